@@ -1,1 +1,7 @@
-//! placeholder
+//! agvrl-sim: the simulator.
+#![warn(missing_docs)]
+
+mod error;
+pub mod msg;
+
+pub use error::SimError;

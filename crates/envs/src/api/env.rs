@@ -1,0 +1,192 @@
+use super::space::BoxSpace;
+use thiserror::Error;
+
+/// Why an env could not reset or step.
+#[derive(Debug, Error)]
+pub enum EnvError {
+    /// The action has the wrong length.
+    #[error("action has {got} elements, the action space has {expected}")]
+    ActionShape {
+        /// Length of the action space.
+        expected: usize,
+        /// Length of the action given.
+        got: usize,
+    },
+    /// The action holds NaN or infinity; it never reaches the physics.
+    #[error("action element {index} is not finite ({value})")]
+    ActionNotFinite {
+        /// Index of the offending element.
+        index: usize,
+        /// Its value.
+        value: f32,
+    },
+    /// `step` was called before `reset`, or after the episode ended without a reset.
+    #[error("step called on an env that needs reset (call reset first, and after every episode end)")]
+    NeedsReset,
+    /// `make` was given an id it does not know.
+    #[error("unknown env id '{id}'; valid ids: {}", valid.join(", "))]
+    UnknownId {
+        /// The id asked for.
+        id: String,
+        /// Every registered id.
+        valid: Vec<String>,
+    },
+    /// The simulator failed (bad scene, vehicle, or a non-finite state).
+    #[error(transparent)]
+    Sim(#[from] agvrl_sim::SimError),
+    /// A vehicle (simulated or hardware) could not deliver what the task needs.
+    #[error("vehicle: {0}")]
+    Vehicle(String),
+    /// A configuration value is invalid.
+    #[error("config: {0}")]
+    Config(String),
+}
+
+/// Named parts of the last reward, for logging (absent terms are 0).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RewardTerms {
+    /// Speed term, 5 T^2.
+    pub throttle: f64,
+    /// Steering penalty, -2 delta^2.
+    pub steering: f64,
+    /// Clearance term, 0.005 r_m^2 (search only).
+    pub clearance: f64,
+    /// Bonus for keeping 2.0 m < r_m < 2.5 m (search only).
+    pub band: f64,
+    /// Collision or near-collision penalty (-50).
+    pub collision: f64,
+    /// Extra penalty for crawling (AutoVRL's outdoor-50 only).
+    pub slow: f64,
+}
+
+/// Racing progress, reported every step of a racing task.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RacingInfo {
+    /// Completed laps since reset.
+    pub laps: u32,
+    /// Duration of the last completed lap, seconds.
+    pub last_lap_s: Option<f64>,
+    /// Fastest completed lap since reset, seconds.
+    pub best_lap_s: Option<f64>,
+    /// Progress along the centre line, laps (fractional, grows in the racing direction).
+    pub progress_laps: f64,
+}
+
+/// Search metrics, reported every step of a search task.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SearchInfo {
+    /// Fraction of free 0.5 m cells that came within 2 m of the vehicle, in [0, 1].
+    pub coverage: f64,
+    /// Path length since reset, metres.
+    pub distance_m: f64,
+}
+
+/// Why an episode terminated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TerminationCause {
+    /// Real contact between the vehicle and something other than the ground.
+    Contact,
+    /// The minimum LiDAR range fell below the task's threshold.
+    TooClose,
+    /// The vehicle rolled over.
+    Flipped,
+    /// The vehicle left the map.
+    OutOfBounds,
+}
+
+/// Summary of a finished episode (set on the step that ends it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EpisodeSummary {
+    /// Sum of rewards.
+    pub ret: f64,
+    /// Number of steps.
+    pub len: u64,
+}
+
+/// Typed step information (Gymnasium's `info`, without a string map).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Info {
+    /// Parts of this step's reward.
+    pub reward_terms: RewardTerms,
+    /// Why the episode terminated, on a terminating step.
+    pub termination: Option<TerminationCause>,
+    /// Racing metrics (racing tasks).
+    pub racing: Option<RacingInfo>,
+    /// Search metrics (search tasks).
+    pub search: Option<SearchInfo>,
+    /// The last observation of an episode that a vector env auto-reset; `Step::obs` is then the
+    /// first observation of the next episode.
+    pub final_obs: Option<Vec<f32>>,
+    /// Return and length of the episode that ended on this step (set by `TimeLimit`/`VecEnv`
+    /// bookkeeping when the episode ends).
+    pub episode: Option<EpisodeSummary>,
+}
+
+/// The result of one `Env::step`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Step {
+    /// Observation after the action.
+    pub obs: Vec<f32>,
+    /// Reward for the transition.
+    pub reward: f64,
+    /// The task ended (collision, goal): do not bootstrap.
+    pub terminated: bool,
+    /// The episode was cut (time limit): bootstrap from the final observation.
+    pub truncated: bool,
+    /// Extra information.
+    pub info: Info,
+}
+
+impl Step {
+    /// Whether the episode is over (terminated or truncated).
+    pub fn done(&self) -> bool {
+        self.terminated || self.truncated
+    }
+}
+
+/// A reinforcement-learning environment with Gymnasium semantics.
+///
+/// Actions are flat `f32` vectors normalised to `[-1, 1]` for the vehicle tasks (check
+/// `action_space`). `reset(Some(seed))` reseeds the env's RNG; `reset(None)` continues the
+/// current random stream. The same seed and the same actions give bit-identical observations.
+pub trait Env: Send {
+    /// Shape and bounds of observations.
+    fn observation_space(&self) -> BoxSpace;
+    /// Shape and bounds of actions.
+    fn action_space(&self) -> BoxSpace;
+    /// Start a new episode.
+    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f32>, Info), EnvError>;
+    /// Apply one action. Errors on a wrong-length or non-finite action.
+    fn step(&mut self, action: &[f32]) -> Result<Step, EnvError>;
+    /// Control period, seconds (for converting steps to time).
+    fn dt_s(&self) -> f64;
+}
+
+impl<E: Env + ?Sized> Env for Box<E> {
+    fn observation_space(&self) -> BoxSpace {
+        (**self).observation_space()
+    }
+    fn action_space(&self) -> BoxSpace {
+        (**self).action_space()
+    }
+    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f32>, Info), EnvError> {
+        (**self).reset(seed)
+    }
+    fn step(&mut self, action: &[f32]) -> Result<Step, EnvError> {
+        (**self).step(action)
+    }
+    fn dt_s(&self) -> f64 {
+        (**self).dt_s()
+    }
+}
+
+/// Reject actions of the wrong length or with NaN/inf, the check every env runs first.
+pub fn validate_action(space: &BoxSpace, action: &[f32]) -> Result<(), EnvError> {
+    if action.len() != space.dim() {
+        return Err(EnvError::ActionShape { expected: space.dim(), got: action.len() });
+    }
+    if let Some((index, &value)) = action.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(EnvError::ActionNotFinite { index, value });
+    }
+    Ok(())
+}

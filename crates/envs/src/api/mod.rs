@@ -1,0 +1,8 @@
+//! The contract: `Env`, spaces, `Step`, `Info`, and the `Vehicle` seam. Invariant: this module
+//! sees agvrl-sim only through `agvrl_sim::msg` (plain readings) and its error type.
+
+mod env;
+mod space;
+
+pub use env::*;
+pub use space::BoxSpace;

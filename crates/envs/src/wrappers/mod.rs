@@ -1,0 +1,5 @@
+//! Wrappers named by their effect.
+
+mod time_limit;
+
+pub use time_limit::TimeLimit;
