@@ -1,1 +1,57 @@
-//! placeholder
+//! agvrl-rl: SAC and PPO in Burn with Stable-Baselines3's defaults, generic over any
+//! [`agvrl_envs::Env`].
+//!
+//! ```text
+//! VecEnv<E> --obs--> actor (Burn, plain device) --action--> VecEnv<E>
+//!     |                                                         |
+//!     +-- SAC: ReplayBuffer --sample--> sac/update.rs ----------+  (every train_freq steps)
+//!     +-- PPO: Rollout + GAE ---------> ppo/update.rs ----------+  (every n_steps)
+//! learner --policy_data()--> PolicyData --save--> policy file --load--> Policy::act (eval, deploy)
+//! learner --save_checkpoint--> checkpoint --load_checkpoint--> learner (resume)
+//! ```
+//!
+//! Invariants:
+//! - The learners know nothing of vehicles: observations and actions are flat `f32` rows; the
+//!   action space's box is honoured (SAC maps `[-1, 1]` onto it, PPO clips to it).
+//! - Termination stops bootstrapping, truncation bootstraps from `Info::final_obs`.
+//! - All randomness comes from one seeded [`rng::Rng`] per learner: the same seed on one thread
+//!   gives the same run, bit for bit.
+//! - The Burn `Device` is chosen by the caller ([`device`]); weights are held on the host and
+//!   mirrored to the device, so a policy file loads on any backend without autodiff.
+//! - Files (policy, checkpoint) are written atomically and carry a CRC-32; a truncated,
+//!   corrupted or mismatching file is an error, never a silently wrong policy.
+//!
+//! Limitations: no gSDE, no discrete actions, no learning-rate schedules; envs restart their
+//! episodes on resume (the `Env` trait has no state snapshot).
+
+#![warn(missing_docs)]
+
+
+mod buffer;
+mod checkpoint;
+pub mod device;
+mod error;
+pub mod eval;
+mod file;
+pub mod learning;
+pub mod nets;
+pub mod normalize;
+pub mod policy;
+pub mod ppo;
+mod progress;
+pub mod rng;
+pub mod sac;
+
+pub use buffer::ReplayBuffer;
+pub use checkpoint::CHECKPOINT_FORMAT_VERSION;
+pub use device::{default_device, CpuBackend};
+pub use error::{Result, RlError};
+pub use eval::evaluate;
+pub use normalize::ObsNormalizer;
+pub use policy::{Algorithm, Policy, PolicyData, POLICY_FORMAT_VERSION};
+pub use ppo::{Ppo, PpoConfig};
+pub use progress::{Control, Losses, Progress};
+pub use sac::{Sac, SacConfig};
+
+/// Re-exported so callers can name the device without depending on Burn.
+pub use burn::tensor::Device;

@@ -1,0 +1,104 @@
+//! Checkpoints: the whole training state of a learner (weights, target nets, optimiser moments,
+//! normaliser, RNG, counters, SAC's replay buffer) in the container of [`crate::file`].
+//!
+//! Envs cannot be snapshotted through the `Env` trait, so a resumed run starts fresh episodes
+//! (env reset with a seed derived from the run seed and the step count); everything the
+//! learner owns continues exactly.
+
+use crate::error::{Result, RlError};
+use crate::file;
+use crate::nets::{Adam, HostParams};
+use serde::{Deserialize, Serialize};
+use serde::de::DeserializeOwned;
+use std::path::Path;
+
+/// Version of the checkpoint layout this build writes and reads.
+pub const CHECKPOINT_FORMAT_VERSION: u32 = 1;
+const CHECKPOINT_MAGIC: &[u8; 8] = b"AGVRLCKP";
+
+/// Adam's scalars; its moments travel as arrays.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(crate) struct AdamMeta {
+    lr: f64,
+    beta1: f64,
+    beta2: f64,
+    eps: f64,
+    t: u64,
+}
+
+/// Collects arrays in order for writing.
+#[derive(Default)]
+pub(crate) struct ArrayWriter<'a> {
+    pub(crate) arrays: Vec<&'a [f32]>,
+}
+
+impl<'a> ArrayWriter<'a> {
+    pub(crate) fn params(&mut self, p: &'a HostParams) {
+        self.arrays.extend(p.data.iter().map(Vec::as_slice));
+    }
+
+    pub(crate) fn adam(&mut self, a: &'a Adam) -> AdamMeta {
+        let (m, v) = a.moments();
+        self.arrays.extend(m.iter().map(Vec::as_slice));
+        self.arrays.extend(v.iter().map(Vec::as_slice));
+        AdamMeta { lr: a.lr, beta1: a.beta1, beta2: a.beta2, eps: a.eps, t: a.t }
+    }
+
+    pub(crate) fn array(&mut self, a: &'a [f32]) {
+        self.arrays.push(a);
+    }
+}
+
+/// Takes arrays back in the order they were written, checking lengths.
+pub(crate) struct ArrayReader<'p> {
+    it: std::vec::IntoIter<Vec<f32>>,
+    path: &'p Path,
+}
+
+impl ArrayReader<'_> {
+    fn bad(&self, reason: &str) -> RlError {
+        RlError::BadFile { path: self.path.to_path_buf(), reason: reason.to_string() }
+    }
+
+    pub(crate) fn array(&mut self, len: Option<usize>) -> Result<Vec<f32>> {
+        let a = self.it.next().ok_or_else(|| self.bad("checkpoint has too few arrays"))?;
+        if len.is_some_and(|l| l != a.len()) {
+            return Err(self.bad("checkpoint array has the wrong length for its configuration"));
+        }
+        Ok(a)
+    }
+
+    pub(crate) fn params(&mut self, shapes: &[[usize; 3]]) -> Result<HostParams> {
+        let mut p = HostParams { shapes: vec![], data: vec![] };
+        for s in shapes {
+            let d = self.array(Some(s.iter().product()))?;
+            p.push(*s, d);
+        }
+        Ok(p)
+    }
+
+    pub(crate) fn adam(&mut self, meta: &AdamMeta, shapes: &[[usize; 3]]) -> Result<Adam> {
+        let m = self.params(shapes)?.data;
+        let v = self.params(shapes)?.data;
+        Ok(Adam::from_parts(meta.lr, meta.beta1, meta.beta2, meta.eps, meta.t, m, v))
+    }
+
+    pub(crate) fn finish(mut self) -> Result<()> {
+        match self.it.next() {
+            Some(_) => Err(self.bad("checkpoint has more arrays than its configuration needs")),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Write a checkpoint: `header` as JSON plus `arrays`, atomically.
+pub(crate) fn write<H: Serialize>(path: &Path, header: &H, arrays: &ArrayWriter<'_>) -> Result<()> {
+    let bytes = file::encode(CHECKPOINT_MAGIC, CHECKPOINT_FORMAT_VERSION, header, &arrays.arrays)?;
+    file::write_atomic(path, &bytes)
+}
+
+/// Read a checkpoint's header and an array reader over its arrays.
+pub(crate) fn read<'p, H: DeserializeOwned>(path: &'p Path) -> Result<(H, ArrayReader<'p>)> {
+    let (h, arrays) = file::read(path, CHECKPOINT_MAGIC, CHECKPOINT_FORMAT_VERSION, "checkpoint")?;
+    Ok((h, ArrayReader { it: arrays.into_iter(), path }))
+}

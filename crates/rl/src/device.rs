@@ -1,0 +1,48 @@
+//! Choosing the Burn device. Only binaries and the bench/learning entry points call these;
+//! the learners take a `Device` as given.
+
+use crate::error::{Result, RlError};
+use burn::tensor::Device;
+
+/// The CPU backends this build carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum CpuBackend {
+    /// burn-flex: pure-Rust, the faster one in our measurements (see `bench`), the default.
+    #[default]
+    Flex,
+    /// burn-ndarray (deprecated upstream, kept selectable).
+    NdArray,
+}
+
+impl CpuBackend {
+    /// Parse `flex` or `ndarray`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "flex" => Ok(Self::Flex),
+            "ndarray" => Ok(Self::NdArray),
+            _ => Err(RlError::Config(format!("unknown CPU backend '{s}' (flex, ndarray)"))),
+        }
+    }
+
+    /// Its name, as `parse` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Flex => "flex",
+            Self::NdArray => "ndarray",
+        }
+    }
+
+    /// A plain (non-autodiff) device on this backend.
+    pub fn device(self) -> Device {
+        match self {
+            Self::Flex => Device::flex(),
+            #[allow(deprecated)] // kept selectable on purpose; see the type's doc
+            Self::NdArray => Device::ndarray(),
+        }
+    }
+}
+
+/// The default CPU device ([`CpuBackend::default`]).
+pub fn default_device() -> Device {
+    CpuBackend::default().device()
+}

@@ -1,0 +1,291 @@
+//! The trained policy: its file format and the [`Policy`] inference type used by eval and
+//! deploy. A policy file holds everything inference needs and nothing training needs: the
+//! actor's weights, the observation normaliser, both spaces, the algorithm and a format version.
+
+use crate::error::{Result, RlError};
+use crate::file;
+use crate::nets::{mlp_forward, to_vec, HostParams, MlpSpec};
+use crate::normalize::ObsNormalizer;
+use crate::rng::Rng;
+use agvrl_envs::BoxSpace;
+use burn::tensor::{Device, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Version of the policy file layout this build writes and reads.
+pub const POLICY_FORMAT_VERSION: u32 = 1;
+const POLICY_MAGIC: &[u8; 8] = b"AGVRLPOL";
+
+/// Which algorithm trained a policy.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Algorithm {
+    /// Soft Actor-Critic.
+    Sac,
+    /// Proximal Policy Optimisation.
+    Ppo,
+}
+
+impl std::fmt::Display for Algorithm {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Algorithm::Sac => "sac",
+            Algorithm::Ppo => "ppo",
+        })
+    }
+}
+
+/// How the network's output becomes an action.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionHead {
+    /// SAC: the net outputs `[mean, log_std]` per action element; the action is
+    /// `tanh(mean + exp(log_std) * noise)` mapped linearly from `[-1, 1]` onto the action box.
+    SquashedGaussian,
+    /// PPO: the net outputs the mean; the action is `mean + exp(log_std) * noise` with a
+    /// state-independent `log_std`, clipped to the action box.
+    Gaussian {
+        /// Log standard deviation per action element.
+        log_std: Vec<f32>,
+    },
+}
+
+/// A policy's contents on the host: what a policy file stores.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PolicyData {
+    /// The algorithm that trained it.
+    pub algorithm: Algorithm,
+    /// Observation space of the env it was trained on.
+    pub observation_space: BoxSpace,
+    /// Action space of the env it was trained on.
+    pub action_space: BoxSpace,
+    /// Layer widths of the actor network (one member).
+    pub net: MlpSpec,
+    /// Actor weights, `[w0, b0, w1, b1, ...]`.
+    pub params: HostParams,
+    /// How outputs become actions.
+    pub head: ActionHead,
+    /// Observation normaliser, if training used one.
+    pub normalizer: Option<ObsNormalizer>,
+    /// The training configuration, as resolved TOML (provenance only).
+    pub config_toml: String,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Header {
+    algorithm: Algorithm,
+    observation_space: BoxSpace,
+    action_space: BoxSpace,
+    net: MlpSpec,
+    shapes: Vec<[usize; 3]>,
+    head: ActionHead,
+    normalizer: Option<ObsNormalizer>,
+    config_toml: String,
+}
+
+impl PolicyData {
+    /// Encode as policy-file bytes.
+    pub fn to_bytes(&self) -> Result<Vec<u8>> {
+        let header = Header {
+            algorithm: self.algorithm,
+            observation_space: self.observation_space.clone(),
+            action_space: self.action_space.clone(),
+            net: self.net.clone(),
+            shapes: self.params.shapes.clone(),
+            head: self.head.clone(),
+            normalizer: self.normalizer.clone(),
+            config_toml: self.config_toml.clone(),
+        };
+        let arrays: Vec<&[f32]> = self.params.data.iter().map(Vec::as_slice).collect();
+        file::encode(POLICY_MAGIC, POLICY_FORMAT_VERSION, &header, &arrays)
+    }
+
+    /// Write the policy file atomically.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        file::write_atomic(path, &self.to_bytes()?)
+    }
+
+    /// Read a policy file; rejects other formats, versions, truncation and corruption.
+    pub fn load(path: &Path) -> Result<Self> {
+        let (h, arrays): (Header, _) = file::read(path, POLICY_MAGIC, POLICY_FORMAT_VERSION, "policy")?;
+        Self::from_parts(path, h, arrays)
+    }
+
+    fn from_parts(path: &Path, h: Header, arrays: Vec<Vec<f32>>) -> Result<Self> {
+        let bad = |reason: String| RlError::BadFile { path: path.to_path_buf(), reason };
+        let expect_shapes: Vec<[usize; 3]> =
+            h.net.sizes.windows(2).flat_map(|w| [[1, w[0], w[1]], [1, 1, w[1]]]).collect();
+        if h.net.n_members != 1 || h.shapes != expect_shapes || arrays.len() != h.shapes.len() {
+            return Err(bad("weights do not match the network description".into()));
+        }
+        if arrays.iter().zip(&h.shapes).any(|(a, s)| a.len() != s.iter().product::<usize>()) {
+            return Err(bad("a weight array has the wrong length".into()));
+        }
+        let (o, a) = (h.observation_space.dim(), h.action_space.dim());
+        let out = match h.head {
+            ActionHead::SquashedGaussian => 2 * a,
+            ActionHead::Gaussian { ref log_std } if log_std.len() == a => a,
+            ActionHead::Gaussian { .. } => return Err(bad("log_std length differs from the action space".into())),
+        };
+        if h.net.sizes.first() != Some(&o) || h.net.sizes.last() != Some(&out) {
+            return Err(bad("network widths do not match the spaces".into()));
+        }
+        if h.normalizer.as_ref().is_some_and(|n| n.dim() != o) {
+            return Err(bad("normaliser width differs from the observation space".into()));
+        }
+        Ok(Self {
+            algorithm: h.algorithm,
+            observation_space: h.observation_space,
+            action_space: h.action_space,
+            net: h.net,
+            params: HostParams { shapes: h.shapes, data: arrays },
+            head: h.head,
+            normalizer: h.normalizer,
+            config_toml: h.config_toml,
+        })
+    }
+
+    /// Map network outputs (`n` rows) to actions in the action box. `deterministic` uses the
+    /// mean; otherwise noise comes from `rng`.
+    pub(crate) fn actions_from_outputs(&self, out: &[f32], deterministic: bool, rng: &mut Rng) -> Vec<f32> {
+        let a_dim = self.action_space.dim();
+        let (low, high) = (&self.action_space.low, &self.action_space.high);
+        match &self.head {
+            ActionHead::SquashedGaussian => {
+                let mut acts = Vec::with_capacity(out.len() / 2);
+                for row in out.chunks_exact(2 * a_dim) {
+                    for i in 0..a_dim {
+                        let mut u = row[i];
+                        if !deterministic {
+                            u += row[a_dim + i].clamp(LOG_STD_MIN, LOG_STD_MAX).exp() * rng.normal() as f32;
+                        }
+                        acts.push(unsquash(u.tanh(), low[i], high[i]));
+                    }
+                }
+                acts
+            }
+            ActionHead::Gaussian { log_std } => {
+                let mut acts = Vec::with_capacity(out.len());
+                for row in out.chunks_exact(a_dim) {
+                    for i in 0..a_dim {
+                        let mut u = row[i];
+                        if !deterministic {
+                            u += log_std[i].exp() * rng.normal() as f32;
+                        }
+                        acts.push(u.clamp(low[i], high[i]));
+                    }
+                }
+                acts
+            }
+        }
+    }
+}
+
+/// SB3's clamp on SAC's predicted log standard deviation.
+pub(crate) const LOG_STD_MIN: f32 = -20.0;
+/// SB3's clamp on SAC's predicted log standard deviation.
+pub(crate) const LOG_STD_MAX: f32 = 2.0;
+
+/// `[-1, 1] -> [low, high]` (SB3's `unscale_action`).
+pub(crate) fn unsquash(y: f32, low: f32, high: f32) -> f32 {
+    low + 0.5 * (y + 1.0) * (high - low)
+}
+
+/// Check that `a` and `b` are the same space; `what` names it in the error.
+pub(crate) fn check_space(what: &'static str, file: &BoxSpace, env: &BoxSpace) -> Result<()> {
+    if file == env {
+        return Ok(());
+    }
+    let show = |s: &BoxSpace| format!("dim {} low {:?} high {:?}", s.dim(), s.low, s.high);
+    Err(RlError::Mismatch { what, file: show(file), env: show(env) })
+}
+
+/// A trained policy on an inference (non-autodiff) device.
+///
+/// ```no_run
+/// # fn main() -> agvrl_rl::Result<()> {
+/// let mut policy = agvrl_rl::Policy::load(std::path::Path::new("runs/x/policy.agvrl"))?;
+/// let action = policy.act(&[1.0, 0.0, 0.0], true)?;
+/// # Ok(()) }
+/// ```
+pub struct Policy {
+    data: PolicyData,
+    weights: Vec<Tensor<3>>,
+    device: Device,
+    rng: Rng,
+    scratch: Vec<f32>,
+}
+
+impl Policy {
+    /// A policy from host data on `device` (autodiff is stripped).
+    pub fn new(data: PolicyData, device: &Device) -> Self {
+        let device = device.clone().without_autodiff();
+        let weights = data.params.to_device(&device);
+        Self { data, weights, device, rng: Rng::new(0), scratch: Vec::new() }
+    }
+
+    /// Load a policy file onto the default CPU device.
+    pub fn load(path: &Path) -> Result<Self> {
+        Self::load_on(path, &crate::device::default_device())
+    }
+
+    /// Load a policy file onto `device`.
+    pub fn load_on(path: &Path, device: &Device) -> Result<Self> {
+        Ok(Self::new(PolicyData::load(path)?, device))
+    }
+
+    /// Write this policy's file.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        self.data.save(path)
+    }
+
+    /// The host-side contents.
+    pub fn data(&self) -> &PolicyData {
+        &self.data
+    }
+
+    /// The algorithm that trained it.
+    pub fn algorithm(&self) -> Algorithm {
+        self.data.algorithm
+    }
+
+    /// Observation space it expects.
+    pub fn observation_space(&self) -> &BoxSpace {
+        &self.data.observation_space
+    }
+
+    /// Action space it produces.
+    pub fn action_space(&self) -> &BoxSpace {
+        &self.data.action_space
+    }
+
+    /// Error unless the env's spaces equal the policy's.
+    pub fn check_spaces(&self, observation_space: &BoxSpace, action_space: &BoxSpace) -> Result<()> {
+        check_space("observation space", &self.data.observation_space, observation_space)?;
+        check_space("action space", &self.data.action_space, action_space)
+    }
+
+    /// Reseed the exploration noise used by `act(.., false)`.
+    pub fn seed(&mut self, seed: u64) {
+        self.rng = Rng::new(seed);
+    }
+
+    /// Actions for `n` observations given flat (`n * obs_dim` values, raw, un-normalised);
+    /// returns `n * act_dim` values inside the action box. `deterministic` takes the mean
+    /// action (eval, deploy); otherwise it samples as in training.
+    pub fn act(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
+        let o = self.data.observation_space.dim();
+        if obs.is_empty() || obs.len() % o != 0 {
+            return Err(RlError::Shape { what: "observation", got: obs.len(), dim: o });
+        }
+        let n = obs.len() / o;
+        self.scratch.clear();
+        self.scratch.extend_from_slice(obs);
+        if let Some(norm) = &self.data.normalizer {
+            norm.normalize(&mut self.scratch);
+        }
+        let x = Tensor::<3>::from_data(TensorData::new(self.scratch.clone(), [1, n, o]), &self.device);
+        let out = to_vec(mlp_forward(&self.weights, x, self.data.net.activation, self.data.net.activate_last))?;
+        Ok(self.data.actions_from_outputs(&out, deterministic, &mut self.rng))
+    }
+}

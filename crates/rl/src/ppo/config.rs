@@ -1,0 +1,112 @@
+//! PPO hyperparameters.
+
+use crate::error::{Result, RlError};
+use serde::{Deserialize, Serialize};
+
+/// Proximal Policy Optimisation hyperparameters. `Default` is Stable-Baselines3's
+/// (`ppo/ppo.py` `PPO.__init__`, `common/policies.py` `ActorCriticPolicy`); a TOML table
+/// overrides any subset, with rl-zoo3's key names.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PpoConfig {
+    /// Adam learning rate (3e-4; Adam eps 1e-5 as SB3).
+    pub learning_rate: f64,
+    /// Steps per env per rollout (2048).
+    pub n_steps: usize,
+    /// Minibatch size (64).
+    pub batch_size: usize,
+    /// Passes over each rollout (10).
+    pub n_epochs: usize,
+    /// Discount factor (0.99).
+    pub gamma: f64,
+    /// GAE lambda (0.95).
+    pub gae_lambda: f64,
+    /// Policy ratio clip (0.2).
+    pub clip_range: f64,
+    /// Value clip around the old value (None: no clipping).
+    pub clip_range_vf: Option<f64>,
+    /// Normalise advantages per minibatch (true).
+    pub normalize_advantage: bool,
+    /// Entropy bonus coefficient (0.0).
+    pub ent_coef: f64,
+    /// Value loss coefficient (0.5).
+    pub vf_coef: f64,
+    /// Global gradient-norm clip (0.5).
+    pub max_grad_norm: f64,
+    /// Stop an update's epochs early when the approximate KL exceeds 1.5 times this (None).
+    pub target_kl: Option<f64>,
+    /// Hidden widths of the separate actor and critic networks ([64, 64]).
+    pub net_arch: Vec<usize>,
+    /// Hidden activation ("tanh").
+    pub activation_fn: crate::nets::Activation,
+    /// Orthogonal initialisation (gains sqrt 2 hidden, 0.01 action, 1 value) (true).
+    pub ortho_init: bool,
+    /// Initial log standard deviation of the action distribution (0.0).
+    pub log_std_init: f64,
+    /// Generalised State-Dependent Exploration: not implemented, must stay false.
+    pub use_sde: bool,
+    /// Running observation normalisation (off).
+    pub normalize_obs: bool,
+}
+
+impl Default for PpoConfig {
+    fn default() -> Self {
+        Self {
+            learning_rate: 3e-4,
+            n_steps: 2048,
+            batch_size: 64,
+            n_epochs: 10,
+            gamma: 0.99,
+            gae_lambda: 0.95,
+            clip_range: 0.2,
+            clip_range_vf: None,
+            normalize_advantage: true,
+            ent_coef: 0.0,
+            vf_coef: 0.5,
+            max_grad_norm: 0.5,
+            target_kl: None,
+            net_arch: vec![64, 64],
+            activation_fn: crate::nets::Activation::Tanh,
+            ortho_init: true,
+            log_std_init: 0.0,
+            use_sde: false,
+            normalize_obs: false,
+        }
+    }
+}
+
+impl PpoConfig {
+    /// Defaults overridden by the keys of a TOML table.
+    pub fn from_toml(s: &str) -> Result<Self> {
+        let c: Self = toml::from_str(s).map_err(|e| RlError::Config(format!("PPO config: {e}")))?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// The configuration as TOML.
+    pub fn to_toml(&self) -> String {
+        // A struct of plain numbers, strings and lists always serialises.
+        toml::to_string(self).unwrap_or_default()
+    }
+
+    /// Reject values the learner cannot run with.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: &str| Err(RlError::Config(format!("PPO: {m}")));
+        if self.use_sde {
+            return bad("use_sde (gSDE) is not implemented; use plain Gaussian exploration (use_sde = false)");
+        }
+        if !(self.learning_rate > 0.0) || self.n_steps == 0 || self.batch_size == 0 || self.n_epochs == 0 {
+            return bad("learning_rate, n_steps, batch_size and n_epochs must be > 0");
+        }
+        if !(0.0..=1.0).contains(&self.gamma) || !(0.0..=1.0).contains(&self.gae_lambda) {
+            return bad("gamma and gae_lambda must lie in [0, 1]");
+        }
+        if !(self.clip_range > 0.0) || !(self.max_grad_norm > 0.0) {
+            return bad("clip_range and max_grad_norm must be > 0");
+        }
+        if self.net_arch.is_empty() || self.net_arch.contains(&0) {
+            return bad("net_arch needs at least one non-zero width");
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,361 @@
+//! Proximal Policy Optimisation (Schulman et al. 2017) as Stable-Baselines3 runs it: separate
+//! tanh MLPs for actor and critic (evaluated as one 2-member stack), state-independent log
+//! std, GAE, clipped surrogate, advantage normalisation, global gradient clipping.
+//!
+//! Data flow per iteration: `n_steps` vector steps with the current policy on plain tensors
+//! (a truncated episode adds `gamma * V(final_obs)` to its last reward, as SB3) -> GAE ->
+//! `update.rs`: `n_epochs` passes of shuffled minibatches.
+
+mod config;
+mod update;
+
+pub use config::PpoConfig;
+
+use crate::checkpoint::{self, AdamMeta, ArrayWriter};
+use crate::error::{Result, RlError};
+use crate::nets::{init_layer, mlp_forward, to_vec, Adam, HostParams, Init, MlpSpec};
+use crate::normalize::ObsNormalizer;
+use crate::policy::{check_space, ActionHead, Algorithm, Policy, PolicyData};
+use crate::progress::{Control, Episodes, Losses, Progress};
+use crate::rng::Rng;
+use agvrl_envs::{BoxSpace, Env, VecEnv};
+use burn::tensor::{Device, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Index of the first head tensor in the parameter list (after the 2-member trunk).
+fn head_idx(cfg: &PpoConfig) -> usize {
+    2 * cfg.net_arch.len()
+}
+
+/// `(mean [1, b, a], value [1, b, 1])` for observations `x [1, b, o]`. `params` is
+/// `[trunk..., pi_w, pi_b, vf_w, vf_b, log_std]`.
+pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (Tensor<3>, Tensor<3>) {
+    let h0 = head_idx(cfg);
+    let h = mlp_forward(&params[..h0], x, cfg.activation_fn, true);
+    let mean = h.clone().narrow(0, 0, 1).matmul(params[h0].clone()) + params[h0 + 1].clone();
+    let value = h.narrow(0, 1, 1).matmul(params[h0 + 2].clone()) + params[h0 + 3].clone();
+    (mean, value)
+}
+
+/// A PPO learner bound to a vector env.
+pub struct Ppo<E: Env> {
+    cfg: PpoConfig,
+    env: VecEnv<E>,
+    device: Device,
+    obs_dim: usize,
+    act_dim: usize,
+    params: HostParams,
+    opt: Adam,
+    normalizer: Option<ObsNormalizer>,
+    rng: Rng,
+    seed: u64,
+    num_timesteps: u64,
+    n_updates: u64,
+    episodes: Episodes,
+    losses: Losses,
+    /// Current raw observations and whether each env just started an episode.
+    last: Option<(Vec<f32>, Vec<bool>)>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Header {
+    algorithm: Algorithm,
+    config: PpoConfig,
+    observation_space: BoxSpace,
+    action_space: BoxSpace,
+    seed: u64,
+    num_timesteps: u64,
+    n_updates: u64,
+    episodes: u64,
+    recent_returns: Vec<f64>,
+    rng: Rng,
+    opt: AdamMeta,
+    normalizer: Option<ObsNormalizer>,
+}
+
+/// One rollout, flat with index `step * n_envs + env`.
+pub(crate) struct Rollout {
+    pub(crate) obs: Vec<f32>,
+    pub(crate) actions: Vec<f32>,
+    pub(crate) log_probs: Vec<f32>,
+    pub(crate) advantages: Vec<f32>,
+    pub(crate) returns: Vec<f32>,
+}
+
+impl<E: Env> Ppo<E> {
+    /// A fresh learner on plain `device`; `seed` seeds weights, noise, shuffling and the envs.
+    pub fn new(cfg: PpoConfig, env: VecEnv<E>, device: &Device, seed: u64) -> Result<Self> {
+        cfg.validate()?;
+        let obs_dim = env.observation_space().dim();
+        let act_dim = env.action_space().dim();
+        let mut rng = Rng::new(seed);
+        let mut sizes = vec![obs_dim];
+        sizes.extend(&cfg.net_arch);
+        let trunk = MlpSpec { n_members: 2, sizes, activation: cfg.activation_fn, activate_last: true };
+        let (hidden, pi_init, vf_init) = if cfg.ortho_init {
+            (Init::Orthogonal(2f64.sqrt()), Init::Orthogonal(0.01), Init::Orthogonal(1.0))
+        } else {
+            (Init::TorchDefault, Init::TorchDefault, Init::TorchDefault)
+        };
+        let mut params = trunk.init(&[hidden], &mut rng);
+        let last = *cfg.net_arch.last().unwrap_or(&obs_dim);
+        let (w, b) = init_layer(pi_init, 1, last, act_dim, &mut rng);
+        params.push([1, last, act_dim], w);
+        params.push([1, 1, act_dim], b);
+        let (w, b) = init_layer(vf_init, 1, last, 1, &mut rng);
+        params.push([1, last, 1], w);
+        params.push([1, 1, 1], b);
+        params.push([1, 1, act_dim], vec![cfg.log_std_init as f32; act_dim]);
+        Ok(Self {
+            opt: Adam::new(&params, cfg.learning_rate, 1e-5),
+            normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(obs_dim)),
+            device: device.clone().without_autodiff(),
+            cfg,
+            env,
+            obs_dim,
+            act_dim,
+            params,
+            rng,
+            seed,
+            num_timesteps: 0,
+            n_updates: 0,
+            episodes: Episodes::default(),
+            losses: Losses::default(),
+            last: None,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PpoConfig {
+        &self.cfg
+    }
+
+    /// Env steps taken so far (summed over envs).
+    pub fn num_timesteps(&self) -> u64 {
+        self.num_timesteps
+    }
+
+    /// The vector env.
+    pub fn env(&self) -> &VecEnv<E> {
+        &self.env
+    }
+
+    fn normalized(&self, obs: &[f32]) -> Vec<f32> {
+        let mut x = obs.to_vec();
+        if let Some(n) = &self.normalizer {
+            n.normalize(&mut x);
+        }
+        x
+    }
+
+    /// Run rollouts and updates until `steps` more env steps are taken (whole rollouts);
+    /// `callback` sees progress after every rollout + update and can stop early.
+    pub fn learn(&mut self, steps: u64, callback: &mut dyn FnMut(&Progress<'_>) -> Control) -> Result<()> {
+        let target = self.num_timesteps + steps;
+        while self.num_timesteps < target {
+            let rollout = self.collect_rollout()?;
+            self.update(&rollout)?;
+            let progress = Progress {
+                algorithm: Algorithm::Ppo,
+                steps: self.num_timesteps,
+                target_steps: target,
+                updates: self.n_updates,
+                episodes: self.episodes.count,
+                recent_returns: self.episodes.recent.make_contiguous(),
+                losses: self.losses,
+            };
+            if callback(&progress) == Control::Stop {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    fn collect_rollout(&mut self) -> Result<Rollout> {
+        let (n_envs, o, a, n_steps) = (self.env.n_envs(), self.obs_dim, self.act_dim, self.cfg.n_steps);
+        let total = n_steps * n_envs;
+        let dev = self.device.clone();
+        let params = self.params.to_device(&dev);
+        let log_std = self.params.data[self.params.data.len() - 1].clone();
+        let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
+        // log N(x; m, s) summed over elements = sum(-z^2/2) - sum(log s) - a ln(2 pi)/2
+        let lp_const = -log_std.iter().sum::<f32>() - a as f32 * 0.918_938_5;
+        let (mut obs, mut starts) = match self.last.take() {
+            Some(l) => l,
+            None => {
+                let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
+                let (o0, _) = self.env.reset(Some(seed))?;
+                if let Some(n) = &mut self.normalizer {
+                    n.update(&o0);
+                }
+                (o0, vec![true; n_envs])
+            }
+        };
+        let mut r = Rollout {
+            obs: Vec::with_capacity(total * o),
+            actions: Vec::with_capacity(total * a),
+            log_probs: Vec::with_capacity(total),
+            advantages: vec![0.0; total],
+            returns: vec![0.0; total],
+        };
+        let mut rewards = Vec::with_capacity(total);
+        let mut values = Vec::with_capacity(total);
+        let mut episode_starts = Vec::with_capacity(total);
+        let space = self.env.action_space().clone();
+        let value_of = |params: &[Tensor<3>], x: Vec<f32>, n: usize, cfg: &PpoConfig| -> Result<(Vec<f32>, Vec<f32>)> {
+            let t = Tensor::<3>::from_data(TensorData::new(x, [1, n, o]), &dev);
+            let (mean, value) = forward(params, t, cfg);
+            Ok((to_vec(mean)?, to_vec(value)?))
+        };
+        for _ in 0..n_steps {
+            let x = self.normalized(&obs);
+            let (mean, value) = value_of(&params, x.clone(), n_envs, &self.cfg)?;
+            let mut actions = Vec::with_capacity(n_envs * a);
+            let mut clipped = Vec::with_capacity(n_envs * a);
+            for e in 0..n_envs {
+                let mut lp = lp_const;
+                for i in 0..a {
+                    let z = self.rng.normal() as f32;
+                    let act = mean[e * a + i] + std[i] * z;
+                    lp -= 0.5 * z * z;
+                    actions.push(act);
+                    clipped.push(act.clamp(space.low[i], space.high[i]));
+                }
+                r.log_probs.push(lp);
+            }
+            let st = self.env.step(&clipped)?;
+            let mut rew: Vec<f32> = st.rewards.iter().map(|v| *v as f32).collect();
+            // Truncated episodes bootstrap: r += gamma V(final_obs).
+            let trunc: Vec<usize> = (0..n_envs).filter(|&e| st.truncated[e] && !st.terminated[e]).collect();
+            if !trunc.is_empty() {
+                let mut fx = Vec::with_capacity(trunc.len() * o);
+                for &e in &trunc {
+                    let f = st.infos[e].final_obs.as_deref().unwrap_or(&st.obs[e * o..(e + 1) * o]);
+                    fx.extend_from_slice(f);
+                }
+                let fx = self.normalized(&fx);
+                let (_, fv) = value_of(&params, fx, trunc.len(), &self.cfg)?;
+                for (k, &e) in trunc.iter().enumerate() {
+                    rew[e] += (self.cfg.gamma as f32) * fv[k];
+                }
+            }
+            r.obs.extend_from_slice(&x);
+            r.actions.extend_from_slice(&actions);
+            rewards.extend_from_slice(&rew);
+            values.extend_from_slice(&value);
+            episode_starts.extend(starts.iter().map(|s| *s as u8 as f32));
+            if let Some(n) = &mut self.normalizer {
+                n.update(&st.obs);
+            }
+            self.episodes.record(&st.infos);
+            self.num_timesteps += n_envs as u64;
+            starts = (0..n_envs).map(|e| st.terminated[e] || st.truncated[e]).collect();
+            obs = st.obs;
+        }
+        let (_, last_values) = value_of(&params, self.normalized(&obs), n_envs, &self.cfg)?;
+        // GAE (SB3's RolloutBuffer.compute_returns_and_advantage).
+        let (g, lam) = (self.cfg.gamma as f32, self.cfg.gae_lambda as f32);
+        let mut last_gae = vec![0.0f32; n_envs];
+        for t in (0..n_steps).rev() {
+            for e in 0..n_envs {
+                let k = t * n_envs + e;
+                let (next_non_terminal, next_value) = if t + 1 == n_steps {
+                    (1.0 - starts[e] as u8 as f32, last_values[e])
+                } else {
+                    (1.0 - episode_starts[k + n_envs], values[k + n_envs])
+                };
+                let delta = rewards[k] + g * next_value * next_non_terminal - values[k];
+                last_gae[e] = delta + g * lam * next_non_terminal * last_gae[e];
+                r.advantages[k] = last_gae[e];
+                r.returns[k] = last_gae[e] + values[k];
+            }
+        }
+        self.last = Some((obs, starts));
+        Ok(r)
+    }
+
+    /// The current policy (actor member, log std, normaliser) as host data.
+    pub fn policy_data(&self) -> PolicyData {
+        let h0 = head_idx(&self.cfg);
+        let mut params = HostParams { shapes: vec![], data: vec![] };
+        // Member 0 of each trunk tensor is the actor's.
+        for (s, d) in self.params.shapes[..h0].iter().zip(&self.params.data[..h0]) {
+            let per = s[1] * s[2];
+            params.push([1, s[1], s[2]], d[..per].to_vec());
+        }
+        params.push(self.params.shapes[h0], self.params.data[h0].clone());
+        params.push(self.params.shapes[h0 + 1], self.params.data[h0 + 1].clone());
+        let mut sizes = vec![self.obs_dim];
+        sizes.extend(&self.cfg.net_arch);
+        sizes.push(self.act_dim);
+        PolicyData {
+            algorithm: Algorithm::Ppo,
+            observation_space: self.env.observation_space().clone(),
+            action_space: self.env.action_space().clone(),
+            net: MlpSpec { n_members: 1, sizes, activation: self.cfg.activation_fn, activate_last: false },
+            params,
+            head: ActionHead::Gaussian { log_std: self.params.data[h0 + 4].clone() },
+            normalizer: self.normalizer.clone(),
+            config_toml: self.cfg.to_toml(),
+        }
+    }
+
+    /// The current policy for inference on `device`.
+    pub fn policy(&self, device: &Device) -> Policy {
+        Policy::new(self.policy_data(), device)
+    }
+
+    /// Write the policy file.
+    pub fn save_policy(&self, path: &Path) -> Result<()> {
+        self.policy_data().save(path)
+    }
+
+    /// Write a checkpoint (weights, optimiser, normaliser, RNG, counters).
+    pub fn save_checkpoint(&self, path: &Path) -> Result<()> {
+        let mut w = ArrayWriter::default();
+        w.params(&self.params);
+        let opt = w.adam(&self.opt);
+        let header = Header {
+            algorithm: Algorithm::Ppo,
+            config: self.cfg.clone(),
+            observation_space: self.env.observation_space().clone(),
+            action_space: self.env.action_space().clone(),
+            seed: self.seed,
+            num_timesteps: self.num_timesteps,
+            n_updates: self.n_updates,
+            episodes: self.episodes.count,
+            recent_returns: self.episodes.recent.iter().copied().collect(),
+            rng: self.rng.clone(),
+            opt,
+            normalizer: self.normalizer.clone(),
+        };
+        checkpoint::write(path, &header, &w)
+    }
+
+    /// Resume from a checkpoint with `env` (whose spaces must match); episodes restart.
+    pub fn load_checkpoint(path: &Path, env: VecEnv<E>, device: &Device) -> Result<Self> {
+        let (h, mut r) = checkpoint::read::<Header>(path)?;
+        if h.algorithm != Algorithm::Ppo {
+            return Err(RlError::Mismatch { what: "algorithm", file: h.algorithm.to_string(), env: "ppo".into() });
+        }
+        check_space("observation space", &h.observation_space, env.observation_space())?;
+        check_space("action space", &h.action_space, env.action_space())?;
+        let mut s = Self::new(h.config.clone(), env, device, h.seed)?;
+        let shapes = s.params.shapes.clone();
+        s.params = r.params(&shapes)?;
+        s.opt = r.adam(&h.opt, &shapes)?;
+        r.finish()?;
+        s.rng = h.rng;
+        s.num_timesteps = h.num_timesteps;
+        s.n_updates = h.n_updates;
+        s.episodes = Episodes { count: h.episodes, recent: h.recent_returns.into_iter().collect() };
+        s.normalizer = h.normalizer;
+        Ok(s)
+    }
+
+    /// Mean return of `n_episodes` deterministic episodes on `env` (seeded `seed`, `seed + 1`, ...).
+    pub fn evaluate<F: Env>(&self, env: &mut F, n_episodes: usize, seed: u64) -> Result<f64> {
+        crate::eval::evaluate(&mut self.policy(&self.device), env, n_episodes, seed)
+    }
+}

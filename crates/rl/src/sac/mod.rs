@@ -1,0 +1,376 @@
+//! Soft Actor-Critic (Haarnoja et al. 2018) as Stable-Baselines3 runs it: tanh-squashed
+//! Gaussian actor, twin critics with Polyak-averaged targets, learned entropy coefficient.
+//!
+//! Data flow per vector step: actor (or uniform noise before `learning_starts`) -> env ->
+//! replay buffer (`next_obs` is `final_obs` where an episode ended; only termination stops
+//! bootstrapping) -> `update.rs` every `train_freq` steps.
+
+mod config;
+mod update;
+
+pub use config::{EntCoef, SacConfig};
+
+use crate::buffer::ReplayBuffer;
+use crate::checkpoint::{self, AdamMeta, ArrayWriter};
+use crate::error::{Result, RlError};
+use crate::nets::{mlp_forward, to_vec, Activation, Adam, HostParams, Init, MlpSpec};
+use crate::normalize::ObsNormalizer;
+use crate::policy::{check_space, unsquash, ActionHead, Algorithm, Policy, PolicyData};
+use crate::progress::{Control, Episodes, Losses, Progress};
+use crate::rng::Rng;
+use agvrl_envs::{BoxSpace, Env, VecEnv};
+use burn::tensor::{Device, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A SAC learner bound to a vector env.
+pub struct Sac<E: Env> {
+    cfg: SacConfig,
+    env: VecEnv<E>,
+    device: Device,
+    obs_dim: usize,
+    act_dim: usize,
+    actor_spec: MlpSpec,
+    actor: HostParams,
+    critic: HostParams,
+    critic_target: HostParams,
+    actor_opt: Adam,
+    critic_opt: Adam,
+    /// `[log(alpha)]` and its optimiser when alpha is learned.
+    log_ent_coef: HostParams,
+    ent_opt: Option<Adam>,
+    target_entropy: f64,
+    buffer: ReplayBuffer,
+    normalizer: Option<ObsNormalizer>,
+    rng: Rng,
+    seed: u64,
+    num_timesteps: u64,
+    n_updates: u64,
+    episodes: Episodes,
+    losses: Losses,
+    /// Current observations (raw), `None` until the envs are reset.
+    last_obs: Option<Vec<f32>>,
+    /// Device copies of the actor, critics and target critics, refreshed after each change.
+    actor_dev: Vec<Tensor<3>>,
+    critic_dev: Vec<Tensor<3>>,
+    target_dev: Vec<Tensor<3>>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Header {
+    algorithm: Algorithm,
+    config: SacConfig,
+    observation_space: BoxSpace,
+    action_space: BoxSpace,
+    seed: u64,
+    num_timesteps: u64,
+    n_updates: u64,
+    episodes: u64,
+    recent_returns: Vec<f64>,
+    rng: Rng,
+    actor_opt: AdamMeta,
+    critic_opt: AdamMeta,
+    ent_opt: Option<AdamMeta>,
+    normalizer: Option<ObsNormalizer>,
+    buffer_len: usize,
+    buffer_pos: usize,
+}
+
+fn finite_box(space: &BoxSpace) -> Result<()> {
+    if space.low.iter().chain(&space.high).all(|v| v.is_finite()) && space.low.iter().zip(&space.high).all(|(l, h)| l < h) {
+        Ok(())
+    } else {
+        Err(RlError::Config("SAC needs a finite action box with low < high".into()))
+    }
+}
+
+impl<E: Env> Sac<E> {
+    /// A fresh learner. `device` is a plain device (autodiff is switched on where needed);
+    /// `seed` seeds the weights, the noise and the envs' first reset.
+    pub fn new(cfg: SacConfig, env: VecEnv<E>, device: &Device, seed: u64) -> Result<Self> {
+        cfg.validate()?;
+        let obs_dim = env.observation_space().dim();
+        let act_dim = env.action_space().dim();
+        finite_box(env.action_space())?;
+        let mut rng = Rng::new(seed);
+        let hidden = |input: usize, out: usize, members: usize| {
+            let mut sizes = vec![input];
+            sizes.extend(&cfg.net_arch);
+            sizes.push(out);
+            MlpSpec { n_members: members, sizes, activation: Activation::Relu, activate_last: false }
+        };
+        let actor_spec = hidden(obs_dim, 2 * act_dim, 1);
+        let critic_spec = hidden(obs_dim + act_dim, 1, 2);
+        let actor = actor_spec.init(&[Init::TorchDefault], &mut rng);
+        let critic = critic_spec.init(&[Init::TorchDefault], &mut rng);
+        let critic_target = critic.clone();
+        let ent_init = cfg.ent_coef.auto_init()?;
+        let log_ent_coef = HostParams {
+            shapes: vec![[1, 1, 1]],
+            data: vec![vec![match (&cfg.ent_coef, ent_init) {
+                (_, Some(init)) => init.ln() as f32,
+                (EntCoef::Fixed(v), None) => v.ln() as f32,
+                _ => 0.0,
+            }]],
+        };
+        let ent_opt = ent_init.map(|_| Adam::new(&log_ent_coef, cfg.learning_rate, 1e-8));
+        let device = device.clone().without_autodiff();
+        let mut s = Self {
+            actor_opt: Adam::new(&actor, cfg.learning_rate, 1e-8),
+            critic_opt: Adam::new(&critic, cfg.learning_rate, 1e-8),
+            target_entropy: cfg.target_entropy.unwrap_or(-(act_dim as f64)),
+            buffer: ReplayBuffer::new(cfg.buffer_size, obs_dim, act_dim),
+            normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(obs_dim)),
+            actor_dev: vec![],
+            critic_dev: vec![],
+            target_dev: vec![],
+            cfg,
+            env,
+            device,
+            obs_dim,
+            act_dim,
+            actor_spec,
+            actor,
+            critic,
+            critic_target,
+            log_ent_coef,
+            ent_opt,
+            rng,
+            seed,
+            num_timesteps: 0,
+            n_updates: 0,
+            episodes: Episodes::default(),
+            losses: Losses::default(),
+            last_obs: None,
+        };
+        s.upload_all();
+        Ok(s)
+    }
+
+    fn upload_all(&mut self) {
+        self.actor_dev = self.actor.to_device(&self.device);
+        self.critic_dev = self.critic.to_device(&self.device);
+        self.target_dev = self.critic_target.to_device(&self.device);
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SacConfig {
+        &self.cfg
+    }
+
+    /// Env steps taken so far (summed over envs).
+    pub fn num_timesteps(&self) -> u64 {
+        self.num_timesteps
+    }
+
+    /// The vector env.
+    pub fn env(&self) -> &VecEnv<E> {
+        &self.env
+    }
+
+    /// The current entropy coefficient alpha.
+    pub fn ent_coef(&self) -> f64 {
+        (self.log_ent_coef.data[0][0] as f64).exp()
+    }
+
+    /// Run `steps` more env steps (rounded up to whole vector steps), training as configured;
+    /// `callback` sees progress after every vector step and can stop early. Calling `learn`
+    /// again continues the same episodes.
+    pub fn learn(&mut self, steps: u64, callback: &mut dyn FnMut(&Progress<'_>) -> Control) -> Result<()> {
+        let target = self.num_timesteps + steps;
+        let n_envs = self.env.n_envs();
+        let mut vec_steps = 0u64;
+        while self.num_timesteps < target {
+            let obs = match self.last_obs.take() {
+                Some(o) => o,
+                None => {
+                    // First reset uses the run seed; after a resume, a seed derived from the step count.
+                    let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
+                    let (o, _) = self.env.reset(Some(seed))?;
+                    if let Some(n) = &mut self.normalizer {
+                        n.update(&o);
+                    }
+                    o
+                }
+            };
+            let scaled = if self.num_timesteps < self.cfg.learning_starts {
+                (0..n_envs * self.act_dim).map(|_| (self.rng.uniform() * 2.0 - 1.0) as f32).collect()
+            } else {
+                self.sample_scaled_actions(&obs)?
+            };
+            let space = self.env.action_space().clone();
+            let env_actions: Vec<f32> = scaled
+                .iter()
+                .enumerate()
+                .map(|(k, y)| {
+                    let i = k % self.act_dim;
+                    unsquash(*y, space.low[i], space.high[i])
+                })
+                .collect();
+            let st = self.env.step(&env_actions)?;
+            let o = self.obs_dim;
+            for e in 0..n_envs {
+                let next = st.infos[e].final_obs.as_deref().unwrap_or(&st.obs[e * o..(e + 1) * o]);
+                self.buffer.push(
+                    &obs[e * o..(e + 1) * o],
+                    &scaled[e * self.act_dim..(e + 1) * self.act_dim],
+                    st.rewards[e] as f32,
+                    next,
+                    st.terminated[e],
+                );
+            }
+            if let Some(n) = &mut self.normalizer {
+                n.update(&st.obs);
+            }
+            self.episodes.record(&st.infos);
+            self.num_timesteps += n_envs as u64;
+            self.last_obs = Some(st.obs);
+            vec_steps += 1;
+            if self.num_timesteps > self.cfg.learning_starts && vec_steps % self.cfg.train_freq == 0 {
+                for _ in 0..self.cfg.gradient_steps {
+                    self.update()?;
+                }
+            }
+            let progress = Progress {
+                algorithm: Algorithm::Sac,
+                steps: self.num_timesteps,
+                target_steps: target,
+                updates: self.n_updates,
+                episodes: self.episodes.count,
+                recent_returns: self.episodes.recent.make_contiguous(),
+                losses: self.losses,
+            };
+            if callback(&progress) == Control::Stop {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// Stochastic actions in [-1, 1] for raw observations.
+    fn sample_scaled_actions(&mut self, obs: &[f32]) -> Result<Vec<f32>> {
+        let n = obs.len() / self.obs_dim;
+        let mut x = obs.to_vec();
+        if let Some(norm) = &self.normalizer {
+            norm.normalize(&mut x);
+        }
+        let x = Tensor::<3>::from_data(TensorData::new(x, [1, n, self.obs_dim]), &self.device);
+        let out = to_vec(mlp_forward(&self.actor_dev, x, Activation::Relu, false))?;
+        let a = self.act_dim;
+        let mut acts = Vec::with_capacity(n * a);
+        for row in out.chunks_exact(2 * a) {
+            for i in 0..a {
+                let std = row[a + i].clamp(crate::policy::LOG_STD_MIN, crate::policy::LOG_STD_MAX).exp();
+                acts.push((row[i] + std * self.rng.normal() as f32).tanh());
+            }
+        }
+        Ok(acts)
+    }
+
+    /// The current policy (actor and normaliser) as host data.
+    pub fn policy_data(&self) -> PolicyData {
+        let mut net = self.actor_spec.clone();
+        net.n_members = 1;
+        PolicyData {
+            algorithm: Algorithm::Sac,
+            observation_space: self.env.observation_space().clone(),
+            action_space: self.env.action_space().clone(),
+            net,
+            params: self.actor.clone(),
+            head: ActionHead::SquashedGaussian,
+            normalizer: self.normalizer.clone(),
+            config_toml: self.cfg.to_toml(),
+        }
+    }
+
+    /// The current policy for inference on `device`.
+    pub fn policy(&self, device: &Device) -> Policy {
+        Policy::new(self.policy_data(), device)
+    }
+
+    /// Write the policy file.
+    pub fn save_policy(&self, path: &Path) -> Result<()> {
+        self.policy_data().save(path)
+    }
+
+    /// Write a checkpoint of the whole training state (including the replay buffer).
+    pub fn save_checkpoint(&self, path: &Path) -> Result<()> {
+        let mut w = ArrayWriter::default();
+        w.params(&self.actor);
+        w.params(&self.critic);
+        w.params(&self.critic_target);
+        w.params(&self.log_ent_coef);
+        let actor_opt = w.adam(&self.actor_opt);
+        let critic_opt = w.adam(&self.critic_opt);
+        let ent_opt = self.ent_opt.as_ref().map(|o| w.adam(o));
+        let b = &self.buffer;
+        for a in [&b.obs, &b.next_obs, &b.actions, &b.rewards, &b.dones] {
+            w.array(a);
+        }
+        let header = Header {
+            algorithm: Algorithm::Sac,
+            config: self.cfg.clone(),
+            observation_space: self.env.observation_space().clone(),
+            action_space: self.env.action_space().clone(),
+            seed: self.seed,
+            num_timesteps: self.num_timesteps,
+            n_updates: self.n_updates,
+            episodes: self.episodes.count,
+            recent_returns: self.episodes.recent.iter().copied().collect(),
+            rng: self.rng.clone(),
+            actor_opt,
+            critic_opt,
+            ent_opt,
+            normalizer: self.normalizer.clone(),
+            buffer_len: b.len(),
+            buffer_pos: b.pos,
+        };
+        checkpoint::write(path, &header, &w)
+    }
+
+    /// Resume from a checkpoint with `env` (whose spaces must match); training continues with
+    /// the saved weights, optimisers, buffer, RNG and counters; episodes restart.
+    pub fn load_checkpoint(path: &Path, env: VecEnv<E>, device: &Device) -> Result<Self> {
+        let (h, mut r) = checkpoint::read::<Header>(path)?;
+        if h.algorithm != Algorithm::Sac {
+            return Err(RlError::Mismatch { what: "algorithm", file: h.algorithm.to_string(), env: "sac".into() });
+        }
+        check_space("observation space", &h.observation_space, env.observation_space())?;
+        check_space("action space", &h.action_space, env.action_space())?;
+        let mut s = Self::new(h.config.clone(), env, device, h.seed)?;
+        s.actor = r.params(&s.actor.shapes)?;
+        s.critic = r.params(&s.critic.shapes)?;
+        s.critic_target = r.params(&s.critic.shapes)?;
+        s.log_ent_coef = r.params(&s.log_ent_coef.shapes)?;
+        s.actor_opt = r.adam(&h.actor_opt, &s.actor.shapes)?;
+        s.critic_opt = r.adam(&h.critic_opt, &s.critic.shapes)?;
+        s.ent_opt = match (&h.ent_opt, s.ent_opt.is_some()) {
+            (Some(m), true) => Some(r.adam(m, &s.log_ent_coef.shapes)?),
+            (None, false) => None,
+            _ => return Err(RlError::BadFile { path: path.to_path_buf(), reason: "entropy optimiser does not match the config".into() }),
+        };
+        let (n, o, a) = (h.buffer_len, s.obs_dim, s.act_dim);
+        if n > s.cfg.buffer_size || h.buffer_pos >= s.cfg.buffer_size.max(1) {
+            return Err(RlError::BadFile { path: path.to_path_buf(), reason: "replay buffer larger than its capacity".into() });
+        }
+        s.buffer.obs = r.array(Some(n * o))?;
+        s.buffer.next_obs = r.array(Some(n * o))?;
+        s.buffer.actions = r.array(Some(n * a))?;
+        s.buffer.rewards = r.array(Some(n))?;
+        s.buffer.dones = r.array(Some(n))?;
+        s.buffer.pos = h.buffer_pos;
+        r.finish()?;
+        s.rng = h.rng;
+        s.num_timesteps = h.num_timesteps;
+        s.n_updates = h.n_updates;
+        s.episodes = Episodes { count: h.episodes, recent: h.recent_returns.into_iter().collect() };
+        s.normalizer = h.normalizer;
+        s.upload_all();
+        Ok(s)
+    }
+
+    /// Mean return of `n_episodes` deterministic episodes on `env` (seeded `seed`, `seed + 1`, ...).
+    pub fn evaluate<F: Env>(&self, env: &mut F, n_episodes: usize, seed: u64) -> Result<f64> {
+        crate::eval::evaluate(&mut self.policy(&self.device), env, n_episodes, seed)
+    }
+}
