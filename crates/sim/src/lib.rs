@@ -1,7 +1,30 @@
-//! agvrl-sim: the simulator.
+//! agvrl-sim: the simulator. rapier3d physics, URDF vehicles and objects, the paper's Ackermann
+//! actuation, GPS / IMU / LiDAR, and the five AutoVRL scenes.
+//!
+//! ```text
+//! Control{throttle, steering} -> DriveModel (w) + ackermann_split (left, right)
+//!   -> vehicle body (raycast | multibody) x substeps -> rapier World
+//!   -> sensors: gps::read, ImuState, Lidar::scan -> msg::{GpsReading, ImuReading, LaserScan}
+//! ```
+//!
+//! Invariants: z up, gravity -9.81 m/s^2, SI units; readings leaving this crate are the plain
+//! structs of `msg` (no rapier types); the vehicle never appears in its own LiDAR scan; the
+//! world is built once and `Sim::reset` only moves the vehicle; the same actions from the same
+//! reset give a bit-identical trajectory. No reward, policy or rendering lives here.
 #![warn(missing_docs)]
 
+pub mod assets;
 mod error;
 pub mod msg;
+pub mod scene;
+pub mod sensors;
+mod sim;
+pub mod urdf;
+pub mod vehicle;
+pub mod world;
 
 pub use error::SimError;
+pub use rapier3d;
+pub use scene::{Scene, SceneKind, SCENE_IDS};
+pub use sim::{Pose2, SceneSource, Sim, SimConfig, VehicleParams};
+pub use vehicle::{ActionMapping, Control, DriveModel, DynamicsMode};

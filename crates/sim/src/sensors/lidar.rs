@@ -1,0 +1,151 @@
+//! Planar LiDAR. Rays start at the LiDAR link's full 3D world pose and fan out evenly over the
+//! field of view, centred on the sensor's x axis (this fixes AutoVRL's rays, which are right
+//! only at the world origin). The vehicle is never in its own scan: only the static scene is
+//! cast against.
+//!
+//! Speed: the scene is static, so each scan first culls the scene's colliders to those whose
+//! bounding box meets the scan's reach, then tests each ray against that short list (a slab test
+//! on the box before the exact shape cast).
+
+use crate::msg::LaserScan;
+use crate::world::StaticIndex;
+use rapier3d::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// LiDAR settings.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct LidarConfig {
+    /// Number of rays.
+    pub n_rays: usize,
+    /// Field of view, degrees (up to 360).
+    pub fov_deg: f32,
+    /// Shortest reported range, metres; closer hits read this.
+    pub range_min_m: f32,
+    /// Longest range, metres; misses read this.
+    pub range_max_m: f32,
+}
+
+impl Default for LidarConfig {
+    /// AutoVRL's LiDAR: 100 rays over 90 degrees, 12 m.
+    fn default() -> Self {
+        Self { n_rays: 100, fov_deg: 90.0, range_min_m: 0.05, range_max_m: 12.0 }
+    }
+}
+
+impl LidarConfig {
+    /// (angle_min, angle_increment), radians. A full circle does not repeat its first ray.
+    pub fn angles(&self) -> (f32, f32) {
+        let fov = self.fov_deg.to_radians();
+        let n = self.n_rays.max(1);
+        if self.fov_deg >= 360.0 {
+            (-std::f32::consts::PI, fov / n as f32)
+        } else if n == 1 {
+            (0.0, 0.0)
+        } else {
+            (-fov / 2.0, fov / (n - 1) as f32)
+        }
+    }
+
+    /// Check the settings, naming what is wrong.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.n_rays == 0 || self.n_rays > 100_000 {
+            return Err(format!("lidar n_rays must be in 1..=100000, got {}", self.n_rays));
+        }
+        if !(self.fov_deg > 0.0 && self.fov_deg <= 360.0) {
+            return Err(format!("lidar fov_deg must be in (0, 360], got {}", self.fov_deg));
+        }
+        if !(self.range_min_m >= 0.0 && self.range_max_m > self.range_min_m && self.range_max_m.is_finite()) {
+            return Err("lidar needs 0 <= range_min_m < range_max_m < inf".into());
+        }
+        Ok(())
+    }
+}
+
+/// A scanner with precomputed ray directions in the sensor frame.
+#[derive(Clone, Debug)]
+pub struct Lidar {
+    cfg: LidarConfig,
+    dirs_s: Vec<Vector>,
+    candidates: Vec<usize>,
+}
+
+impl Lidar {
+    /// A scanner for `cfg` (validated by the caller).
+    pub fn new(cfg: LidarConfig) -> Self {
+        let (a0, da) = cfg.angles();
+        let dirs_s = (0..cfg.n_rays)
+            .map(|i| {
+                let a = a0 + da * i as f32;
+                Vector::new(a.cos(), a.sin(), 0.0)
+            })
+            .collect();
+        Self { cfg, dirs_s, candidates: Vec::new() }
+    }
+
+    /// Settings.
+    pub fn config(&self) -> &LidarConfig {
+        &self.cfg
+    }
+
+    /// Scan the static scene from `pose_w` (the LiDAR link's world pose).
+    pub fn scan(&mut self, scene: &StaticIndex, pose_w: &Pose) -> LaserScan {
+        let (angle_min, angle_increment) = self.cfg.angles();
+        let origin = pose_w.translation;
+        let rmax = self.cfg.range_max_m;
+        let reach = Aabb::new(origin - Vector::splat(rmax), origin + Vector::splat(rmax));
+        self.candidates.clear();
+        self.candidates.extend(scene.entries.iter().enumerate().filter(|(_, e)| e.aabb.intersects(&reach)).map(|(i, _)| i));
+        let n = self.dirs_s.len();
+        let mut scan = LaserScan {
+            angle_min,
+            angle_increment,
+            range_min: self.cfg.range_min_m,
+            range_max: rmax,
+            ranges: Vec::with_capacity(n),
+            hit: Vec::with_capacity(n),
+            points_w: Vec::with_capacity(n),
+            object_id: Vec::with_capacity(n),
+            origin_w: origin.to_array(),
+        };
+        for d_s in &self.dirs_s {
+            let dir = pose_w.rotation * *d_s;
+            let ray = Ray::new(origin, dir);
+            let inv = dir.recip();
+            let mut best = rmax;
+            let mut best_id: Option<Option<u32>> = None;
+            for &ci in &self.candidates {
+                let e = &scene.entries[ci];
+                if !slab_hit(&e.aabb, origin, inv, best) {
+                    continue;
+                }
+                if let Some(t) = e.shape.cast_ray(&e.pose, &ray, best, true) {
+                    if t < best {
+                        best = t;
+                        best_id = Some(e.object_id);
+                    }
+                }
+            }
+            let hit = best_id.is_some();
+            let range = best.max(self.cfg.range_min_m);
+            scan.ranges.push(range);
+            scan.hit.push(hit);
+            scan.points_w.push((origin + dir * best).to_array());
+            scan.object_id.push(best_id.flatten());
+        }
+        scan
+    }
+}
+
+/// Whether the ray `origin + t dir` (with `inv` = 1/dir) meets `aabb` for some t in [0, tmax].
+#[inline]
+fn slab_hit(aabb: &Aabb, origin: Vector, inv: Vector, tmax: f32) -> bool {
+    let t1 = (aabb.mins - origin) * inv;
+    let t2 = (aabb.maxs - origin) * inv;
+    let tmin_v = t1.min(t2);
+    let tmax_v = t1.max(t2);
+    // NaN (0 * inf on a face) compares false, so max/min of glam skip it conservatively.
+    let enter = tmin_v.max_element().max(0.0);
+    let exit = tmax_v.min_element().min(tmax);
+    enter <= exit
+}

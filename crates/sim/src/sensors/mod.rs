@@ -1,0 +1,8 @@
+//! Sensors. Each has a config struct and returns a plain reading from `crate::msg`.
+
+pub mod gps;
+pub mod imu;
+pub mod lidar;
+
+pub use gps::GpsConfig;
+pub use lidar::{Lidar, LidarConfig};

@@ -1,0 +1,401 @@
+//! `Sim`: one vehicle in one scene, stepped one control period at a time.
+
+use crate::assets::AssetSource;
+use crate::msg::{GpsReading, ImuReading, LaserScan};
+use crate::scene::{Scene, SceneKind};
+use crate::sensors::imu::ImuState;
+use crate::sensors::{gps, GpsConfig, Lidar, LidarConfig};
+use crate::vehicle::body::Body;
+use crate::vehicle::{ackermann_split, BodyParams, Control, DriveModel, DynamicsMode, VehicleModel};
+use crate::world::{groups, World};
+use crate::SimError;
+use rapier3d::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// Where the scene comes from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SceneSource {
+    /// A built-in scene id (`outdoor-20`, `outdoor-50`, `urban-20`, `urban-50`, `oval`).
+    Builtin(String),
+    /// A scene TOML on disk.
+    File(PathBuf),
+    /// A seeded random layout.
+    Procedural {
+        /// Generator family.
+        kind: SceneKind,
+        /// Layout seed.
+        seed: u64,
+        /// Inner half size of the map, metres (outdoor/urban).
+        half_m: f32,
+    },
+}
+
+/// Everything that defines a simulation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimConfig {
+    /// The scene.
+    pub scene: SceneSource,
+    /// A built-in vehicle name (`xtenth_car`, `racecar`) or the path of a vehicle TOML.
+    pub vehicle: String,
+    /// Dynamics mode.
+    pub mode: DynamicsMode,
+    /// Control period, seconds (AutoVRL: 1/30).
+    pub control_period_s: f64,
+    /// Physics steps per control period (the substep must be <= 1/60 s).
+    pub substeps: u32,
+    /// LiDAR settings.
+    pub lidar: LidarConfig,
+    /// GPS settings.
+    pub gps: GpsConfig,
+    /// Split steering between the front wheels by Ackermann geometry (`None`: the vehicle's
+    /// own setting; `Some(false)`: AutoVRL's equal angles).
+    pub ackermann: Option<bool>,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            scene: SceneSource::Builtin("oval".into()),
+            vehicle: "xtenth_car".into(),
+            mode: DynamicsMode::Raycast,
+            control_period_s: 1.0 / 30.0,
+            substeps: 4,
+            lidar: LidarConfig::default(),
+            gps: GpsConfig::default(),
+            ackermann: None,
+        }
+    }
+}
+
+/// A planar pose: where to put the vehicle.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Pose2 {
+    /// x, metres.
+    pub x_m: f32,
+    /// y, metres.
+    pub y_m: f32,
+    /// Heading, radians counter-clockwise from +x.
+    pub yaw_rad: f32,
+}
+
+/// Vehicle parameters that may change per episode (domain randomisation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VehicleParams {
+    /// Wheel-speed model.
+    pub drive: DriveModel,
+    /// Tyre friction coefficient.
+    pub tyre_friction: f32,
+    /// Factor on mass and inertia.
+    pub mass_scale: f32,
+    /// Constant offset added to the commanded steering angle, rad.
+    pub steering_offset_rad: f64,
+}
+
+/// The simulator.
+pub struct Sim {
+    cfg: SimConfig,
+    world: World,
+    scene: Scene,
+    model: VehicleModel,
+    body: Body,
+    nominal: VehicleParams,
+    params: VehicleParams,
+    lidar: Lidar,
+    imu: ImuState,
+    wheel_speed: f64,
+    control: Control,
+    wheel_angles: (f64, f64),
+    time_s: f64,
+    steps: u64,
+}
+
+impl Sim {
+    /// Build the world once: scene, vehicle at the scene's spawn, sensors.
+    pub fn new(cfg: SimConfig) -> Result<Self, SimError> {
+        let invalid = |msg: String| SimError::Invalid { context: "sim config".into(), msg };
+        if !(cfg.control_period_s > 0.0 && cfg.control_period_s.is_finite()) || cfg.substeps == 0 {
+            return Err(invalid("control_period_s must be positive and substeps >= 1".into()));
+        }
+        if cfg.control_period_s / cfg.substeps as f64 > 1.0 / 60.0 + 1e-9 {
+            return Err(invalid(format!(
+                "physics substep {:.4} s is longer than 1/60 s: raise substeps",
+                cfg.control_period_s / cfg.substeps as f64
+            )));
+        }
+        cfg.lidar.validate().map_err(invalid)?;
+        let assets = AssetSource::builtin();
+        let scene = match &cfg.scene {
+            SceneSource::Builtin(id) => Scene::builtin(&assets, id)?,
+            SceneSource::File(path) => {
+                let dir = path.parent().map(|p| p.to_path_buf()).unwrap_or_default();
+                let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string();
+                Scene::load(&AssetSource::Dir(dir), &name)?
+            }
+            SceneSource::Procedural { kind, seed, half_m } => Scene::procedural(*kind, *seed, *half_m, 2.0)?,
+        };
+        let model = if cfg.vehicle.ends_with(".toml") {
+            let path = PathBuf::from(&cfg.vehicle);
+            let dir = path.parent().map(|p| p.to_path_buf()).unwrap_or_default();
+            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string();
+            VehicleModel::load(&AssetSource::Dir(dir), &name)?
+        } else {
+            VehicleModel::builtin(&assets, &cfg.vehicle)?
+        };
+        let mut world = World::new(&scene, (cfg.control_period_s / cfg.substeps as f64) as f32);
+        let d = model.spec.drive;
+        let nominal = VehicleParams {
+            drive: DriveModel { c_t: d.c_t, c_d: d.c_d, c_r: d.c_r },
+            tyre_friction: model.spec.tyre_friction,
+            mass_scale: 1.0,
+            steering_offset_rad: 0.0,
+        };
+        let spawn = scene.file.spawn;
+        let pose2 = Pose2 { x_m: spawn.x_m, y_m: spawn.y_m, yaw_rad: spawn.yaw_deg.to_radians() };
+        let body = Body::new(&mut world, &model, cfg.mode, spawn_pose(&model, pose2), body_params(&nominal))?;
+        let lidar = Lidar::new(cfg.lidar.clone());
+        let mut sim = Self {
+            cfg,
+            world,
+            scene,
+            model,
+            body,
+            nominal,
+            params: nominal,
+            lidar,
+            imu: ImuState::default(),
+            wheel_speed: 0.0,
+            control: Control::default(),
+            wheel_angles: (0.0, 0.0),
+            time_s: 0.0,
+            steps: 0,
+        };
+        sim.reset(pose2)?;
+        Ok(sim)
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SimConfig {
+        &self.cfg
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The vehicle model.
+    pub fn vehicle(&self) -> &VehicleModel {
+        &self.model
+    }
+
+    /// The vehicle's nominal parameters (from its spec).
+    pub fn nominal_params(&self) -> VehicleParams {
+        self.nominal
+    }
+
+    /// The parameters in force.
+    pub fn params(&self) -> VehicleParams {
+        self.params
+    }
+
+    /// Change parameters (domain randomisation); they take effect at the next `reset`.
+    pub fn set_params(&mut self, p: VehicleParams) {
+        self.params = p;
+    }
+
+    /// AutoVRL's fixed spawn of this scene.
+    pub fn default_spawn(&self) -> Pose2 {
+        let s = self.scene.file.spawn;
+        Pose2 { x_m: s.x_m, y_m: s.y_m, yaw_rad: s.yaw_deg.to_radians() }
+    }
+
+    /// Put the vehicle at `pose` on the ground, at rest, wheel speed 0 (no scene reload).
+    pub fn reset(&mut self, pose: Pose2) -> Result<(), SimError> {
+        let p = spawn_pose(&self.model, pose);
+        let bp = body_params(&self.params);
+        self.body.reset(&mut self.world, &self.model, p, bp)?;
+        self.wheel_speed = 0.0;
+        self.control = Control::default();
+        self.wheel_angles = (0.0, 0.0);
+        self.time_s = 0.0;
+        self.steps = 0;
+        self.imu.reset();
+        Ok(())
+    }
+
+    /// Apply `control` for one control period: advance the wheel-speed model, split the
+    /// steering, and run the physics substeps.
+    pub fn step(&mut self, control: Control) -> Result<(), SimError> {
+        let c = Control {
+            throttle: if control.throttle.is_finite() { control.throttle.clamp(0.0, 1.0) } else { 0.0 },
+            steering_rad: if control.steering_rad.is_finite() { control.steering_rad } else { 0.0 },
+        };
+        let max = self.model.spec.steering.max_rad;
+        let delta = (c.steering_rad + self.params.steering_offset_rad).clamp(-max, max);
+        let t = self.cfg.control_period_s;
+        self.wheel_speed = self.params.drive.advance(self.wheel_speed, c.throttle, t);
+        let ack = self.cfg.ackermann.unwrap_or(self.model.spec.steering.ackermann);
+        self.wheel_angles = ackermann_split(delta, self.model.wheelbase_m as f64, self.model.front_track_m as f64, ack);
+        self.control = Control { throttle: c.throttle, steering_rad: delta };
+        let bp = body_params(&self.params);
+        let steer = (self.wheel_angles.0 as f32, self.wheel_angles.1 as f32);
+        for _ in 0..self.cfg.substeps {
+            self.body.substep(&mut self.world, &self.model, self.wheel_speed as f32, steer, bp);
+        }
+        self.time_s += t;
+        self.steps += 1;
+        let rb = &self.world.pw.bodies[self.body.base()];
+        let (lin, ang) = (rb.linvel(), rb.angvel());
+        if !(rb.position().is_finite() && lin.is_finite() && ang.is_finite()) {
+            return Err(SimError::NotFinite(format!("vehicle state after step {}", self.steps)));
+        }
+        self.imu.update(lin, ang, t as f32);
+        Ok(())
+    }
+
+    /// Simulated time since reset, seconds.
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Control steps since reset.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The drive model's wheel speed, rad/s.
+    pub fn wheel_speed_radps(&self) -> f64 {
+        self.wheel_speed
+    }
+
+    /// The control in force (throttle, centre steering angle after limits and offset).
+    pub fn control(&self) -> Control {
+        self.control
+    }
+
+    /// Steering angles of the left and right front wheels, rad.
+    pub fn wheel_angles_rad(&self) -> (f64, f64) {
+        self.wheel_angles
+    }
+
+    /// World pose of the vehicle's base frame.
+    pub fn base_pose(&self) -> Pose {
+        *self.world.pw.bodies[self.body.base()].position()
+    }
+
+    /// Planar pose of the base frame.
+    pub fn pose2(&self) -> Pose2 {
+        let p = self.base_pose();
+        let fwd = p.rotation * Vector::X;
+        Pose2 { x_m: p.translation.x, y_m: p.translation.y, yaw_rad: fwd.y.atan2(fwd.x) }
+    }
+
+    /// Linear velocity of the base, world frame, m/s.
+    pub fn linvel_w(&self) -> Vector {
+        self.world.pw.bodies[self.body.base()].linvel()
+    }
+
+    /// Angular velocity of the base, world frame, rad/s.
+    pub fn angvel_w(&self) -> Vector {
+        self.world.pw.bodies[self.body.base()].angvel()
+    }
+
+    /// Speed along the heading, m/s (negative when rolling backwards).
+    pub fn forward_speed_mps(&self) -> f32 {
+        let p = self.base_pose();
+        self.linvel_w().dot(p.rotation * Vector::X)
+    }
+
+    /// Yaw rate, rad/s.
+    pub fn yaw_rate_radps(&self) -> f32 {
+        let p = self.base_pose();
+        self.angvel_w().dot(p.rotation * Vector::Z)
+    }
+
+    /// Whether the car is on its side or roof (body z more than 60 degrees from world z).
+    pub fn flipped(&self) -> bool {
+        (self.base_pose().rotation * Vector::Z).z < 0.5
+    }
+
+    /// Scene objects the vehicle touched in the last physics step (walls included, ground
+    /// excluded); empty right after a reset. (Refreshing contacts at reset with rapier's
+    /// collision-only pass would drop the multibody car from the solver's islands.)
+    pub fn contacts(&self) -> Vec<u32> {
+        let mut out = Vec::new();
+        if self.steps == 0 {
+            return out;
+        }
+        for &h in self.body.colliders() {
+            for pair in self.world.pw.narrow_phase.contact_pairs_with(h) {
+                if !pair.has_any_active_contact() {
+                    continue;
+                }
+                let other = if pair.collider1 == h { pair.collider2 } else { pair.collider1 };
+                if let Some(id) = self.world.object_id(other) {
+                    out.push(id);
+                }
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
+
+    /// The LiDAR's world pose.
+    pub fn lidar_pose(&self) -> Pose {
+        self.base_pose() * self.model.lidar_b
+    }
+
+    /// The camera's world pose, when the vehicle has a camera link.
+    pub fn camera_pose(&self) -> Option<Pose> {
+        self.model.camera_b.map(|c| self.base_pose() * c)
+    }
+
+    /// A LiDAR scan from the current pose.
+    pub fn lidar_scan(&mut self) -> LaserScan {
+        let pose = self.lidar_pose();
+        self.lidar.scan(&self.world.statics, &pose)
+    }
+
+    /// A LiDAR scan as if the LiDAR link were at `pose_w` (probing; the car does not move).
+    pub fn lidar_scan_at(&mut self, pose_w: &Pose) -> LaserScan {
+        self.lidar.scan(&self.world.statics, pose_w)
+    }
+
+    /// The GPS reading.
+    pub fn gps(&self) -> GpsReading {
+        gps::read(&self.cfg.gps, &self.base_pose())
+    }
+
+    /// The IMU reading (accelerations over the last control period).
+    pub fn imu(&self) -> ImuReading {
+        self.imu.read(&self.base_pose(), self.linvel_w(), self.angvel_w())
+    }
+
+    /// Whether a vertical cylinder of `radius_m` standing at (x, y) from the ground to 1 m
+    /// touches no scene object (spawn and coverage checks).
+    pub fn free_at(&self, x: f32, y: f32, radius_m: f32) -> bool {
+        let shape = Cylinder::new(0.45, radius_m);
+        let pose = Pose::from_parts(Vector::new(x, y, 0.55), Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2));
+        let groups = InteractionGroups::new(Group::ALL, groups::OBSTACLE, InteractionTestMode::And);
+        let q = self.world.pw.query_pipeline_with_filter(QueryFilter::default().groups(groups));
+        q.intersect_shape(pose, &shape).next().is_none()
+    }
+
+    /// The physics world (read-only), for renderers and tests.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+}
+
+fn body_params(p: &VehicleParams) -> BodyParams {
+    BodyParams { tyre_friction: p.tyre_friction, mass_scale: p.mass_scale }
+}
+
+fn spawn_pose(model: &VehicleModel, p: Pose2) -> Pose {
+    // A hair above the ground so the first contact is not a penetration.
+    Pose::from_parts(Vector::new(p.x_m, p.y_m, model.rest_height_m() + 0.002), Rotation::from_rotation_z(p.yaw_rad))
+}

@@ -1,0 +1,135 @@
+//! The paper's actuation (section 5): action -> throttle and steering, AutoVRL's wheel-speed
+//! model, and the Ackermann split of the steering angle between the front wheels.
+
+use serde::{Deserialize, Serialize};
+
+/// How an action `a in [-1, 1]^2` becomes throttle and steering.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionMapping {
+    /// The paper and AutoVRL: T = clamp(a0, 0, 1), delta = clamp(a1, -delta_max, delta_max) with
+    /// a1 read as radians (half of a0's range coasts, most of a1's saturates).
+    Paper,
+    /// T = (a0 + 1) / 2, delta = a1 * delta_max: every part of the action range does something.
+    #[default]
+    Scaled,
+}
+
+/// Throttle and steering for one control period.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Control {
+    /// Throttle in [0, 1] (no reverse, no brake: AutoVRL's car).
+    pub throttle: f64,
+    /// Steering angle of the virtual centre front wheel, rad, positive = left.
+    pub steering_rad: f64,
+}
+
+impl ActionMapping {
+    /// Map a (finite) action to a control. Non-finite inputs give a safe zero control.
+    pub fn control(self, a0: f64, a1: f64, delta_max_rad: f64) -> Control {
+        if !a0.is_finite() || !a1.is_finite() {
+            return Control::default();
+        }
+        match self {
+            ActionMapping::Paper => {
+                Control { throttle: a0.clamp(0.0, 1.0), steering_rad: a1.clamp(-delta_max_rad, delta_max_rad) }
+            }
+            ActionMapping::Scaled => Control {
+                throttle: ((a0.clamp(-1.0, 1.0) + 1.0) / 2.0),
+                steering_rad: a1.clamp(-1.0, 1.0) * delta_max_rad,
+            },
+        }
+    }
+}
+
+/// AutoVRL's wheel-speed model, integrated once per control period:
+/// `w <- max(0, w + t_s (c_t T - w (c_d w + c_r)))`, w in rad/s.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DriveModel {
+    /// Throttle gain, rad/s^2.
+    pub c_t: f64,
+    /// Quadratic drag, 1/rad.
+    pub c_d: f64,
+    /// Linear resistance, 1/s.
+    pub c_r: f64,
+}
+
+impl DriveModel {
+    /// Next wheel speed (rad/s) after `t_s` seconds at throttle `throttle` in [0, 1].
+    pub fn advance(&self, w: f64, throttle: f64, t_s: f64) -> f64 {
+        let dw = self.c_t * throttle - w * (self.c_d * w + self.c_r);
+        (w + t_s * dw).max(0.0)
+    }
+
+    /// Steady-state wheel speed at throttle `throttle`, rad/s: the positive root of
+    /// `c_d w^2 + c_r w - c_t T = 0`.
+    pub fn steady_state(&self, throttle: f64) -> f64 {
+        let c = self.c_t * throttle;
+        if self.c_d == 0.0 {
+            return c / self.c_r;
+        }
+        (-self.c_r + (self.c_r * self.c_r + 4.0 * self.c_d * c).sqrt()) / (2.0 * self.c_d)
+    }
+}
+
+/// Angles (left, right) of the two steered wheels for a centre angle `delta` (rad, + = left).
+/// Ackermann: both wheels point at the same turning centre, `tan(delta_i) = L / (R - w/2)` for
+/// the inner wheel, `L / (R + w/2)` for the outer, with `R = L / tan(delta)`; else both get delta.
+pub fn ackermann_split(delta: f64, wheelbase_m: f64, track_m: f64, ackermann: bool) -> (f64, f64) {
+    if !ackermann || delta.abs() < 1e-9 {
+        return (delta, delta);
+    }
+    let r = wheelbase_m / delta.tan();
+    let left = (wheelbase_m / (r - track_m / 2.0)).atan();
+    let right = (wheelbase_m / (r + track_m / 2.0)).atan();
+    (left, right)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_mapping_clips_like_autovrl() {
+        let c = ActionMapping::Paper.control(-0.5, 0.9, 0.36);
+        assert_eq!(c, Control { throttle: 0.0, steering_rad: 0.36 });
+        let c = ActionMapping::Paper.control(0.25, -0.1, 0.36);
+        assert_eq!(c, Control { throttle: 0.25, steering_rad: -0.1 });
+    }
+
+    #[test]
+    fn scaled_mapping_uses_the_whole_range() {
+        let c = ActionMapping::Scaled.control(-1.0, -1.0, 0.36);
+        assert_eq!(c, Control { throttle: 0.0, steering_rad: -0.36 });
+        let c = ActionMapping::Scaled.control(0.0, 0.5, 0.36);
+        assert_eq!(c, Control { throttle: 0.5, steering_rad: 0.18 });
+        assert_eq!(ActionMapping::Scaled.control(f64::NAN, 0.0, 0.36), Control::default());
+    }
+
+    #[test]
+    fn drive_model_converges_to_autovrl_terminal_speed() {
+        let m = DriveModel { c_t: 20.0, c_d: 0.01, c_r: 0.2 };
+        let mut w = 0.0;
+        for _ in 0..600 {
+            w = m.advance(w, 1.0, 1.0 / 30.0);
+        }
+        // Facts file: terminal w = 35.8 rad/s.
+        assert!((w - 35.83).abs() < 0.01, "w = {w}");
+        assert!((m.steady_state(1.0) - w).abs() < 1e-6);
+        assert_eq!(m.advance(1.0, 0.0, 10.0), 0.0, "never negative");
+    }
+
+    #[test]
+    fn inner_wheel_steers_more() {
+        for delta in [0.05, 0.2, 0.36, -0.05, -0.36] {
+            let (l, r) = ackermann_split(delta, 0.33, 0.314, true);
+            let (inner, outer) = if delta > 0.0 { (l, r) } else { (r, l) };
+            assert!(inner.abs() > delta.abs() && outer.abs() < delta.abs(), "delta {delta}: {l} {r}");
+            // Both wheels' normals meet at the same turning centre on the rear axle line.
+            let centre_l = 0.33 / l.tan() + 0.157;
+            let centre_r = 0.33 / r.tan() - 0.157;
+            assert!((centre_l - centre_r).abs() < 1e-9);
+        }
+        assert_eq!(ackermann_split(0.2, 0.33, 0.314, false), (0.2, 0.2));
+    }
+}

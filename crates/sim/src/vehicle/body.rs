@@ -1,0 +1,373 @@
+//! The two dynamics modes of a vehicle.
+//!
+//! - `Raycast`: one rigid chassis carrying the whole car's mass properties, held up and driven by
+//!   rapier's `DynamicRayCastVehicleController` (one suspension ray per wheel). Wheel proxies
+//!   (cylinders) ride along for contacts with obstacles but never touch the ground. Fast.
+//! - `Multibody`: the URDF's links and joints as a rapier multibody (reduced coordinates), ball
+//!   wheel colliders on the ground, velocity motors on the driven joints and position motors on
+//!   the steering hinges. The reference for fidelity.
+//!
+//! Both follow the same command: a wheel speed `w` (rad/s) from the drive model and the two
+//! front-wheel steering angles.
+
+use super::spec::VehicleModel;
+use crate::world::{groups, World};
+use crate::SimError;
+use rapier3d::control::{DynamicRayCastVehicleController, WheelTuning};
+use rapier3d::prelude::*;
+use rapier3d_urdf::{UrdfLoaderOptions, UrdfMultibodyOptions, UrdfRobot};
+use serde::{Deserialize, Serialize};
+
+/// Which physics represents the vehicle.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DynamicsMode {
+    /// A rigid chassis on ray-cast wheels (rapier's ray-cast vehicle controller).
+    #[default]
+    Raycast,
+    /// The URDF's joints as a multibody with joint motors.
+    Multibody,
+}
+
+/// Time constant of the wheel-speed tracking in ray-cast mode, seconds: the tyre force brings
+/// the ground speed to `w r` about as fast as a velocity motor would.
+const TRACK_TAU_S: f32 = 0.03;
+/// Velocity-motor damping of the driven joints in multibody mode (high: rapier's motors are soft).
+const DRIVE_MOTOR_DAMPING: f32 = 1000.0;
+/// Position-motor gains of the steering hinges in multibody mode.
+const STEER_STIFFNESS: f32 = 2000.0;
+const STEER_DAMPING: f32 = 50.0;
+/// Suspension of the ray-cast wheels: stiffness per unit chassis mass (1/s^2) and travel.
+const SUSPENSION_STIFFNESS: f32 = 400.0;
+const SUSPENSION_REST_M: f32 = 0.03;
+
+pub(crate) enum Body {
+    Raycast { chassis: RigidBodyHandle, controller: DynamicRayCastVehicleController, colliders: Vec<ColliderHandle> },
+    Multibody(Box<MultibodyCar>),
+}
+
+pub(crate) struct MultibodyCar {
+    template: UrdfRobot,
+    joint_names: Vec<String>,
+    base_idx: usize,
+    bodies: Vec<RigidBodyHandle>,
+    mprops: Vec<MassProperties>,
+    colliders: Vec<ColliderHandle>,
+    wheel_colliders: Vec<ColliderHandle>,
+    drive: Vec<MultibodyJointHandle>,
+    steer: Vec<(MultibodyJointHandle, i8)>,
+}
+
+/// Physical parameters that domain randomisation may change per episode.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BodyParams {
+    /// Tyre friction coefficient.
+    pub tyre_friction: f32,
+    /// Factor on the total mass (and inertia).
+    pub mass_scale: f32,
+}
+
+impl Body {
+    pub(crate) fn new(world: &mut World, model: &VehicleModel, mode: DynamicsMode, pose: Pose, p: BodyParams) -> Result<Self, SimError> {
+        match mode {
+            DynamicsMode::Raycast => Ok(Self::new_raycast(world, model, pose, p)),
+            DynamicsMode::Multibody => Self::new_multibody(world, model, pose, p),
+        }
+    }
+
+    fn new_raycast(world: &mut World, model: &VehicleModel, pose: Pose, p: BodyParams) -> Self {
+        let mp = scale_mass(model.mass_props, p.mass_scale);
+        let chassis = world.pw.insert_body(
+            RigidBodyBuilder::dynamic().pose(pose).additional_mass_properties(mp).can_sleep(false),
+        );
+        let mut colliders = Vec::new();
+        for s in &model.body_shapes {
+            colliders.push(world.pw.insert_collider(
+                ColliderBuilder::new(s.shape.clone())
+                    .position(s.pose)
+                    .density(0.0)
+                    .friction(0.5)
+                    .collision_groups(groups::vehicle()),
+                Some(chassis),
+            ));
+        }
+        for w in &model.wheels {
+            let rot = Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2);
+            colliders.push(world.pw.insert_collider(
+                ColliderBuilder::cylinder(w.width_m / 2.0, w.radius_m)
+                    .position(Pose::from_parts(w.center_b, rot))
+                    .density(0.0)
+                    .friction(0.5)
+                    .collision_groups(groups::vehicle_no_ground()),
+                Some(chassis),
+            ));
+        }
+        let mut controller = DynamicRayCastVehicleController::new(chassis);
+        controller.index_up_axis = 2;
+        controller.index_forward_axis = 0;
+        let n = model.wheels.len() as f32;
+        let tuning = WheelTuning {
+            suspension_stiffness: SUSPENSION_STIFFNESS,
+            // Critically damped per wheel: c = 2 sqrt(k / n_wheels) in per-unit-mass terms.
+            suspension_compression: 2.0 * (SUSPENSION_STIFFNESS / n).sqrt(),
+            suspension_damping: 2.0 * (SUSPENSION_STIFFNESS / n).sqrt(),
+            max_suspension_travel: SUSPENSION_REST_M,
+            side_friction_stiffness: 1.0,
+            friction_slip: p.tyre_friction,
+            max_suspension_force: 1.0e4,
+        };
+        // Rest compression under a 1/n share of the weight, so the wheel centre sits where the
+        // URDF puts it.
+        let sag = crate::world::GRAVITY_MPS2 / (n * SUSPENSION_STIFFNESS);
+        for w in &model.wheels {
+            let hard_point = w.center_b + Vector::Z * (SUSPENSION_REST_M - sag);
+            controller.add_wheel(hard_point, -Vector::Z, -Vector::Y, SUSPENSION_REST_M, w.radius_m, &tuning);
+        }
+        Body::Raycast { chassis, controller, colliders }
+    }
+
+    fn new_multibody(world: &mut World, model: &VehicleModel, pose: Pose, p: BodyParams) -> Result<Self, SimError> {
+        let options = UrdfLoaderOptions {
+            create_colliders_from_collision_shapes: true,
+            apply_imported_mass_props: true,
+            enable_joint_collisions: false,
+            collider_blueprint: ColliderBuilder::default()
+                .density(0.0)
+                .friction(0.5)
+                .friction_combine_rule(CoefficientCombineRule::Multiply)
+                .collision_groups(groups::vehicle()),
+            ..UrdfLoaderOptions::default()
+        };
+        let mut template = UrdfRobot::from_robot(&model.urdf.robot, options, std::path::Path::new("."));
+        let robot = &model.urdf.robot;
+        // Ball wheels: cylinders roll badly on rapier's contact manifolds.
+        for link in &mut template.links {
+            let name = &robot.links[link.urdf_link_index].name;
+            if let Some(w) = model.wheels.iter().find(|w| &w.link == name) {
+                for c in &mut link.colliders {
+                    let local = c.collider.position_wrt_parent().copied().unwrap_or(*c.collider.position());
+                    c.collider.set_shape(SharedShape::ball(w.radius_m));
+                    c.collider.set_position_wrt_parent(Pose::from_translation(local.translation));
+                    c.collider.set_friction(p.tyre_friction);
+                }
+            }
+        }
+        let joint_names: Vec<String> = template.joints.iter().map(|j| robot.joints[j.urdf_joint_index].name.clone()).collect();
+        let base_idx = template
+            .links
+            .iter()
+            .position(|l| robot.links[l.urdf_link_index].name == model.urdf.root)
+            .ok_or_else(|| SimError::Invalid { context: model.urdf.rel_path.clone(), msg: "root link has no body".into() })?;
+        let mut car = MultibodyCar {
+            template,
+            joint_names,
+            base_idx,
+            bodies: vec![],
+            mprops: vec![],
+            colliders: vec![],
+            wheel_colliders: vec![],
+            drive: vec![],
+            steer: vec![],
+        };
+        car.insert(world, model, pose)?;
+        Ok(Body::Multibody(Box::new(car)))
+    }
+
+    /// World pose of the base frame.
+    pub(crate) fn base(&self) -> RigidBodyHandle {
+        match self {
+            Body::Raycast { chassis, .. } => *chassis,
+            Body::Multibody(c) => c.bodies[c.base_idx],
+        }
+    }
+
+    pub(crate) fn colliders(&self) -> &[ColliderHandle] {
+        match self {
+            Body::Raycast { colliders, .. } => colliders,
+            Body::Multibody(c) => &c.colliders,
+        }
+    }
+
+    /// Put the car at `pose`, at rest, with parameters `p` (no bodies are rebuilt).
+    pub(crate) fn reset(&mut self, world: &mut World, model: &VehicleModel, pose: Pose, p: BodyParams) -> Result<(), SimError> {
+        match self {
+            Body::Raycast { chassis, controller, .. } => {
+                let rb = &mut world.pw.bodies[*chassis];
+                rb.set_additional_mass_properties(scale_mass(model.mass_props, p.mass_scale), true);
+                rb.set_position(pose, true);
+                rb.set_linvel(Vector::ZERO, true);
+                rb.set_angvel(Vector::ZERO, true);
+                for w in controller.wheels_mut() {
+                    w.engine_force = 0.0;
+                    w.steering = 0.0;
+                }
+                Ok(())
+            }
+            Body::Multibody(car) => car.teleport(world, model, pose, p),
+        }
+    }
+
+    /// Apply the command for one physics substep and advance rapier by one step.
+    pub(crate) fn substep(&mut self, world: &mut World, model: &VehicleModel, w_radps: f32, steer: (f32, f32), p: BodyParams) {
+        match self {
+            Body::Raycast { chassis, controller, .. } => {
+                let rb = &world.pw.bodies[*chassis];
+                let fwd = rb.position().rotation * Vector::X;
+                let v = rb.linvel().dot(fwd);
+                let r = model.drive_radius_m();
+                let n_driven = model.wheels.iter().filter(|w| w.driven).count().max(1) as f32;
+                let f_max = model.spec.drive.max_torque_nm as f32 / r;
+                let f_total = rb.mass() * (w_radps * r - v) / TRACK_TAU_S;
+                let f_wheel = (f_total / n_driven).clamp(-f_max, f_max);
+                for (wheel, geom) in controller.wheels_mut().iter_mut().zip(&model.wheels) {
+                    wheel.engine_force = if geom.driven { f_wheel } else { 0.0 };
+                    wheel.steering = match geom.steer_side {
+                        1 => steer.0,
+                        -1 => steer.1,
+                        _ => 0.0,
+                    };
+                    wheel.friction_slip = p.tyre_friction;
+                }
+                let dt = world.pw.integration_parameters.dt;
+                let filter = QueryFilter::default().groups(groups::sensors());
+                let pw = &mut world.pw;
+                let q = pw.broad_phase.as_query_pipeline_mut(pw.narrow_phase.query_dispatcher(), &mut pw.bodies, &mut pw.colliders, filter);
+                controller.update_vehicle(dt, q);
+                world.pw.step();
+            }
+            Body::Multibody(car) => {
+                let max_t = model.spec.drive.max_torque_nm as f32;
+                for &h in &car.drive {
+                    if let Some((mb, link)) = world.pw.multibody_joints.get_mut(h) {
+                        if let Some(l) = mb.link_mut(link) {
+                            l.joint.data.set_motor_velocity(JointAxis::AngX, w_radps, DRIVE_MOTOR_DAMPING);
+                            l.joint.data.set_motor_max_force(JointAxis::AngX, max_t);
+                        }
+                    }
+                }
+                for &(h, side) in &car.steer {
+                    if let Some((mb, link)) = world.pw.multibody_joints.get_mut(h) {
+                        if let Some(l) = mb.link_mut(link) {
+                            let target = if side > 0 { steer.0 } else { steer.1 };
+                            l.joint.data.set_motor_position(JointAxis::AngX, target, STEER_STIFFNESS, STEER_DAMPING);
+                        }
+                    }
+                }
+                world.pw.step();
+            }
+        }
+    }
+}
+
+impl MultibodyCar {
+    fn insert(&mut self, world: &mut World, model: &VehicleModel, pose: Pose) -> Result<(), SimError> {
+        let mut robot = self.template.clone();
+        robot.append_transform(&pose);
+        let pw = &mut world.pw;
+        let handles = robot.insert_using_multibody_joints(
+            &mut pw.bodies,
+            &mut pw.colliders,
+            &mut pw.multibody_joints,
+            UrdfMultibodyOptions::DISABLE_SELF_CONTACTS,
+        );
+        self.bodies = handles.links.iter().map(|l| l.body).collect();
+        let robot = &model.urdf.robot;
+        self.mprops = self
+            .template
+            .links
+            .iter()
+            .map(|l| model.link_mprops.get(&robot.links[l.urdf_link_index].name).copied().unwrap_or_default())
+            .collect();
+        let wheel_links: Vec<usize> = self
+            .template
+            .links
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| model.wheels.iter().any(|w| w.link == model.urdf.robot.links[l.urdf_link_index].name))
+            .map(|(i, _)| i)
+            .collect();
+        self.wheel_colliders = wheel_links.iter().flat_map(|&i| handles.links[i].colliders.iter().map(|c| c.handle)).collect();
+        self.colliders = handles.links.iter().flat_map(|l| l.colliders.iter().map(|c| c.handle)).collect();
+        let find = |name: &str| -> Result<MultibodyJointHandle, SimError> {
+            self.joint_names
+                .iter()
+                .position(|n| n == name)
+                .and_then(|i| handles.joints[i].joint)
+                .ok_or_else(|| SimError::Invalid { context: model.urdf.rel_path.clone(), msg: format!("joint '{name}' did not become a multibody joint") })
+        };
+        self.drive = model.wheels.iter().filter(|w| w.driven).map(|w| find(&w.joint)).collect::<Result<_, _>>()?;
+        self.steer = model
+            .wheels
+            .iter()
+            .filter_map(|w| w.steer_joint.as_ref().map(|s| (s, w.steer_side)))
+            .map(|(s, side)| find(s).map(|h| (h, side)))
+            .collect::<Result<_, _>>()?;
+        // Multibodies add 0.1 of damping to free angular axes; a car must roll freely.
+        if let Some(&h) = self.drive.first() {
+            if let Some((mb, _)) = pw.multibody_joints.get_mut(h) {
+                mb.damping_mut().fill(0.0);
+            }
+        }
+        for &b in &self.bodies {
+            if let Some(rb) = pw.bodies.get_mut(b) {
+                rb.set_linear_damping(0.0);
+                rb.set_angular_damping(0.0);
+            }
+            // The loader inserts joints without waking: put every link in an active island.
+            pw.wake_up(b, true);
+        }
+        Ok(())
+    }
+
+    /// Move the multibody to `pose` with every joint at zero and at rest. Removing and
+    /// re-inserting a multibody leaves rapier's multibody set stale, so reset works in place.
+    fn teleport(&mut self, world: &mut World, model: &VehicleModel, pose: Pose, p: BodyParams) -> Result<(), SimError> {
+        let pw = &mut world.pw;
+        for (&b, mp) in self.bodies.iter().zip(&self.mprops) {
+            if let Some(rb) = pw.bodies.get_mut(b) {
+                rb.set_additional_mass_properties(scale_mass(*mp, p.mass_scale), false);
+                rb.set_linvel(Vector::ZERO, false);
+                rb.set_angvel(Vector::ZERO, false);
+            }
+        }
+        for &c in &self.wheel_colliders {
+            if let Some(co) = pw.colliders.get_mut(c) {
+                co.set_friction(p.tyre_friction);
+            }
+        }
+        let root = self.bodies[self.base_idx];
+        pw.bodies[root].set_position(pose, true);
+        let h = *self.drive.first().ok_or_else(|| SimError::Invalid { context: model.urdf.rel_path.clone(), msg: "no driven wheel".into() })?;
+        let (mb, _) = pw.multibody_joints.get_mut(h).ok_or_else(|| SimError::Invalid { context: model.urdf.rel_path.clone(), msg: "multibody lost".into() })?;
+        let mut disp = vec![0.0; mb.ndofs()];
+        for link in mb.links().filter(|l| !l.is_root()) {
+            let n = link.joint().ndofs();
+            let coords = link.joint().coords();
+            // Revolute joints keep their angle in the first angular slot of `coords`.
+            let locked = link.joint().data.locked_axes.bits();
+            let mut k = 0;
+            for axis in 0..6 {
+                if locked & (1 << axis) == 0 && k < n {
+                    disp[link.assembly_id() + k] = -coords[axis];
+                    k += 1;
+                }
+            }
+        }
+        mb.apply_displacements(&disp);
+        mb.generalized_velocity_mut().fill(0.0);
+        mb.forward_kinematics(&pw.bodies, true);
+        let poses: Vec<(RigidBodyHandle, Pose)> = mb.links().map(|l| (l.rigid_body_handle(), *l.local_to_world())).collect();
+        for (b, pose) in poses {
+            pw.bodies[b].set_position(pose, true);
+            pw.wake_up(b, true);
+        }
+        Ok(())
+    }
+}
+
+fn scale_mass(mp: MassProperties, s: f32) -> MassProperties {
+    if s == 1.0 {
+        return mp;
+    }
+    MassProperties::with_principal_inertia_frame(mp.local_com, mp.mass() * s, mp.principal_inertia() * s, mp.principal_inertia_local_frame)
+}

@@ -1,0 +1,124 @@
+//! The physics world: rapier with gravity along -z, fixed substeps, the scene's static colliders,
+//! and the collision groups that keep the vehicle out of its own sensors.
+
+use crate::scene::Scene;
+use rapier3d::prelude::*;
+
+/// Gravity, m/s^2 (REP 103: z up).
+pub const GRAVITY_MPS2: f32 = 9.81;
+
+/// Collision groups.
+pub mod groups {
+    use rapier3d::prelude::*;
+    /// The ground.
+    pub const GROUND: Group = Group::GROUP_1;
+    /// Static scene objects and walls.
+    pub const OBSTACLE: Group = Group::GROUP_2;
+    /// The vehicle's colliders.
+    pub const VEHICLE: Group = Group::GROUP_3;
+
+    /// Groups of a vehicle collider that may touch the ground.
+    pub fn vehicle() -> InteractionGroups {
+        InteractionGroups::new(VEHICLE, GROUND.union(OBSTACLE), InteractionTestMode::And)
+    }
+    /// Groups of a vehicle collider that must not touch the ground (ray-cast wheel proxies).
+    pub fn vehicle_no_ground() -> InteractionGroups {
+        InteractionGroups::new(VEHICLE, OBSTACLE, InteractionTestMode::And)
+    }
+    /// Groups for queries that see everything but the vehicle.
+    pub fn sensors() -> InteractionGroups {
+        InteractionGroups::new(Group::ALL, GROUND.union(OBSTACLE), InteractionTestMode::And)
+    }
+}
+
+/// Collider `user_data` for the ground: scene object ids are stored as `id + 1`.
+pub const GROUND_USER_DATA: u128 = 0;
+
+/// One static collider, for sensors that skip the broad phase.
+#[derive(Clone)]
+pub struct StaticEntry {
+    /// World-frame bounding box.
+    pub aabb: Aabb,
+    /// Shape.
+    pub shape: SharedShape,
+    /// World pose.
+    pub pose: Pose,
+    /// Scene object id (`None`: the ground).
+    pub object_id: Option<u32>,
+}
+
+/// Every static collider of the scene with its box (the scene never moves).
+#[derive(Clone, Default)]
+pub struct StaticIndex {
+    /// The entries, ground first.
+    pub entries: Vec<StaticEntry>,
+}
+
+/// The rapier state plus the static index.
+pub struct World {
+    /// rapier's bundle of sets and pipelines.
+    pub pw: PhysicsWorld,
+    /// Static colliders for sensors.
+    pub statics: StaticIndex,
+    /// The ground's collider.
+    pub ground: ColliderHandle,
+}
+
+impl World {
+    /// A world holding `scene`, stepping `substep_s` seconds per physics step.
+    pub fn new(scene: &Scene, substep_s: f32) -> Self {
+        let mut pw = PhysicsWorld::default();
+        pw.gravity = Vector::new(0.0, 0.0, -GRAVITY_MPS2);
+        pw.integration_parameters.dt = substep_s;
+        let [gx, gy] = scene.file.ground.size_m;
+        let ground_body = pw.insert_body(RigidBodyBuilder::fixed());
+        let ground = pw.insert_collider(
+            ColliderBuilder::cuboid(gx / 2.0, gy / 2.0, 0.05)
+                .translation(Vector::new(0.0, 0.0, -0.05))
+                .friction(scene.file.ground.friction)
+                .friction_combine_rule(CoefficientCombineRule::Multiply)
+                .collision_groups(InteractionGroups::new(groups::GROUND, Group::ALL, InteractionTestMode::And))
+                .user_data(GROUND_USER_DATA),
+            Some(ground_body),
+        );
+        let mut statics = StaticIndex::default();
+        let gco = &pw.colliders[ground];
+        statics.entries.push(StaticEntry {
+            aabb: gco.compute_aabb(),
+            shape: gco.shared_shape().clone(),
+            pose: *gco.position(),
+            object_id: None,
+        });
+        for obj in &scene.objects {
+            let body = pw.insert_body(RigidBodyBuilder::fixed());
+            for s in &obj.shapes {
+                let h = pw.insert_collider(
+                    ColliderBuilder::new(s.shape.clone())
+                        .position(s.pose)
+                        .friction(0.5)
+                        .collision_groups(InteractionGroups::new(groups::OBSTACLE, Group::ALL, InteractionTestMode::And))
+                        .user_data(obj.id as u128 + 1),
+                    Some(body),
+                );
+                let co = &pw.colliders[h];
+                statics.entries.push(StaticEntry {
+                    aabb: co.compute_aabb(),
+                    shape: co.shared_shape().clone(),
+                    pose: *co.position(),
+                    object_id: Some(obj.id),
+                });
+            }
+        }
+        Self { pw, statics, ground }
+    }
+
+    /// Scene object id behind a collider (`None` for the ground and the vehicle).
+    pub fn object_id(&self, h: ColliderHandle) -> Option<u32> {
+        let co = self.pw.colliders.get(h)?;
+        if co.collision_groups().memberships.contains(groups::OBSTACLE) && co.user_data > 0 {
+            Some((co.user_data - 1) as u32)
+        } else {
+            None
+        }
+    }
+}
