@@ -26,5 +26,5 @@ pub mod world;
 pub use error::SimError;
 pub use rapier3d;
 pub use scene::{Scene, SceneKind, SCENE_IDS};
-pub use sim::{Pose2, SceneSource, Sim, SimConfig, VehicleParams};
+pub use sim::{PlanarPose, SceneSource, Sim, SimConfig, VehicleParams};
 pub use vehicle::{ActionMapping, Control, DriveModel, DynamicsMode};

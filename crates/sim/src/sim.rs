@@ -72,7 +72,7 @@ impl Default for SimConfig {
 
 /// A planar pose: where to put the vehicle.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Pose2 {
+pub struct PlanarPose {
     /// x, metres.
     pub x_m: f32,
     /// y, metres.
@@ -110,6 +110,7 @@ pub struct Sim {
     wheel_angles: (f64, f64),
     time_s: f64,
     steps: u64,
+    vel_w: (Vector, Vector),
 }
 
 impl Sim {
@@ -153,7 +154,7 @@ impl Sim {
             steering_offset_rad: 0.0,
         };
         let spawn = scene.file.spawn;
-        let pose2 = Pose2 { x_m: spawn.x_m, y_m: spawn.y_m, yaw_rad: spawn.yaw_deg.to_radians() };
+        let pose2 = PlanarPose { x_m: spawn.x_m, y_m: spawn.y_m, yaw_rad: spawn.yaw_deg.to_radians() };
         let body = Body::new(&mut world, &model, cfg.mode, spawn_pose(&model, pose2), body_params(&nominal))?;
         let lidar = Lidar::new(cfg.lidar.clone());
         let mut sim = Self {
@@ -171,6 +172,7 @@ impl Sim {
             wheel_angles: (0.0, 0.0),
             time_s: 0.0,
             steps: 0,
+            vel_w: (Vector::ZERO, Vector::ZERO),
         };
         sim.reset(pose2)?;
         Ok(sim)
@@ -207,13 +209,13 @@ impl Sim {
     }
 
     /// AutoVRL's fixed spawn of this scene.
-    pub fn default_spawn(&self) -> Pose2 {
+    pub fn default_spawn(&self) -> PlanarPose {
         let s = self.scene.file.spawn;
-        Pose2 { x_m: s.x_m, y_m: s.y_m, yaw_rad: s.yaw_deg.to_radians() }
+        PlanarPose { x_m: s.x_m, y_m: s.y_m, yaw_rad: s.yaw_deg.to_radians() }
     }
 
     /// Put the vehicle at `pose` on the ground, at rest, wheel speed 0 (no scene reload).
-    pub fn reset(&mut self, pose: Pose2) -> Result<(), SimError> {
+    pub fn reset(&mut self, pose: PlanarPose) -> Result<(), SimError> {
         let p = spawn_pose(&self.model, pose);
         let bp = body_params(&self.params);
         self.body.reset(&mut self.world, &self.model, p, bp)?;
@@ -222,6 +224,7 @@ impl Sim {
         self.wheel_angles = (0.0, 0.0);
         self.time_s = 0.0;
         self.steps = 0;
+        self.vel_w = (Vector::ZERO, Vector::ZERO);
         self.imu.reset();
         Ok(())
     }
@@ -242,16 +245,25 @@ impl Sim {
         self.control = Control { throttle: c.throttle, steering_rad: delta };
         let bp = body_params(&self.params);
         let steer = (self.wheel_angles.0 as f32, self.wheel_angles.1 as f32);
+        let mut before = self.base_pose();
         for _ in 0..self.cfg.substeps {
+            before = self.base_pose();
             self.body.substep(&mut self.world, &self.model, self.wheel_speed as f32, steer, bp);
         }
         self.time_s += t;
         self.steps += 1;
-        let rb = &self.world.pw.bodies[self.body.base()];
-        let (lin, ang) = (rb.linvel(), rb.angvel());
-        if !(rb.position().is_finite() && lin.is_finite() && ang.is_finite()) {
+        // Velocities of the base origin over the last substep: the motion the pose really made.
+        // (rapier's body velocity is the centre of mass's, and in ray-cast mode it carries the
+        // gravity increment that the next suspension impulse cancels.)
+        let after = self.base_pose();
+        let h = self.world.pw.integration_parameters.dt;
+        let lin = (after.translation - before.translation) / h;
+        let (axis, angle) = (after.rotation * before.rotation.inverse()).to_axis_angle();
+        let ang = if angle.is_finite() && axis.is_finite() { axis * (angle / h) } else { Vector::ZERO };
+        if !(after.is_finite() && lin.is_finite() && ang.is_finite()) {
             return Err(SimError::NotFinite(format!("vehicle state after step {}", self.steps)));
         }
+        self.vel_w = (lin, ang);
         self.imu.update(lin, ang, t as f32);
         Ok(())
     }
@@ -287,20 +299,20 @@ impl Sim {
     }
 
     /// Planar pose of the base frame.
-    pub fn pose2(&self) -> Pose2 {
+    pub fn pose2(&self) -> PlanarPose {
         let p = self.base_pose();
         let fwd = p.rotation * Vector::X;
-        Pose2 { x_m: p.translation.x, y_m: p.translation.y, yaw_rad: fwd.y.atan2(fwd.x) }
+        PlanarPose { x_m: p.translation.x, y_m: p.translation.y, yaw_rad: fwd.y.atan2(fwd.x) }
     }
 
-    /// Linear velocity of the base, world frame, m/s.
+    /// Linear velocity of the base origin over the last physics substep, world frame, m/s.
     pub fn linvel_w(&self) -> Vector {
-        self.world.pw.bodies[self.body.base()].linvel()
+        self.vel_w.0
     }
 
-    /// Angular velocity of the base, world frame, rad/s.
+    /// Angular velocity of the base over the last physics substep, world frame, rad/s.
     pub fn angvel_w(&self) -> Vector {
-        self.world.pw.bodies[self.body.base()].angvel()
+        self.vel_w.1
     }
 
     /// Speed along the heading, m/s (negative when rolling backwards).
@@ -395,7 +407,7 @@ fn body_params(p: &VehicleParams) -> BodyParams {
     BodyParams { tyre_friction: p.tyre_friction, mass_scale: p.mass_scale }
 }
 
-fn spawn_pose(model: &VehicleModel, p: Pose2) -> Pose {
+fn spawn_pose(model: &VehicleModel, p: PlanarPose) -> Pose {
     // A hair above the ground so the first contact is not a penetration.
     Pose::from_parts(Vector::new(p.x_m, p.y_m, model.rest_height_m() + 0.002), Rotation::from_rotation_z(p.yaw_rad))
 }
