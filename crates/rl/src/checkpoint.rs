@@ -8,6 +8,7 @@
 use crate::error::{Result, RlError};
 use crate::file;
 use crate::nets::{Adam, HostParams};
+use crate::policy::Algorithm;
 use serde::{Deserialize, Serialize};
 use serde::de::DeserializeOwned;
 use std::path::Path;
@@ -97,8 +98,14 @@ pub(crate) fn write<H: Serialize>(path: &Path, header: &H, arrays: &ArrayWriter<
     file::write_atomic(path, &bytes)
 }
 
-/// Read a checkpoint's header and an array reader over its arrays.
-pub(crate) fn read<'p, H: DeserializeOwned>(path: &'p Path) -> Result<(H, ArrayReader<'p>)> {
-    let (h, arrays) = file::read(path, CHECKPOINT_MAGIC, CHECKPOINT_FORMAT_VERSION, "checkpoint")?;
+/// Read a checkpoint written by `algorithm`: its header and a reader over its arrays.
+pub(crate) fn read<'p, H: DeserializeOwned>(path: &'p Path, algorithm: Algorithm) -> Result<(H, ArrayReader<'p>)> {
+    let (h, arrays): (serde_json::Value, _) = file::read(path, CHECKPOINT_MAGIC, CHECKPOINT_FORMAT_VERSION, "checkpoint")?;
+    let found = h.get("algorithm").and_then(|a| a.as_str()).unwrap_or("unknown").to_string();
+    if found != algorithm.to_string() {
+        return Err(RlError::Mismatch { what: "algorithm", file: found, env: algorithm.to_string() });
+    }
+    let h = serde_json::from_value(h)
+        .map_err(|e| RlError::BadFile { path: path.to_path_buf(), reason: format!("checkpoint header: {e}") })?;
     Ok((h, ArrayReader { it: arrays.into_iter(), path }))
 }

@@ -26,7 +26,7 @@
 
 #![warn(missing_docs)]
 
-
+pub mod bench;
 mod buffer;
 mod checkpoint;
 pub mod device;

@@ -12,7 +12,7 @@ mod update;
 pub use config::PpoConfig;
 
 use crate::checkpoint::{self, AdamMeta, ArrayWriter};
-use crate::error::{Result, RlError};
+use crate::error::Result;
 use crate::nets::{init_layer, mlp_forward, to_vec, Adam, HostParams, Init, MlpSpec};
 use crate::normalize::ObsNormalizer;
 use crate::policy::{check_space, ActionHead, Algorithm, Policy, PolicyData};
@@ -335,10 +335,7 @@ impl<E: Env> Ppo<E> {
 
     /// Resume from a checkpoint with `env` (whose spaces must match); episodes restart.
     pub fn load_checkpoint(path: &Path, env: VecEnv<E>, device: &Device) -> Result<Self> {
-        let (h, mut r) = checkpoint::read::<Header>(path)?;
-        if h.algorithm != Algorithm::Ppo {
-            return Err(RlError::Mismatch { what: "algorithm", file: h.algorithm.to_string(), env: "ppo".into() });
-        }
+        let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Ppo)?;
         check_space("observation space", &h.observation_space, env.observation_space())?;
         check_space("action space", &h.action_space, env.action_space())?;
         let mut s = Self::new(h.config.clone(), env, device, h.seed)?;

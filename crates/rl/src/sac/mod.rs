@@ -331,10 +331,7 @@ impl<E: Env> Sac<E> {
     /// Resume from a checkpoint with `env` (whose spaces must match); training continues with
     /// the saved weights, optimisers, buffer, RNG and counters; episodes restart.
     pub fn load_checkpoint(path: &Path, env: VecEnv<E>, device: &Device) -> Result<Self> {
-        let (h, mut r) = checkpoint::read::<Header>(path)?;
-        if h.algorithm != Algorithm::Sac {
-            return Err(RlError::Mismatch { what: "algorithm", file: h.algorithm.to_string(), env: "sac".into() });
-        }
+        let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Sac)?;
         check_space("observation space", &h.observation_space, env.observation_space())?;
         check_space("action space", &h.action_space, env.action_space())?;
         let mut s = Self::new(h.config.clone(), env, device, h.seed)?;

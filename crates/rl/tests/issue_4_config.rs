@@ -1,0 +1,68 @@
+//! Defaults are SB3's, and TOML overrides behave like rl-zoo3's.
+
+use agvrl_rl::nets::Activation;
+use agvrl_rl::sac::EntCoef;
+use agvrl_rl::{PpoConfig, SacConfig};
+
+#[test]
+fn sac_defaults_are_sb3s() {
+    let c = SacConfig::default();
+    assert_eq!(c.learning_rate, 3e-4);
+    assert_eq!(c.buffer_size, 1_000_000);
+    assert_eq!(c.learning_starts, 100);
+    assert_eq!(c.batch_size, 256);
+    assert_eq!(c.tau, 0.005);
+    assert_eq!(c.gamma, 0.99);
+    assert_eq!(c.train_freq, 1);
+    assert_eq!(c.gradient_steps, 1);
+    assert_eq!(c.ent_coef, EntCoef::Auto("auto".into()));
+    assert_eq!(c.ent_coef.auto_init().unwrap(), Some(1.0));
+    assert_eq!(c.target_update_interval, 1);
+    assert_eq!(c.target_entropy, None);
+    assert_eq!(c.net_arch, vec![256, 256]);
+    assert!(!c.normalize_obs);
+}
+
+#[test]
+fn ppo_defaults_are_sb3s() {
+    let c = PpoConfig::default();
+    assert_eq!(c.learning_rate, 3e-4);
+    assert_eq!(c.n_steps, 2048);
+    assert_eq!(c.batch_size, 64);
+    assert_eq!(c.n_epochs, 10);
+    assert_eq!(c.gamma, 0.99);
+    assert_eq!(c.gae_lambda, 0.95);
+    assert_eq!(c.clip_range, 0.2);
+    assert_eq!(c.clip_range_vf, None);
+    assert!(c.normalize_advantage);
+    assert_eq!(c.ent_coef, 0.0);
+    assert_eq!(c.vf_coef, 0.5);
+    assert_eq!(c.max_grad_norm, 0.5);
+    assert_eq!(c.target_kl, None);
+    assert_eq!(c.net_arch, vec![64, 64]);
+    assert_eq!(c.activation_fn, Activation::Tanh);
+    assert!(c.ortho_init);
+    assert_eq!(c.log_std_init, 0.0);
+    assert!(!c.use_sde);
+    assert!(!c.normalize_obs);
+}
+
+#[test]
+fn toml_overrides_a_subset_and_round_trips() {
+    let c = PpoConfig::from_toml("n_steps = 1024\ngamma = 0.9\nlearning_rate = 1e-3\n").unwrap();
+    assert_eq!((c.n_steps, c.gamma, c.learning_rate), (1024, 0.9, 1e-3));
+    assert_eq!(c.batch_size, 64);
+    assert_eq!(PpoConfig::from_toml(&c.to_toml()).unwrap(), c);
+    let s = SacConfig::from_toml("ent_coef = 0.1\nnet_arch = [64, 64]\n").unwrap();
+    assert_eq!(s.ent_coef, EntCoef::Fixed(0.1));
+    assert_eq!(SacConfig::from_toml(&s.to_toml()).unwrap(), s);
+    assert_eq!(SacConfig::from_toml("ent_coef = \"auto_0.1\"").unwrap().ent_coef.auto_init().unwrap(), Some(0.1));
+}
+
+#[test]
+fn unknown_keys_and_unsupported_options_are_rejected() {
+    assert!(SacConfig::from_toml("learnign_rate = 1e-3").is_err());
+    assert!(SacConfig::from_toml("ent_coef = \"sometimes\"").is_err());
+    let e = PpoConfig::from_toml("use_sde = true").unwrap_err().to_string();
+    assert!(e.contains("gSDE"), "{e}");
+}

@@ -1,0 +1,129 @@
+//! Policy files and checkpoints: round trip, rejection of corrupt, truncated and mismatching
+//! files, size bound.
+
+use crate::reach::vec_env;
+use agvrl_envs::{make, Env};
+use agvrl_rl::{default_device, Control, Policy, PolicyData, Ppo, PpoConfig, RlError, Sac, SacConfig};
+use std::path::PathBuf;
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("agvrl-rl-tests");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(format!("{name}-{}", std::process::id()))
+}
+
+fn same_bytes(a: &std::path::Path, b: &std::path::Path) {
+    let (x, y) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
+    let first = x.iter().zip(&y).position(|(p, q)| p != q);
+    assert!(x == y, "lengths {} {}, first difference at {first:?}: {:?}", x.len(), y.len(), first.map(|i| String::from_utf8_lossy(&x[i.saturating_sub(60)..(i + 20).min(x.len())]).into_owned()));
+}
+
+fn small_sac(seed: u64) -> Sac<crate::reach::Reach> {
+    let cfg = SacConfig { net_arch: vec![32, 32], batch_size: 32, learning_starts: 50, normalize_obs: true, ..SacConfig::default() };
+    let mut sac = Sac::new(cfg, vec_env(2), &default_device(), seed).unwrap();
+    sac.learn(200, &mut |_| Control::Continue).unwrap();
+    sac
+}
+
+#[test]
+fn policy_round_trip_gives_the_same_actions() {
+    let sac = small_sac(0);
+    let path = tmp("sac.policy");
+    sac.save_policy(&path).unwrap();
+    let loaded = PolicyData::load(&path).unwrap();
+    assert_eq!(loaded, sac.policy_data());
+    let mut a = Policy::load(&path).unwrap();
+    let mut b = sac.policy(&default_device());
+    let obs = [0.3, -0.2, -0.5, 0.9];
+    let (xa, xb) = (a.act(&obs, true).unwrap(), b.act(&obs, true).unwrap());
+    assert_eq!(xa, xb);
+    assert_eq!(xa.len(), 2);
+    assert!(xa.iter().all(|v| (-2.0..=2.0).contains(v)));
+    // The ndarray backend reads the same file and agrees to float tolerance.
+    let mut c = Policy::load_on(&path, &agvrl_rl::CpuBackend::NdArray.device()).unwrap();
+    let xc = c.act(&obs, true).unwrap();
+    assert!(xa.iter().zip(&xc).all(|(p, q)| (p - q).abs() < 1e-4), "{xa:?} {xc:?}");
+}
+
+#[test]
+fn corrupted_truncated_and_foreign_files_are_rejected() {
+    let sac = small_sac(1);
+    let path = tmp("corrupt.policy");
+    sac.save_policy(&path).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let is_bad_file = |b: &[u8]| {
+        std::fs::write(&path, b).unwrap();
+        matches!(Policy::load(&path), Err(RlError::BadFile { .. }))
+    };
+    let mut flipped = bytes.clone();
+    let mid = bytes.len() / 2;
+    flipped[mid] ^= 0x10;
+    assert!(is_bad_file(&flipped));
+    assert!(is_bad_file(&bytes[..bytes.len() - 1]));
+    assert!(is_bad_file(&bytes[..bytes.len() / 3]));
+    assert!(is_bad_file(b"not a policy"));
+    // A checkpoint is not a policy file.
+    let ck = tmp("as-policy.ckpt");
+    sac.save_checkpoint(&ck).unwrap();
+    let e = Policy::load(&ck).err().unwrap().to_string();
+    assert!(e.contains("not an agvrl policy file"), "{e}");
+}
+
+#[test]
+fn policy_for_another_env_is_rejected() {
+    let sac = small_sac(2);
+    let policy = sac.policy(&default_device());
+    let pendulum = make("pendulum").unwrap();
+    let e = policy.check_spaces(&pendulum.observation_space(), &pendulum.action_space()).unwrap_err();
+    assert!(matches!(e, RlError::Mismatch { what: "observation space", .. }), "{e}");
+    let mut env = make("pendulum").unwrap();
+    assert!(agvrl_rl::evaluate(&mut sac.policy(&default_device()), &mut env, 1, 0).is_err());
+    let mut p = sac.policy(&default_device());
+    assert!(matches!(p.act(&[1.0, 2.0, 3.0], true), Err(RlError::Shape { .. })));
+}
+
+#[test]
+fn a_large_sac_policy_file_stays_under_10_mb() {
+    // obs 100, act 2, [256, 256]: the benchmark's size.
+    let env = agvrl_envs::VecEnv::new(vec![agvrl_rl::bench::RandomEnv::new(100, 2)], 1).unwrap();
+    let sac = Sac::new(SacConfig::default(), env, &default_device(), 0).unwrap();
+    let bytes = sac.policy_data().to_bytes().unwrap();
+    assert!(bytes.len() < 10 * 1024 * 1024, "{}", bytes.len());
+    assert!(bytes.len() > 4 * (100 * 256 + 256 * 256), "weights are in the file");
+}
+
+#[test]
+fn sac_checkpoint_resumes_the_same_state() {
+    let sac = small_sac(3);
+    let a = tmp("sac-a.ckpt");
+    let b = tmp("sac-b.ckpt");
+    sac.save_checkpoint(&a).unwrap();
+    let mut resumed = Sac::load_checkpoint(&a, vec_env(2), &default_device()).unwrap();
+    resumed.save_checkpoint(&b).unwrap();
+    same_bytes(&a, &b);
+    assert_eq!(resumed.num_timesteps(), sac.num_timesteps());
+    assert_eq!(resumed.policy_data(), sac.policy_data());
+    resumed.learn(50, &mut |_| Control::Continue).unwrap();
+    assert_eq!(resumed.num_timesteps(), sac.num_timesteps() + 50);
+    // Wrong algorithm and wrong env are refused.
+    assert!(matches!(Ppo::load_checkpoint(&a, vec_env(2), &default_device()), Err(RlError::Mismatch { .. })));
+    let pend = agvrl_envs::VecEnv::new(vec![make("pendulum").unwrap()], 1).unwrap();
+    assert!(matches!(Sac::load_checkpoint(&a, pend, &default_device()), Err(RlError::Mismatch { .. })));
+}
+
+#[test]
+fn ppo_checkpoint_resumes_the_same_state() {
+    let cfg = PpoConfig { n_steps: 64, net_arch: vec![16], normalize_obs: true, ..PpoConfig::default() };
+    let mut ppo = Ppo::new(cfg, vec_env(2), &default_device(), 4).unwrap();
+    ppo.learn(128, &mut |_| Control::Continue).unwrap();
+    let (a, b) = (tmp("ppo-a.ckpt"), tmp("ppo-b.ckpt"));
+    ppo.save_checkpoint(&a).unwrap();
+    let resumed = Ppo::load_checkpoint(&a, vec_env(2), &default_device()).unwrap();
+    resumed.save_checkpoint(&b).unwrap();
+    same_bytes(&a, &b);
+    assert_eq!(resumed.policy_data(), ppo.policy_data());
+    let mut bytes = std::fs::read(&a).unwrap();
+    bytes.truncate(bytes.len() - 7);
+    std::fs::write(&a, &bytes).unwrap();
+    assert!(matches!(Ppo::load_checkpoint(&a, vec_env(2), &default_device()), Err(RlError::BadFile { .. })));
+}
