@@ -14,6 +14,7 @@
 #![warn(missing_docs)]
 
 pub mod assets;
+pub mod bench;
 mod error;
 pub mod msg;
 pub mod scene;

@@ -45,6 +45,8 @@ pub struct StaticEntry {
     pub pose: Pose,
     /// Scene object id (`None`: the ground).
     pub object_id: Option<u32>,
+    /// The shape prepared for closed-form ray casts.
+    pub fast: crate::sensors::fast_ray::FastRay,
 }
 
 /// Every static collider of the scene with its box (the scene never moves).
@@ -88,6 +90,7 @@ impl World {
             shape: gco.shared_shape().clone(),
             pose: *gco.position(),
             object_id: None,
+            fast: crate::sensors::fast_ray::FastRay::new(gco.shared_shape(), gco.position()),
         });
         for obj in &scene.objects {
             let body = pw.insert_body(RigidBodyBuilder::fixed());
@@ -106,6 +109,7 @@ impl World {
                     shape: co.shared_shape().clone(),
                     pose: *co.position(),
                     object_id: Some(obj.id),
+                    fast: crate::sensors::fast_ray::FastRay::new(co.shared_shape(), co.position()),
                 });
             }
         }

@@ -93,10 +93,44 @@ impl Lidar {
         let (angle_min, angle_increment) = self.cfg.angles();
         let origin = pose_w.translation;
         let rmax = self.cfg.range_max_m;
-        let reach = Aabb::new(origin - Vector::splat(rmax), origin + Vector::splat(rmax));
+        let n = self.dirs_s.len();
+        let dirs: Vec<Vector> = self.dirs_s.iter().map(|d| pose_w.rotation * *d).collect();
+        let inv: Vec<Vector> = dirs.iter().map(|d| d.recip()).collect();
+        // Vertical reach of the fan: rays climb or dip at most this far within range.
+        let dz = dirs.iter().map(|d| d.z.abs()).fold(0.0f32, f32::max) * rmax + 1e-3;
+        let reach = Aabb::new(
+            Vector::new(origin.x - rmax, origin.y - rmax, origin.z - dz),
+            Vector::new(origin.x + rmax, origin.y + rmax, origin.z + dz),
+        );
+        let up = pose_w.rotation * Vector::Z;
+        let fwd = pose_w.rotation * Vector::X;
+        let yaw = fwd.y.atan2(fwd.x);
+        // Bearing culling assumes a roughly level sensor (ray bearings = yaw + ray angle).
+        let level = up.z > 0.98;
+        let full = self.cfg.fov_deg >= 360.0;
+        let mut best = vec![rmax; n];
+        let mut best_id: Vec<Option<Option<u32>>> = vec![None; n];
         self.candidates.clear();
         self.candidates.extend(scene.entries.iter().enumerate().filter(|(_, e)| e.aabb.intersects(&reach)).map(|(i, _)| i));
-        let n = self.dirs_s.len();
+        for &ci in &self.candidates {
+            let e = &scene.entries[ci];
+            let (lo, hi) = if level && angle_increment > 0.0 { ray_span(&e.aabb, origin, yaw, angle_min, angle_increment, n, full) } else { (0, n as i64 - 1) };
+            if lo > hi {
+                continue;
+            }
+            for k in lo..=hi {
+                let i = k.rem_euclid(n as i64) as usize;
+                if !slab_hit(&e.aabb, origin, inv[i], best[i]) {
+                    continue;
+                }
+                if let Some(t) = e.fast.cast(origin, dirs[i], best[i]) {
+                    if t < best[i] {
+                        best[i] = t;
+                        best_id[i] = Some(e.object_id);
+                    }
+                }
+            }
+        }
         let mut scan = LaserScan {
             angle_min,
             angle_increment,
@@ -108,33 +142,55 @@ impl Lidar {
             object_id: Vec::with_capacity(n),
             origin_w: origin.to_array(),
         };
-        for d_s in &self.dirs_s {
-            let dir = pose_w.rotation * *d_s;
-            let ray = Ray::new(origin, dir);
-            let inv = dir.recip();
-            let mut best = rmax;
-            let mut best_id: Option<Option<u32>> = None;
-            for &ci in &self.candidates {
-                let e = &scene.entries[ci];
-                if !slab_hit(&e.aabb, origin, inv, best) {
-                    continue;
-                }
-                if let Some(t) = e.shape.cast_ray(&e.pose, &ray, best, true) {
-                    if t < best {
-                        best = t;
-                        best_id = Some(e.object_id);
-                    }
-                }
-            }
-            let hit = best_id.is_some();
-            let range = best.max(self.cfg.range_min_m);
-            scan.ranges.push(range);
-            scan.hit.push(hit);
-            scan.points_w.push((origin + dir * best).to_array());
-            scan.object_id.push(best_id.flatten());
+        for i in 0..n {
+            scan.ranges.push(best[i].max(self.cfg.range_min_m));
+            scan.hit.push(best_id[i].is_some());
+            scan.points_w.push((origin + dirs[i] * best[i]).to_array());
+            scan.object_id.push(best_id[i].flatten());
         }
         scan
     }
+}
+
+/// Ray indices (possibly outside `0..n` for a full circle, to be wrapped) whose bearing may meet
+/// the box's footprint, with a one-ray margin; `lo > hi` when none can.
+fn ray_span(aabb: &Aabb, o: Vector, yaw: f32, a0: f32, da: f32, n: usize, full: bool) -> (i64, i64) {
+    use std::f32::consts::{PI, TAU};
+    if o.x >= aabb.mins.x && o.x <= aabb.maxs.x && o.y >= aabb.mins.y && o.y <= aabb.maxs.y {
+        return (0, n as i64 - 1);
+    }
+    let c = 0.5 * (aabb.mins + aabb.maxs);
+    let phi_c = (c.y - o.y).atan2(c.x - o.x);
+    let wrap = |a: f32| (a + PI).rem_euclid(TAU) - PI;
+    let (mut dmin, mut dmax) = (f32::MAX, f32::MIN);
+    for (x, y) in [(aabb.mins.x, aabb.mins.y), (aabb.mins.x, aabb.maxs.y), (aabb.maxs.x, aabb.mins.y), (aabb.maxs.x, aabb.maxs.y)] {
+        let d = wrap((y - o.y).atan2(x - o.x) - phi_c);
+        dmin = dmin.min(d);
+        dmax = dmax.max(d);
+    }
+    // Bearing of the box centre relative to the first ray, in the fan's own angle.
+    let mut rel = wrap(phi_c - yaw) - a0;
+    if full {
+        rel = rel.rem_euclid(TAU);
+    }
+    let lo = ((rel + dmin) / da).floor() as i64 - 1;
+    let hi = ((rel + dmax) / da).ceil() as i64 + 1;
+    if full {
+        if hi - lo + 1 >= n as i64 {
+            return (0, n as i64 - 1);
+        }
+        return (lo, hi);
+    }
+    // A fan narrower than a circle: the box may also be reached through the wrap at +-pi.
+    let lo2 = lo.max(0);
+    let hi2 = hi.min(n as i64 - 1);
+    if lo2 <= hi2 {
+        return (lo2, hi2);
+    }
+    let alt = if rel + dmin < 0.0 { TAU } else { -TAU };
+    let lo = ((rel + alt + dmin) / da).floor() as i64 - 1;
+    let hi = ((rel + alt + dmax) / da).ceil() as i64 + 1;
+    (lo.max(0), hi.min(n as i64 - 1))
 }
 
 /// Whether the ray `origin + t dir` (with `inv` = 1/dir) meets `aabb` for some t in [0, tmax].

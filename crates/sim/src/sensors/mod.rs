@@ -1,5 +1,6 @@
 //! Sensors. Each has a config struct and returns a plain reading from `crate::msg`.
 
+pub mod fast_ray;
 pub mod gps;
 pub mod imu;
 pub mod lidar;

@@ -1,0 +1,88 @@
+//! Speed figures of the simulator as `key=value` lines (medians over repetitions after a
+//! warm-up, single thread). `agvrl bench` prints them.
+
+use crate::{Control, DynamicsMode, PlanarPose, SceneSource, Sim, SimConfig, SCENE_IDS};
+use std::hint::black_box;
+use std::time::Instant;
+
+/// Median of `reps` timings (seconds) of `f`.
+pub fn median_s(reps: usize, mut f: impl FnMut()) -> f64 {
+    let mut t: Vec<f64> = (0..reps)
+        .map(|_| {
+            let t0 = Instant::now();
+            f();
+            t0.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    t[t.len() / 2]
+}
+
+/// A deterministic pseudo-random control sequence (logistic map), so every run drives the same.
+pub fn wander(x: &mut f64) -> Control {
+    *x = (*x * 3.9 * (1.0 - *x)).clamp(1e-6, 1.0 - 1e-6);
+    Control { throttle: 0.4 + 0.6 * *x, steering_rad: 0.36 * (2.0 * *x - 1.0) }
+}
+
+/// Simulator figures per scene and dynamics mode. `quick` shortens the runs (CI smoke test).
+pub fn run(quick: bool) -> Vec<String> {
+    let reps = if quick { 3 } else { 7 };
+    let steps = if quick { 100 } else { 1000 };
+    let mut out = Vec::new();
+    for mode in [DynamicsMode::Raycast, DynamicsMode::Multibody] {
+        for id in SCENE_IDS {
+            let cfg = SimConfig { scene: SceneSource::Builtin(id.to_string()), mode, ..SimConfig::default() };
+            let load_s = median_s(reps.min(3), || {
+                black_box(Sim::new(cfg.clone()).ok());
+            });
+            let Ok(mut sim) = Sim::new(cfg.clone()) else {
+                out.push(format!("scene={id} mode={} error=load_failed", mode_name(mode)));
+                continue;
+            };
+            let spawn = sim.default_spawn();
+            let mut x = 0.31;
+            // Episodes restart when the car strays, so every scene is timed while driving.
+            let mut drive = |sim: &mut Sim, n: usize, scan: bool| {
+                for _ in 0..n {
+                    if sim.steps() > 150 || !sim.contacts().is_empty() {
+                        let _ = sim.reset(spawn);
+                    }
+                    let _ = sim.step(wander(&mut x));
+                    if scan {
+                        black_box(sim.lidar_scan());
+                    }
+                }
+            };
+            drive(&mut sim, steps / 5, true);
+            let step_s = median_s(reps, || drive(&mut sim, steps, true)) / steps as f64;
+            let phys_s = median_s(reps, || drive(&mut sim, steps, false)) / steps as f64 / sim.config().substeps as f64;
+            let scan_s = median_s(reps, || {
+                for _ in 0..steps {
+                    black_box(sim.lidar_scan());
+                }
+            }) / steps as f64;
+            let reset_s = median_s(reps, || {
+                for _ in 0..100 {
+                    let _ = sim.reset(PlanarPose { ..spawn });
+                }
+            }) / 100.0;
+            out.push(format!(
+                "scene={id} mode={} physics_step_us={:.1} lidar_scan_us={:.1} sim_steps_per_s={:.0} scene_load_ms={:.1} reset_us={:.2} reps={reps}",
+                mode_name(mode),
+                phys_s * 1e6,
+                scan_s * 1e6,
+                1.0 / step_s,
+                load_s * 1e3,
+                reset_s * 1e6
+            ));
+        }
+    }
+    out
+}
+
+fn mode_name(m: DynamicsMode) -> &'static str {
+    match m {
+        DynamicsMode::Raycast => "raycast",
+        DynamicsMode::Multibody => "multibody",
+    }
+}

@@ -1,0 +1,172 @@
+//! Closed-form ray casts against the static scene's shapes, in the world frame. parry casts
+//! rays at cylinders and convex hulls by GJK iterations; a LiDAR casts thousands per second at
+//! the same fixed shapes, so they are turned once into planes (boxes, hulls) or an analytic
+//! cylinder. Other shapes fall back to parry.
+
+use rapier3d::prelude::*;
+
+/// A static shape prepared for fast ray casts.
+#[derive(Clone)]
+pub enum FastRay {
+    /// A convex solid as the intersection of half-spaces `n . x <= d` (world frame).
+    Planes(Vec<(Vector, f32)>),
+    /// A finite cylinder (world frame): centre, unit axis, radius, half height.
+    Cylinder {
+        /// Centre.
+        c: Vector,
+        /// Unit axis.
+        a: Vector,
+        /// Radius.
+        r: f32,
+        /// Half height.
+        h: f32,
+    },
+    /// Anything else: parry's cast.
+    Parry(SharedShape, Pose),
+}
+
+impl FastRay {
+    /// Prepare `shape` at `pose`.
+    pub fn new(shape: &SharedShape, pose: &Pose) -> Self {
+        if let Some(c) = shape.as_cuboid() {
+            let he = c.half_extents;
+            let mut planes = Vec::with_capacity(6);
+            for i in 0..3 {
+                let n = pose.rotation * Vector::ith(i, 1.0);
+                let d = n.dot(pose.translation);
+                planes.push((n, d + he[i]));
+                planes.push((-n, -d + he[i]));
+            }
+            return FastRay::Planes(planes);
+        }
+        if let Some(p) = shape.as_convex_polyhedron() {
+            let pts: Vec<Vector> = p.points().iter().map(|v| pose * *v).collect();
+            let planes = p
+                .faces()
+                .iter()
+                .map(|f| {
+                    let n = pose.rotation * f.normal;
+                    let d = pts.iter().map(|q| n.dot(*q)).fold(f32::MIN, f32::max);
+                    (n, d)
+                })
+                .collect();
+            return FastRay::Planes(planes);
+        }
+        if let Some(c) = shape.as_cylinder() {
+            return FastRay::Cylinder { c: pose.translation, a: pose.rotation * Vector::Y, r: c.radius, h: c.half_height };
+        }
+        FastRay::Parry(shape.clone(), *pose)
+    }
+
+    /// Time of impact in [0, max_t] of the solid shape along `o + t d` (unit `d`), if any.
+    #[inline]
+    pub fn cast(&self, o: Vector, d: Vector, max_t: f32) -> Option<f32> {
+        match self {
+            FastRay::Planes(planes) => {
+                let (mut t0, mut t1) = (0.0f32, max_t);
+                for (n, off) in planes {
+                    let denom = n.dot(d);
+                    let dist = off - n.dot(o);
+                    if denom.abs() < 1e-12 {
+                        if dist < 0.0 {
+                            return None;
+                        }
+                    } else {
+                        let t = dist / denom;
+                        if denom > 0.0 {
+                            t1 = t1.min(t);
+                        } else {
+                            t0 = t0.max(t);
+                        }
+                        if t0 > t1 {
+                            return None;
+                        }
+                    }
+                }
+                Some(t0)
+            }
+            FastRay::Cylinder { c, a, r, h } => cast_cylinder(o - *c, d, *a, *r, *h, max_t),
+            FastRay::Parry(s, p) => s.cast_ray(p, &Ray::new(o, d), max_t, true),
+        }
+    }
+}
+
+fn cast_cylinder(o: Vector, d: Vector, a: Vector, r: f32, h: f32, max_t: f32) -> Option<f32> {
+    // Split into the axial coordinate and the radial plane.
+    let (oa, da) = (o.dot(a), d.dot(a));
+    let (orad, drad) = (o - a * oa, d - a * da);
+    // Slab of the caps.
+    let (mut t0, mut t1) = (0.0f32, max_t);
+    if da.abs() < 1e-12 {
+        if oa.abs() > h {
+            return None;
+        }
+    } else {
+        let (ta, tb) = ((-h - oa) / da, (h - oa) / da);
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+    }
+    // Infinite cylinder |orad + t drad| <= r.
+    let qa = drad.dot(drad);
+    let qb = orad.dot(drad);
+    let qc = orad.dot(orad) - r * r;
+    if qa < 1e-12 {
+        if qc > 0.0 {
+            return None;
+        }
+    } else {
+        let disc = qb * qb - qa * qc;
+        if disc < 0.0 {
+            return None;
+        }
+        let s = disc.sqrt();
+        t0 = t0.max((-qb - s) / qa);
+        t1 = t1.min((-qb + s) / qa);
+    }
+    (t0 <= t1).then_some(t0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn closed_forms_agree_with_parry() {
+        let shapes = [
+            (SharedShape::cuboid(0.5, 1.0, 0.3), Pose::from_parts(Vector::new(2.0, 1.0, 0.2), Rotation::from_rotation_z(0.7))),
+            (SharedShape::cylinder(0.8, 0.3), Pose::from_parts(Vector::new(-1.0, 2.0, 0.5), Rotation::from_rotation_x(1.5707964))),
+            (
+                SharedShape::convex_hull(&[
+                    Vector::new(0.0, 0.0, 0.0),
+                    Vector::new(1.0, 0.2, 0.0),
+                    Vector::new(0.3, 1.1, 0.1),
+                    Vector::new(0.4, 0.4, 1.2),
+                    Vector::new(0.9, 0.9, 0.7),
+                ])
+                .unwrap(),
+                Pose::from_translation(Vector::new(0.5, -2.0, -0.3)),
+            ),
+        ];
+        let o = Vector::new(0.1, -0.2, 0.3);
+        let mut hits = 0;
+        for (shape, pose) in &shapes {
+            let fast = FastRay::new(shape, pose);
+            for k in 0..720 {
+                let a = k as f32 * std::f32::consts::TAU / 720.0;
+                let d = Vector::new(a.cos(), a.sin(), 0.05 * (k as f32 * 0.37).sin()).normalize();
+                let want = shape.cast_ray(pose, &Ray::new(o, d), 20.0, true);
+                let got = fast.cast(o, d, 20.0);
+                match (want, got) {
+                    (Some(w), Some(g)) => {
+                        hits += 1;
+                        assert!((w - g).abs() < 1e-3, "ray {k}: parry {w} vs {g}");
+                    }
+                    (None, None) => {}
+                    // Grazing rays may differ at the edge.
+                    (w, g) => assert!(w.or(g).is_some()),
+                }
+            }
+        }
+        assert!(hits > 100, "the rays must hit the shapes: {hits}");
+    }
+}
