@@ -106,32 +106,9 @@ pub struct TrackSpec {
 }
 
 impl TrackSpec {
-    /// Radius of the centre line, metres.
-    pub fn centre_radius_m(&self) -> f32 {
-        0.5 * (self.inner_radius_m + self.outer_radius_m)
-    }
-
-    /// Length of the centre line, metres.
-    pub fn lap_length_m(&self) -> f32 {
-        2.0 * self.straight_m + 2.0 * PI * self.centre_radius_m()
-    }
-
-    /// Arc length (metres, in [0, lap)) of the centre-line point nearest to (x, y), measured
-    /// clockwise seen from above (AutoVRL's direction) from the start of the +x straight at
-    /// its top end (x = R, y = +straight/2).
-    pub fn centreline_s(&self, x: f32, y: f32) -> f32 {
-        let h = self.straight_m / 2.0;
-        let r = self.centre_radius_m();
-        if y.abs() <= h {
-            if x >= 0.0 { h - y } else { self.straight_m + PI * r + (y + h) }
-        } else if y < -h {
-            // Lower semicircle, centre (0, -h): from angle 0 (x = +R) clockwise to pi.
-            let a = (-(y + h)).atan2(x).clamp(0.0, PI);
-            self.straight_m + a * r
-        } else {
-            let a = (y - h).atan2(-x).clamp(0.0, PI);
-            2.0 * self.straight_m + PI * r + a * r
-        }
+    /// The track's plain geometry (progress along the centre line).
+    pub fn oval(&self) -> crate::msg::OvalTrack {
+        crate::msg::OvalTrack { straight_m: self.straight_m, inner_radius_m: self.inner_radius_m, outer_radius_m: self.outer_radius_m }
     }
 
     /// Walls as boxes: (half extents, pose).

@@ -15,14 +15,7 @@ pub enum ActionMapping {
     Scaled,
 }
 
-/// Throttle and steering for one control period.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Control {
-    /// Throttle in [0, 1] (no reverse, no brake: AutoVRL's car).
-    pub throttle: f64,
-    /// Steering angle of the virtual centre front wheel, rad, positive = left.
-    pub steering_rad: f64,
-}
+pub use crate::msg::Control;
 
 impl ActionMapping {
     /// Map a (finite) action to a control. Non-finite inputs give a safe zero control.
