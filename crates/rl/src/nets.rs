@@ -9,7 +9,7 @@
 
 use crate::error::{Result, RlError};
 use crate::rng::Rng;
-use burn::tensor::activation::{relu, tanh};
+use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
@@ -27,7 +27,10 @@ impl Activation {
     fn apply<const D: usize>(self, x: Tensor<D>) -> Tensor<D> {
         match self {
             Activation::Relu => relu(x),
-            Activation::Tanh => tanh(x),
+            // tanh(x) = 2 sigmoid(2x) - 1: the CPU backends evaluate tanh with libm's scalar
+            // tanhf (~20 ns/element, 2/3 of PPO's update time when profiled) and sigmoid with
+            // expf, several times cheaper even with the two extra scaling ops.
+            Activation::Tanh => sigmoid(x * 2.0) * 2.0 - 1.0,
         }
     }
 }
@@ -280,6 +283,15 @@ impl Adam {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tanh_activation_matches_tanh() {
+        let dev = crate::device::default_device();
+        let xs: Vec<f32> = (-80..=80).map(|i| i as f32 * 0.1).collect();
+        let t = Tensor::<1>::from_data(TensorData::new(xs.clone(), [xs.len()]), &dev);
+        let ys = to_vec(Activation::Tanh.apply(t)).unwrap();
+        assert!(xs.iter().zip(&ys).all(|(x, y)| (x.tanh() - y).abs() < 1e-6));
+    }
 
     #[test]
     fn orthogonal_columns_are_orthonormal_times_gain() {
