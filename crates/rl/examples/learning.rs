@@ -14,11 +14,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for &seed in &seeds {
             let t = std::time::Instant::now();
             let r = agvrl_rl::learning::pendulum_sac(seed, steps)?;
-            println!("algo=sac env=pendulum steps={steps} seed={seed} eval_return={r:.1} wall_s={:.0}", t.elapsed().as_secs_f64());
+            println!(
+                "algo=sac env=pendulum steps={steps} seed={seed} eval_return={r:.1} wall_s={:.0}",
+                t.elapsed().as_secs_f64()
+            );
             rets.push(r);
         }
         rets.sort_by(f64::total_cmp);
-        println!("algo=sac median_eval_return={:.1} target>=-170", rets[rets.len() / 2]);
+        println!(
+            "algo=sac median_eval_return={:.1} target>=-170",
+            rets[rets.len() / 2]
+        );
     }
     if which == "ppo" || which == "all" {
         let steps = steps.unwrap_or(100_000);
@@ -26,11 +32,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for &seed in &seeds {
             let t = std::time::Instant::now();
             let r = agvrl_rl::learning::pendulum_ppo(seed, steps)?;
-            println!("algo=ppo exploration=gaussian env=pendulum steps={steps} seed={seed} eval_return={r:.1} wall_s={:.0}", t.elapsed().as_secs_f64());
+            println!(
+                "algo=ppo exploration=gaussian env=pendulum steps={steps} seed={seed} eval_return={r:.1} wall_s={:.0}",
+                t.elapsed().as_secs_f64()
+            );
             rets.push(r);
         }
         rets.sort_by(f64::total_cmp);
-        println!("algo=ppo median_eval_return={:.1} target>=-250", rets[rets.len() / 2]);
+        println!(
+            "algo=ppo median_eval_return={:.1} target>=-250",
+            rets[rets.len() / 2]
+        );
     }
     Ok(())
 }

@@ -1,5 +1,6 @@
 //! Speed figures as `key=value` lines (`agvrl bench`): each is the median of `reps`
-//! repetitions after a warm-up, on the given CPU backend, single process.
+//! repetitions after a warm-up, on the given CPU backend, single process, one thread unless
+//! the line says `threads=2`.
 //!
 //! `sac_gflops` counts the matrix-product FLOPs one update of `sac/update.rs` performs
 //! ([`sac_update_flops`]); `sgemm_gflops` is a plain 256x256x256 product on the same device,
@@ -7,13 +8,13 @@
 
 use crate::device::CpuBackend;
 use crate::error::Result;
+use crate::nets::{Activation, Init, MlpSpec};
 use crate::policy::{ActionHead, Algorithm, Policy, PolicyData};
 use crate::ppo::{Ppo, PpoConfig};
 use crate::progress::Control;
 use crate::rng::Rng;
 use crate::sac::{Sac, SacConfig};
-use crate::nets::{Activation, Init, MlpSpec};
-use agvrl_envs::{make, BoxSpace, Env, EnvError, Info, Step, VecEnv};
+use agvrl_envs::{BoxSpace, Env, EnvError, Info, Step, VecEnv, make};
 use burn::tensor::{Tensor, TensorData};
 use std::time::Instant;
 
@@ -33,11 +34,18 @@ pub struct RandomEnv {
 impl RandomEnv {
     /// Observations of `obs_dim` random values, actions of `act_dim` in [-1, 1], 1000-step episodes.
     pub fn new(obs_dim: usize, act_dim: usize) -> Self {
-        Self { rng: Rng::new(0), obs_dim, act_dim, t: 0 }
+        Self {
+            rng: Rng::new(0),
+            obs_dim,
+            act_dim,
+            t: 0,
+        }
     }
 
     fn obs(&mut self) -> Vec<f32> {
-        (0..self.obs_dim).map(|_| self.rng.normal() as f32).collect()
+        (0..self.obs_dim)
+            .map(|_| self.rng.normal() as f32)
+            .collect()
     }
 }
 
@@ -59,7 +67,13 @@ impl Env for RandomEnv {
         agvrl_envs::api::validate_action(&self.action_space(), action)?;
         self.t += 1;
         let reward = -action.iter().map(|a| (*a as f64).powi(2)).sum::<f64>();
-        Ok(Step { obs: self.obs(), reward, terminated: false, truncated: self.t >= 1000, info: Info::default() })
+        Ok(Step {
+            obs: self.obs(),
+            reward,
+            terminated: false,
+            truncated: self.t >= 1000,
+            info: Info::default(),
+        })
     }
     fn dt_s(&self) -> f64 {
         0.05
@@ -72,7 +86,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Matrix-product FLOPs of one SAC update (batch `b`, obs `o`, action `a`, hidden `h`):
-/// actor forward twice, target critics forward, critics forward and backward (no input
+/// actor forward on `[obs; next_obs]` and again on `obs` with gradients, target critics forward, critics forward and backward (no input
 /// gradient at the first layer), critics forward and input-backward for the actor loss,
 /// actor backward.
 pub fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
@@ -87,7 +101,7 @@ pub fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
     let (actor, actor_rest) = chain(o, 2 * a);
     let (critic, critic_rest) = chain(o + a, 1);
     let (critic, critic_rest) = (2 * critic, 2 * critic_rest);
-    let macs = 2 * actor // actor on obs and next_obs
+    let macs = 3 * actor // actor on obs and next_obs (plain), on obs again (tracked)
         + critic // target
         + critic + critic + critic_rest // critic loss forward, weight grads, input grads
         + critic + critic // actor loss: forward, input grads down to the action
@@ -99,11 +113,13 @@ pub fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
 pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
     let device = backend.device();
     let reps = if quick { 3 } else { 7 };
-    let mut lines = vec![format!("backend={} threads=1 reps={reps}", backend.name())];
+    let mut lines = vec![format!("backend={} reps={reps}", backend.name())];
 
     // Plain 256^3 product.
     let mut rng = Rng::new(1);
-    let m = |rng: &mut Rng| Tensor::<2>::from_data(TensorData::new(rng.normals(256 * 256), [256, 256]), &device);
+    let m = |rng: &mut Rng| {
+        Tensor::<2>::from_data(TensorData::new(rng.normals(256 * 256), [256, 256]), &device)
+    };
     let (x, y) = (m(&mut rng), m(&mut rng));
     let inner = 50;
     let mut gf = vec![];
@@ -111,7 +127,9 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         let t = Instant::now();
         let mut acc = 0.0f32;
         for _ in 0..inner {
-            acc += crate::nets::to_vec(x.clone().matmul(y.clone()).narrow(0, 0, 1).narrow(1, 0, 1))?[0];
+            acc +=
+                crate::nets::to_vec(x.clone().matmul(y.clone()).narrow(0, 0, 1).narrow(1, 0, 1))?
+                    [0];
         }
         let s = t.elapsed().as_secs_f64();
         std::hint::black_box(acc);
@@ -119,28 +137,49 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
             gf.push(2.0 * 256f64.powi(3) * inner as f64 / s / 1e9);
         }
     }
-    lines.push(format!("sgemm_gflops={:.1} size=256x256x256 reps={reps}", median(gf)));
+    lines.push(format!(
+        "sgemm_gflops={:.1} size=256x256x256 reps={reps}",
+        median(gf)
+    ));
 
-    // SAC updates (one update per env step, buffer pre-filled).
+    // SAC updates (one update per env step, buffer pre-filled), on 1 and 2 threads.
     let (o, a) = (BENCH_OBS_DIM, BENCH_ACT_DIM);
-    let cfg = SacConfig { learning_starts: 256, buffer_size: 100_000, ..SacConfig::default() };
+    let cfg = SacConfig {
+        learning_starts: 256,
+        buffer_size: 100_000,
+        ..SacConfig::default()
+    };
     let flops = sac_update_flops(cfg.batch_size, o, a, &cfg.net_arch);
-    let env = VecEnv::new(vec![RandomEnv::new(o, a)], 1)?;
-    let mut sac = Sac::new(cfg, env, &device, 0)?;
-    sac.learn(300, &mut |_| Control::Continue)?;
     let n = if quick { 20 } else { 50 };
-    let mut ups = vec![];
-    for _ in 0..reps {
-        let t = Instant::now();
-        sac.learn(n, &mut |_| Control::Continue)?;
-        ups.push(n as f64 / t.elapsed().as_secs_f64());
+    let mut per_threads = vec![];
+    for threads in [1, 2] {
+        let env = VecEnv::new(vec![RandomEnv::new(o, a)], 1)?;
+        let mut sac = Sac::new(cfg.clone(), env, &device, 0)?;
+        sac.set_threads(threads);
+        sac.learn(300, &mut |_| Control::Continue)?;
+        let mut ups = vec![];
+        for _ in 0..reps {
+            let t = Instant::now();
+            sac.learn(n, &mut |_| Control::Continue)?;
+            ups.push(n as f64 / t.elapsed().as_secs_f64());
+        }
+        per_threads.push(median(ups));
     }
-    let ups = median(ups);
-    lines.push(format!("sac_updates_per_s={ups:.1} obs={o} act={a} batch=256 net=256x256 reps={reps}"));
-    lines.push(format!("sac_gflops={:.1} gflop_per_update={:.3} reps={reps}", ups * flops / 1e9, flops / 1e9));
+    let (one, two) = (per_threads[0], per_threads[1]);
+    lines.push(format!(
+        "sac_updates_per_s={two:.1} threads=2 obs={o} act={a} batch=256 net=256x256 reps={reps}"
+    ));
+    lines.push(format!("sac_updates_per_s_1thread={one:.1} reps={reps}"));
+    lines.push(format!(
+        "sac_gflops={:.1} threads=2 gflop_per_update={:.3} reps={reps}",
+        two * flops / 1e9,
+        flops / 1e9
+    ));
 
     // PPO: pendulum, 8 envs, SB3 defaults; one iteration = 8 x 2048 steps + 10 epochs.
-    let envs = (0..8).map(|_| make("pendulum")).collect::<std::result::Result<Vec<_>, _>>()?;
+    let envs = (0..8)
+        .map(|_| make("pendulum"))
+        .collect::<std::result::Result<Vec<_>, _>>()?;
     let mut ppo = Ppo::new(PpoConfig::default(), VecEnv::new(envs, 1)?, &device, 0)?;
     let per_iter = 8 * 2048;
     ppo.learn(per_iter, &mut |_| Control::Continue)?;
@@ -151,10 +190,18 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         ppo.learn(per_iter, &mut |_| Control::Continue)?;
         sps.push(per_iter as f64 / t.elapsed().as_secs_f64());
     }
-    lines.push(format!("ppo_steps_per_s={:.0} env=pendulum n_envs=8 n_steps=2048 reps={ppo_reps}", median(sps)));
+    lines.push(format!(
+        "ppo_steps_per_s={:.0} env=pendulum n_envs=8 n_steps=2048 reps={ppo_reps}",
+        median(sps)
+    ));
 
     // Policy inference, batch 1.
-    let net = MlpSpec { n_members: 1, sizes: vec![o, 256, 256, 2 * a], activation: Activation::Relu, activate_last: false };
+    let net = MlpSpec {
+        n_members: 1,
+        sizes: vec![o, 256, 256, 2 * a],
+        activation: Activation::Relu,
+        activate_last: false,
+    };
     let params = net.init(&[Init::TorchDefault], &mut rng);
     let data = PolicyData {
         algorithm: Algorithm::Sac,
@@ -179,7 +226,10 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
             us.push(t.elapsed().as_secs_f64() * 1e6 / calls as f64);
         }
     }
-    lines.push(format!("policy_infer_us={:.1} obs={o} act={a} net=256x256 batch=1 reps={reps}", median(us)));
+    lines.push(format!(
+        "policy_infer_us={:.1} obs={o} act={a} net=256x256 batch=1 reps={reps}",
+        median(us)
+    ));
     Ok(lines)
 }
 

@@ -9,8 +9,8 @@ use crate::error::{Result, RlError};
 use crate::file;
 use crate::nets::{Adam, HostParams};
 use crate::policy::Algorithm;
-use serde::{Deserialize, Serialize};
 use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Version of the checkpoint layout this build writes and reads.
@@ -42,7 +42,13 @@ impl<'a> ArrayWriter<'a> {
         let (m, v) = a.moments();
         self.arrays.extend(m.iter().map(Vec::as_slice));
         self.arrays.extend(v.iter().map(Vec::as_slice));
-        AdamMeta { lr: a.lr, beta1: a.beta1, beta2: a.beta2, eps: a.eps, t: a.t }
+        AdamMeta {
+            lr: a.lr,
+            beta1: a.beta1,
+            beta2: a.beta2,
+            eps: a.eps,
+            t: a.t,
+        }
     }
 
     pub(crate) fn array(&mut self, a: &'a [f32]) {
@@ -58,11 +64,17 @@ pub(crate) struct ArrayReader<'p> {
 
 impl ArrayReader<'_> {
     fn bad(&self, reason: &str) -> RlError {
-        RlError::BadFile { path: self.path.to_path_buf(), reason: reason.to_string() }
+        RlError::BadFile {
+            path: self.path.to_path_buf(),
+            reason: reason.to_string(),
+        }
     }
 
     pub(crate) fn array(&mut self, len: Option<usize>) -> Result<Vec<f32>> {
-        let a = self.it.next().ok_or_else(|| self.bad("checkpoint has too few arrays"))?;
+        let a = self
+            .it
+            .next()
+            .ok_or_else(|| self.bad("checkpoint has too few arrays"))?;
         if len.is_some_and(|l| l != a.len()) {
             return Err(self.bad("checkpoint array has the wrong length for its configuration"));
         }
@@ -70,7 +82,10 @@ impl ArrayReader<'_> {
     }
 
     pub(crate) fn params(&mut self, shapes: &[[usize; 3]]) -> Result<HostParams> {
-        let mut p = HostParams { shapes: vec![], data: vec![] };
+        let mut p = HostParams {
+            shapes: vec![],
+            data: vec![],
+        };
         for s in shapes {
             let d = self.array(Some(s.iter().product()))?;
             p.push(*s, d);
@@ -81,7 +96,9 @@ impl ArrayReader<'_> {
     pub(crate) fn adam(&mut self, meta: &AdamMeta, shapes: &[[usize; 3]]) -> Result<Adam> {
         let m = self.params(shapes)?.data;
         let v = self.params(shapes)?.data;
-        Ok(Adam::from_parts(meta.lr, meta.beta1, meta.beta2, meta.eps, meta.t, m, v))
+        Ok(Adam::from_parts(
+            meta.lr, meta.beta1, meta.beta2, meta.eps, meta.t, m, v,
+        ))
     }
 
     pub(crate) fn finish(mut self) -> Result<()> {
@@ -94,18 +111,47 @@ impl ArrayReader<'_> {
 
 /// Write a checkpoint: `header` as JSON plus `arrays`, atomically.
 pub(crate) fn write<H: Serialize>(path: &Path, header: &H, arrays: &ArrayWriter<'_>) -> Result<()> {
-    let bytes = file::encode(CHECKPOINT_MAGIC, CHECKPOINT_FORMAT_VERSION, header, &arrays.arrays)?;
+    let bytes = file::encode(
+        CHECKPOINT_MAGIC,
+        CHECKPOINT_FORMAT_VERSION,
+        header,
+        &arrays.arrays,
+    )?;
     file::write_atomic(path, &bytes)
 }
 
 /// Read a checkpoint written by `algorithm`: its header and a reader over its arrays.
-pub(crate) fn read<'p, H: DeserializeOwned>(path: &'p Path, algorithm: Algorithm) -> Result<(H, ArrayReader<'p>)> {
-    let (h, arrays): (serde_json::Value, _) = file::read(path, CHECKPOINT_MAGIC, CHECKPOINT_FORMAT_VERSION, "checkpoint")?;
-    let found = h.get("algorithm").and_then(|a| a.as_str()).unwrap_or("unknown").to_string();
+pub(crate) fn read<'p, H: DeserializeOwned>(
+    path: &'p Path,
+    algorithm: Algorithm,
+) -> Result<(H, ArrayReader<'p>)> {
+    let (h, arrays): (serde_json::Value, _) = file::read(
+        path,
+        CHECKPOINT_MAGIC,
+        CHECKPOINT_FORMAT_VERSION,
+        "checkpoint",
+    )?;
+    let found = h
+        .get("algorithm")
+        .and_then(|a| a.as_str())
+        .unwrap_or("unknown")
+        .to_string();
     if found != algorithm.to_string() {
-        return Err(RlError::Mismatch { what: "algorithm", file: found, env: algorithm.to_string() });
+        return Err(RlError::Mismatch {
+            what: "algorithm",
+            file: found,
+            env: algorithm.to_string(),
+        });
     }
-    let h = serde_json::from_value(h)
-        .map_err(|e| RlError::BadFile { path: path.to_path_buf(), reason: format!("checkpoint header: {e}") })?;
-    Ok((h, ArrayReader { it: arrays.into_iter(), path }))
+    let h = serde_json::from_value(h).map_err(|e| RlError::BadFile {
+        path: path.to_path_buf(),
+        reason: format!("checkpoint header: {e}"),
+    })?;
+    Ok((
+        h,
+        ArrayReader {
+            it: arrays.into_iter(),
+            path,
+        },
+    ))
 }

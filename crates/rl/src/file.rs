@@ -20,7 +20,11 @@ const CRC_TABLE: [u32; 256] = {
         let mut c = i as u32;
         let mut k = 0;
         while k < 8 {
-            c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            c = if c & 1 != 0 {
+                0xEDB8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
             k += 1;
         }
         t[i] = c;
@@ -39,15 +43,26 @@ pub fn crc32(bytes: &[u8]) -> u32 {
 }
 
 fn bad(path: &Path, reason: impl Into<String>) -> RlError {
-    RlError::BadFile { path: path.to_path_buf(), reason: reason.into() }
+    RlError::BadFile {
+        path: path.to_path_buf(),
+        reason: reason.into(),
+    }
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> RlError + '_ {
-    move |source| RlError::Io { path: path.to_path_buf(), source }
+    move |source| RlError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
 }
 
 /// Encode a container in memory.
-pub fn encode(magic: &[u8; 8], version: u32, header: &impl Serialize, arrays: &[&[f32]]) -> Result<Vec<u8>> {
+pub fn encode(
+    magic: &[u8; 8],
+    version: u32,
+    header: &impl Serialize,
+    arrays: &[&[f32]],
+) -> Result<Vec<u8>> {
     let header = serde_json::to_vec(header).map_err(|e| RlError::Config(format!("header: {e}")))?;
     let n_floats: usize = arrays.iter().map(|a| a.len()).sum();
     let mut buf = Vec::with_capacity(32 + header.len() + 8 * arrays.len() + 4 * n_floats);
@@ -70,9 +85,15 @@ pub fn encode(magic: &[u8; 8], version: u32, header: &impl Serialize, arrays: &[
 /// Write `bytes` to `path` through a temporary file in the same directory and a rename, so a
 /// crash never leaves a half-written file under the final name.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(io(dir))?;
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let tmp: PathBuf = dir.join(format!(".{name}.tmp{}", std::process::id()));
     let res = (|| {
         let mut f = std::fs::File::create(&tmp).map_err(io(&tmp))?;
@@ -94,44 +115,80 @@ struct Reader<'a> {
 
 impl Reader<'_> {
     fn take(&mut self, n: usize) -> Result<&[u8]> {
-        let end = self.pos.checked_add(n).filter(|e| *e <= self.buf.len()).ok_or_else(|| bad(self.path, "truncated"))?;
+        let end = self
+            .pos
+            .checked_add(n)
+            .filter(|e| *e <= self.buf.len())
+            .ok_or_else(|| bad(self.path, "truncated"))?;
         let s = &self.buf[self.pos..end];
         self.pos = end;
         Ok(s)
     }
     fn u64(&mut self) -> Result<u64> {
         let b = self.take(8)?;
-        Ok(u64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
+        Ok(u64::from_le_bytes([
+            b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7],
+        ]))
     }
 }
 
 /// Decode a container read from `path`: checks the checksum, magic and version, then parses
 /// the header as `H` and returns the arrays.
-pub fn decode<H: DeserializeOwned>(path: &Path, bytes: &[u8], magic: &[u8; 8], version: u32, kind: &str) -> Result<(H, Vec<Vec<f32>>)> {
+pub fn decode<H: DeserializeOwned>(
+    path: &Path,
+    bytes: &[u8],
+    magic: &[u8; 8],
+    version: u32,
+    kind: &str,
+) -> Result<(H, Vec<Vec<f32>>)> {
     if bytes.len() < 8 || &bytes[..8] != magic {
-        return Err(bad(path, format!("not an agvrl {kind} file (wrong magic bytes)")));
+        return Err(bad(
+            path,
+            format!("not an agvrl {kind} file (wrong magic bytes)"),
+        ));
     }
     if bytes.len() < 8 + 4 + 8 + 8 + 4 {
-        return Err(bad(path, format!("truncated {kind} file ({} bytes)", bytes.len())));
+        return Err(bad(
+            path,
+            format!("truncated {kind} file ({} bytes)", bytes.len()),
+        ));
     }
     let (body, tail) = bytes.split_at(bytes.len() - 4);
     let stored = u32::from_le_bytes([tail[0], tail[1], tail[2], tail[3]]);
     if crc32(body) != stored {
-        return Err(bad(path, format!("{kind} file is corrupted or truncated (checksum mismatch)")));
+        return Err(bad(
+            path,
+            format!("{kind} file is corrupted or truncated (checksum mismatch)"),
+        ));
     }
     let got_version = u32::from_le_bytes([body[8], body[9], body[10], body[11]]);
     if got_version != version {
-        return Err(bad(path, format!("{kind} format version {got_version}, this build reads version {version}")));
+        return Err(bad(
+            path,
+            format!("{kind} format version {got_version}, this build reads version {version}"),
+        ));
     }
-    let mut r = Reader { buf: body, pos: 12, path };
+    let mut r = Reader {
+        buf: body,
+        pos: 12,
+        path,
+    };
     let hlen = r.u64()? as usize;
-    let header: H = serde_json::from_slice(r.take(hlen)?).map_err(|e| bad(path, format!("header: {e}")))?;
+    let header: H =
+        serde_json::from_slice(r.take(hlen)?).map_err(|e| bad(path, format!("header: {e}")))?;
     let n = r.u64()? as usize;
     let mut arrays = Vec::with_capacity(n.min(1 << 16));
     for _ in 0..n {
         let len = r.u64()? as usize;
-        let raw = r.take(len.checked_mul(4).ok_or_else(|| bad(path, "array length overflows"))?)?;
-        arrays.push(raw.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect());
+        let raw = r.take(
+            len.checked_mul(4)
+                .ok_or_else(|| bad(path, "array length overflows"))?,
+        )?;
+        arrays.push(
+            raw.chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect(),
+        );
     }
     if r.pos != body.len() {
         return Err(bad(path, "trailing bytes after the last array"));
@@ -140,7 +197,12 @@ pub fn decode<H: DeserializeOwned>(path: &Path, bytes: &[u8], magic: &[u8; 8], v
 }
 
 /// Read and decode the container at `path`.
-pub fn read<H: DeserializeOwned>(path: &Path, magic: &[u8; 8], version: u32, kind: &str) -> Result<(H, Vec<Vec<f32>>)> {
+pub fn read<H: DeserializeOwned>(
+    path: &Path,
+    magic: &[u8; 8],
+    version: u32,
+    kind: &str,
+) -> Result<(H, Vec<Vec<f32>>)> {
     let bytes = std::fs::read(path).map_err(io(path))?;
     decode(path, &bytes, magic, version, kind)
 }
@@ -163,7 +225,10 @@ mod tests {
         assert_eq!(h, "hello");
         assert_eq!(arrays, vec![a.to_vec(), vec![]]);
         for n in 0..bytes.len() {
-            assert!(decode::<String>(p, &bytes[..n], b"AGVRLTST", 3, "test").is_err(), "{n}");
+            assert!(
+                decode::<String>(p, &bytes[..n], b"AGVRLTST", 3, "test").is_err(),
+                "{n}"
+            );
         }
         let mut flipped = bytes.clone();
         flipped[30] ^= 1;

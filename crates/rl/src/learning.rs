@@ -3,16 +3,18 @@
 
 use crate::device::default_device;
 use crate::error::Result;
-use crate::progress::Control;
 use crate::ppo::{Ppo, PpoConfig};
+use crate::progress::Control;
 use crate::sac::{Sac, SacConfig};
-use agvrl_envs::{make, Env, VecEnv};
+use agvrl_envs::{Env, VecEnv, make};
 
 /// Episodes per evaluation (the protocol).
 pub const EVAL_EPISODES: usize = 10;
 
 fn pendulum_envs(n: usize) -> Result<VecEnv<Box<dyn Env>>> {
-    let envs = (0..n).map(|_| make("pendulum")).collect::<std::result::Result<Vec<_>, _>>()?;
+    let envs = (0..n)
+        .map(|_| make("pendulum"))
+        .collect::<std::result::Result<Vec<_>, _>>()?;
     Ok(VecEnv::new(envs, 1)?)
 }
 
@@ -30,7 +32,12 @@ pub fn pendulum_sac(seed: u64, steps: u64) -> Result<f64> {
 /// gae_lambda 0.95, gamma 0.9, n_epochs 10, ent_coef 0, lr 1e-3, clip 0.2) but plain Gaussian
 /// exploration instead of gSDE; eval return after `steps` steps. SB3 with gSDE: -132, -151.
 pub fn pendulum_ppo(seed: u64, steps: u64) -> Result<f64> {
-    let cfg = PpoConfig { n_steps: 1024, gamma: 0.9, learning_rate: 1e-3, ..PpoConfig::default() };
+    let cfg = PpoConfig {
+        n_steps: 1024,
+        gamma: 0.9,
+        learning_rate: 1e-3,
+        ..PpoConfig::default()
+    };
     let mut ppo = Ppo::new(cfg, pendulum_envs(4)?, &default_device(), seed)?;
     ppo.learn(steps, &mut |_| Control::Continue)?;
     let mut env = make("pendulum")?;

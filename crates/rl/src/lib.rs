@@ -44,11 +44,11 @@ pub mod sac;
 
 pub use buffer::ReplayBuffer;
 pub use checkpoint::CHECKPOINT_FORMAT_VERSION;
-pub use device::{default_device, CpuBackend};
+pub use device::{CpuBackend, default_device};
 pub use error::{Result, RlError};
 pub use eval::evaluate;
 pub use normalize::ObsNormalizer;
-pub use policy::{Algorithm, Policy, PolicyData, POLICY_FORMAT_VERSION};
+pub use policy::{Algorithm, POLICY_FORMAT_VERSION, Policy, PolicyData};
 pub use ppo::{Ppo, PpoConfig};
 pub use progress::{Control, Losses, Progress};
 pub use sac::{Sac, SacConfig};

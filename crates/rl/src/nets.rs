@@ -73,7 +73,10 @@ impl HostParams {
 
     /// Leaf tensors that record gradients (`device` must have autodiff on).
     pub fn to_tracked(&self, device: &Device) -> Vec<Tensor<3>> {
-        self.to_device(device).into_iter().map(|t| t.require_grad()).collect()
+        self.to_device(device)
+            .into_iter()
+            .map(|t| t.require_grad())
+            .collect()
     }
 
     /// `self = (1 - tau) self + tau other` (Polyak averaging of target networks).
@@ -121,7 +124,10 @@ impl MlpSpec {
 
     /// Fresh weights; `inits[l]` initialises layer `l` (the last entry repeats).
     pub fn init(&self, inits: &[Init], rng: &mut Rng) -> HostParams {
-        let mut p = HostParams { shapes: vec![], data: vec![] };
+        let mut p = HostParams {
+            shapes: vec![],
+            data: vec![],
+        };
         for l in 0..self.n_layers() {
             let (fan_in, fan_out) = (self.sizes[l], self.sizes[l + 1]);
             let init = inits[l.min(inits.len() - 1)];
@@ -139,14 +145,22 @@ impl MlpSpec {
 }
 
 /// One layer's weights `[n, fan_in, fan_out]` and biases `[n, 1, fan_out]`.
-pub fn init_layer(init: Init, n: usize, fan_in: usize, fan_out: usize, rng: &mut Rng) -> (Vec<f32>, Vec<f32>) {
+pub fn init_layer(
+    init: Init,
+    n: usize,
+    fan_in: usize,
+    fan_out: usize,
+    rng: &mut Rng,
+) -> (Vec<f32>, Vec<f32>) {
     let mut w = Vec::with_capacity(n * fan_in * fan_out);
     let mut b = Vec::with_capacity(n * fan_out);
     for _ in 0..n {
         match init {
             Init::TorchDefault => {
                 let bound = 1.0 / (fan_in as f64).sqrt();
-                w.extend((0..fan_in * fan_out).map(|_| ((rng.uniform() * 2.0 - 1.0) * bound) as f32));
+                w.extend(
+                    (0..fan_in * fan_out).map(|_| ((rng.uniform() * 2.0 - 1.0) * bound) as f32),
+                );
                 b.extend((0..fan_out).map(|_| ((rng.uniform() * 2.0 - 1.0) * bound) as f32));
             }
             Init::Orthogonal(gain) => {
@@ -163,7 +177,9 @@ pub fn init_layer(init: Init, n: usize, fan_in: usize, fan_out: usize, rng: &mut
 fn orthogonal(rows: usize, cols: usize, gain: f64, rng: &mut Rng) -> Vec<f32> {
     let (long, short) = (rows.max(cols), rows.min(cols));
     // `short` vectors of length `long`, made orthonormal.
-    let mut q: Vec<Vec<f64>> = (0..short).map(|_| (0..long).map(|_| rng.normal()).collect()).collect();
+    let mut q: Vec<Vec<f64>> = (0..short)
+        .map(|_| (0..long).map(|_| rng.normal()).collect())
+        .collect();
     for i in 0..short {
         for j in 0..i {
             let d: f64 = q[i].iter().zip(&q[j]).map(|(a, b)| a * b).sum();
@@ -185,7 +201,12 @@ fn orthogonal(rows: usize, cols: usize, gain: f64, rng: &mut Rng) -> Vec<f32> {
 
 /// `x [n_members or 1, batch, in] -> [n_members, batch, out]` through the layers in `params`
 /// (`[w0, b0, w1, b1, ...]`).
-pub fn mlp_forward(params: &[Tensor<3>], x: Tensor<3>, activation: Activation, activate_last: bool) -> Tensor<3> {
+pub fn mlp_forward(
+    params: &[Tensor<3>],
+    x: Tensor<3>,
+    activation: Activation,
+    activate_last: bool,
+) -> Tensor<3> {
     let n_layers = params.len() / 2;
     let mut h = x;
     for l in 0..n_layers {
@@ -237,12 +258,36 @@ impl Adam {
     /// Zeroed moments for `params`.
     pub fn new(params: &HostParams, lr: f64, eps: f64) -> Self {
         let zeros: Vec<Vec<f32>> = params.data.iter().map(|d| vec![0.0; d.len()]).collect();
-        Self { lr, beta1: 0.9, beta2: 0.999, eps, t: 0, m: zeros.clone(), v: zeros }
+        Self {
+            lr,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps,
+            t: 0,
+            m: zeros.clone(),
+            v: zeros,
+        }
     }
 
     /// Rebuild from saved parts (checkpoints).
-    pub(crate) fn from_parts(lr: f64, beta1: f64, beta2: f64, eps: f64, t: u64, m: Vec<Vec<f32>>, v: Vec<Vec<f32>>) -> Self {
-        Self { lr, beta1, beta2, eps, t, m, v }
+    pub(crate) fn from_parts(
+        lr: f64,
+        beta1: f64,
+        beta2: f64,
+        eps: f64,
+        t: u64,
+        m: Vec<Vec<f32>>,
+        v: Vec<Vec<f32>>,
+    ) -> Self {
+        Self {
+            lr,
+            beta1,
+            beta2,
+            eps,
+            t,
+            m,
+            v,
+        }
     }
 
     /// First and second moments (checkpoints).
@@ -253,7 +298,12 @@ impl Adam {
     /// Scale `grads` so their global L2 norm is at most `max_norm` (PyTorch's
     /// `clip_grad_norm_`); returns the norm before clipping.
     pub fn clip_grad_norm(grads: &mut [Vec<f32>], max_norm: f64) -> f64 {
-        let norm = grads.iter().flatten().map(|g| (*g as f64) * (*g as f64)).sum::<f64>().sqrt();
+        let norm = grads
+            .iter()
+            .flatten()
+            .map(|g| (*g as f64) * (*g as f64))
+            .sum::<f64>()
+            .sqrt();
         let coef = max_norm / (norm + 1e-6);
         if coef < 1.0 {
             grads.iter_mut().flatten().for_each(|g| *g *= coef as f32);
@@ -270,7 +320,13 @@ impl Adam {
         let step_size = (self.lr / bc1) as f32;
         let inv_sqrt_bc2 = (1.0 / bc2.sqrt()) as f32;
         let eps = self.eps as f32;
-        for (((p, g), m), v) in params.data.iter_mut().zip(grads).zip(&mut self.m).zip(&mut self.v) {
+        for (((p, g), m), v) in params
+            .data
+            .iter_mut()
+            .zip(grads)
+            .zip(&mut self.m)
+            .zip(&mut self.v)
+        {
             for (((p, g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
                 *m = b1 * *m + (1.0 - b1) * g;
                 *v = b2 * *v + (1.0 - b2) * g * g;
@@ -309,7 +365,10 @@ mod tests {
 
     #[test]
     fn adam_first_step_moves_by_lr_against_the_gradient() {
-        let mut p = HostParams { shapes: vec![[1, 1, 2]], data: vec![vec![1.0, -1.0]] };
+        let mut p = HostParams {
+            shapes: vec![[1, 1, 2]],
+            data: vec![vec![1.0, -1.0]],
+        };
         let mut adam = Adam::new(&p, 0.1, 1e-8);
         adam.step(&mut p, &[vec![3.0, -0.5]]);
         assert!((p.data[0][0] - 0.9).abs() < 1e-5);

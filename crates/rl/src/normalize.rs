@@ -22,7 +22,13 @@ pub struct ObsNormalizer {
 impl ObsNormalizer {
     /// Zero mean, unit variance, SB3's `clip_obs = 10`, `epsilon = 1e-8`.
     pub fn new(dim: usize) -> Self {
-        Self { mean: vec![0.0; dim], var: vec![1.0; dim], count: 1e-4, clip: 10.0, eps: 1e-8 }
+        Self {
+            mean: vec![0.0; dim],
+            var: vec![1.0; dim],
+            count: 1e-4,
+            clip: 10.0,
+            eps: 1e-8,
+        }
     }
 
     /// Elements per observation.
@@ -44,7 +50,10 @@ impl ObsNormalizer {
         bmean.iter_mut().for_each(|m| *m /= n as f64);
         let mut bvar = vec![0.0; d];
         for row in batch.chunks_exact(d) {
-            bvar.iter_mut().zip(row).zip(&bmean).for_each(|((v, x), m)| *v += (*x as f64 - m).powi(2));
+            bvar.iter_mut()
+                .zip(row)
+                .zip(&bmean)
+                .for_each(|((v, x), m)| *v += (*x as f64 - m).powi(2));
         }
         bvar.iter_mut().for_each(|v| *v /= n as f64);
         let (na, nb) = (self.count, n as f64);
@@ -76,7 +85,9 @@ mod tests {
     #[test]
     fn matches_batch_statistics() {
         let mut n = ObsNormalizer::new(2);
-        let data: Vec<f32> = (0..1000).flat_map(|i| [i as f32, 5.0 - 0.5 * i as f32]).collect();
+        let data: Vec<f32> = (0..1000)
+            .flat_map(|i| [i as f32, 5.0 - 0.5 * i as f32])
+            .collect();
         for chunk in data.chunks(20) {
             n.update(chunk);
         }

@@ -4,7 +4,7 @@
 
 use crate::error::{Result, RlError};
 use crate::file;
-use crate::nets::{mlp_forward, to_vec, HostParams, MlpSpec};
+use crate::nets::{HostParams, MlpSpec, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
 use crate::rng::Rng;
 use agvrl_envs::BoxSpace;
@@ -107,38 +107,57 @@ impl PolicyData {
 
     /// Read a policy file; rejects other formats, versions, truncation and corruption.
     pub fn load(path: &Path) -> Result<Self> {
-        let (h, arrays): (Header, _) = file::read(path, POLICY_MAGIC, POLICY_FORMAT_VERSION, "policy")?;
+        let (h, arrays): (Header, _) =
+            file::read(path, POLICY_MAGIC, POLICY_FORMAT_VERSION, "policy")?;
         Self::from_parts(path, h, arrays)
     }
 
     fn from_parts(path: &Path, h: Header, arrays: Vec<Vec<f32>>) -> Result<Self> {
-        let bad = |reason: String| RlError::BadFile { path: path.to_path_buf(), reason };
-        let expect_shapes: Vec<[usize; 3]> =
-            h.net.sizes.windows(2).flat_map(|w| [[1, w[0], w[1]], [1, 1, w[1]]]).collect();
+        let bad = |reason: String| RlError::BadFile {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let expect_shapes: Vec<[usize; 3]> = h
+            .net
+            .sizes
+            .windows(2)
+            .flat_map(|w| [[1, w[0], w[1]], [1, 1, w[1]]])
+            .collect();
         if h.net.n_members != 1 || h.shapes != expect_shapes || arrays.len() != h.shapes.len() {
             return Err(bad("weights do not match the network description".into()));
         }
-        if arrays.iter().zip(&h.shapes).any(|(a, s)| a.len() != s.iter().product::<usize>()) {
+        if arrays
+            .iter()
+            .zip(&h.shapes)
+            .any(|(a, s)| a.len() != s.iter().product::<usize>())
+        {
             return Err(bad("a weight array has the wrong length".into()));
         }
         let (o, a) = (h.observation_space.dim(), h.action_space.dim());
         let out = match h.head {
             ActionHead::SquashedGaussian => 2 * a,
             ActionHead::Gaussian { ref log_std } if log_std.len() == a => a,
-            ActionHead::Gaussian { .. } => return Err(bad("log_std length differs from the action space".into())),
+            ActionHead::Gaussian { .. } => {
+                return Err(bad("log_std length differs from the action space".into()));
+            }
         };
         if h.net.sizes.first() != Some(&o) || h.net.sizes.last() != Some(&out) {
             return Err(bad("network widths do not match the spaces".into()));
         }
         if h.normalizer.as_ref().is_some_and(|n| n.dim() != o) {
-            return Err(bad("normaliser width differs from the observation space".into()));
+            return Err(bad(
+                "normaliser width differs from the observation space".into()
+            ));
         }
         Ok(Self {
             algorithm: h.algorithm,
             observation_space: h.observation_space,
             action_space: h.action_space,
             net: h.net,
-            params: HostParams { shapes: h.shapes, data: arrays },
+            params: HostParams {
+                shapes: h.shapes,
+                data: arrays,
+            },
             head: h.head,
             normalizer: h.normalizer,
             config_toml: h.config_toml,
@@ -147,7 +166,12 @@ impl PolicyData {
 
     /// Map network outputs (`n` rows) to actions in the action box. `deterministic` uses the
     /// mean; otherwise noise comes from `rng`.
-    pub(crate) fn actions_from_outputs(&self, out: &[f32], deterministic: bool, rng: &mut Rng) -> Vec<f32> {
+    pub(crate) fn actions_from_outputs(
+        &self,
+        out: &[f32],
+        deterministic: bool,
+        rng: &mut Rng,
+    ) -> Vec<f32> {
         let a_dim = self.action_space.dim();
         let (low, high) = (&self.action_space.low, &self.action_space.high);
         match &self.head {
@@ -157,7 +181,8 @@ impl PolicyData {
                     for i in 0..a_dim {
                         let mut u = row[i];
                         if !deterministic {
-                            u += row[a_dim + i].clamp(LOG_STD_MIN, LOG_STD_MAX).exp() * rng.normal() as f32;
+                            u += row[a_dim + i].clamp(LOG_STD_MIN, LOG_STD_MAX).exp()
+                                * rng.normal() as f32;
                         }
                         acts.push(unsquash(u.tanh(), low[i], high[i]));
                     }
@@ -197,7 +222,11 @@ pub(crate) fn check_space(what: &'static str, file: &BoxSpace, env: &BoxSpace) -
         return Ok(());
     }
     let show = |s: &BoxSpace| format!("dim {} low {:?} high {:?}", s.dim(), s.low, s.high);
-    Err(RlError::Mismatch { what, file: show(file), env: show(env) })
+    Err(RlError::Mismatch {
+        what,
+        file: show(file),
+        env: show(env),
+    })
 }
 
 /// A trained policy on an inference (non-autodiff) device.
@@ -221,7 +250,13 @@ impl Policy {
     pub fn new(data: PolicyData, device: &Device) -> Self {
         let device = device.clone().without_autodiff();
         let weights = data.params.to_device(&device);
-        Self { data, weights, device, rng: Rng::new(0), scratch: Vec::new() }
+        Self {
+            data,
+            weights,
+            device,
+            rng: Rng::new(0),
+            scratch: Vec::new(),
+        }
     }
 
     /// Load a policy file onto the default CPU device.
@@ -260,8 +295,16 @@ impl Policy {
     }
 
     /// Error unless the env's spaces equal the policy's.
-    pub fn check_spaces(&self, observation_space: &BoxSpace, action_space: &BoxSpace) -> Result<()> {
-        check_space("observation space", &self.data.observation_space, observation_space)?;
+    pub fn check_spaces(
+        &self,
+        observation_space: &BoxSpace,
+        action_space: &BoxSpace,
+    ) -> Result<()> {
+        check_space(
+            "observation space",
+            &self.data.observation_space,
+            observation_space,
+        )?;
         check_space("action space", &self.data.action_space, action_space)
     }
 
@@ -275,8 +318,12 @@ impl Policy {
     /// action (eval, deploy); otherwise it samples as in training.
     pub fn act(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
         let o = self.data.observation_space.dim();
-        if obs.is_empty() || obs.len() % o != 0 {
-            return Err(RlError::Shape { what: "observation", got: obs.len(), dim: o });
+        if obs.is_empty() || !obs.len().is_multiple_of(o) {
+            return Err(RlError::Shape {
+                what: "observation",
+                got: obs.len(),
+                dim: o,
+            });
         }
         let n = obs.len() / o;
         self.scratch.clear();
@@ -284,8 +331,18 @@ impl Policy {
         if let Some(norm) = &self.data.normalizer {
             norm.normalize(&mut self.scratch);
         }
-        let x = Tensor::<3>::from_data(TensorData::new(self.scratch.clone(), [1, n, o]), &self.device);
-        let out = to_vec(mlp_forward(&self.weights, x, self.data.net.activation, self.data.net.activate_last))?;
-        Ok(self.data.actions_from_outputs(&out, deterministic, &mut self.rng))
+        let x = Tensor::<3>::from_data(
+            TensorData::new(self.scratch.clone(), [1, n, o]),
+            &self.device,
+        );
+        let out = to_vec(mlp_forward(
+            &self.weights,
+            x,
+            self.data.net.activation,
+            self.data.net.activate_last,
+        ))?;
+        Ok(self
+            .data
+            .actions_from_outputs(&out, deterministic, &mut self.rng))
     }
 }

@@ -56,13 +56,22 @@ fn toml_overrides_a_subset_and_round_trips() {
     let s = SacConfig::from_toml("ent_coef = 0.1\nnet_arch = [64, 64]\n").unwrap();
     assert_eq!(s.ent_coef, EntCoef::Fixed(0.1));
     assert_eq!(SacConfig::from_toml(&s.to_toml()).unwrap(), s);
-    assert_eq!(SacConfig::from_toml("ent_coef = \"auto_0.1\"").unwrap().ent_coef.auto_init().unwrap(), Some(0.1));
+    assert_eq!(
+        SacConfig::from_toml("ent_coef = \"auto_0.1\"")
+            .unwrap()
+            .ent_coef
+            .auto_init()
+            .unwrap(),
+        Some(0.1)
+    );
 }
 
 #[test]
 fn unknown_keys_and_unsupported_options_are_rejected() {
     assert!(SacConfig::from_toml("learnign_rate = 1e-3").is_err());
     assert!(SacConfig::from_toml("ent_coef = \"sometimes\"").is_err());
-    let e = PpoConfig::from_toml("use_sde = true").unwrap_err().to_string();
+    let e = PpoConfig::from_toml("use_sde = true")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("gSDE"), "{e}");
 }

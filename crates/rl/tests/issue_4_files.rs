@@ -2,8 +2,10 @@
 //! files, size bound.
 
 use crate::reach::vec_env;
-use agvrl_envs::{make, Env};
-use agvrl_rl::{default_device, Control, Policy, PolicyData, Ppo, PpoConfig, RlError, Sac, SacConfig};
+use agvrl_envs::{Env, make};
+use agvrl_rl::{
+    Control, Policy, PolicyData, Ppo, PpoConfig, RlError, Sac, SacConfig, default_device,
+};
 use std::path::PathBuf;
 
 fn tmp(name: &str) -> PathBuf {
@@ -15,11 +17,26 @@ fn tmp(name: &str) -> PathBuf {
 fn same_bytes(a: &std::path::Path, b: &std::path::Path) {
     let (x, y) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
     let first = x.iter().zip(&y).position(|(p, q)| p != q);
-    assert!(x == y, "lengths {} {}, first difference at {first:?}: {:?}", x.len(), y.len(), first.map(|i| String::from_utf8_lossy(&x[i.saturating_sub(60)..(i + 20).min(x.len())]).into_owned()));
+    assert!(
+        x == y,
+        "lengths {} {}, first difference at {first:?}: {:?}",
+        x.len(),
+        y.len(),
+        first.map(
+            |i| String::from_utf8_lossy(&x[i.saturating_sub(60)..(i + 20).min(x.len())])
+                .into_owned()
+        )
+    );
 }
 
 fn small_sac(seed: u64) -> Sac<crate::reach::Reach> {
-    let cfg = SacConfig { net_arch: vec![32, 32], batch_size: 32, learning_starts: 50, normalize_obs: true, ..SacConfig::default() };
+    let cfg = SacConfig {
+        net_arch: vec![32, 32],
+        batch_size: 32,
+        learning_starts: 50,
+        normalize_obs: true,
+        ..SacConfig::default()
+    };
     let mut sac = Sac::new(cfg, vec_env(2), &default_device(), seed).unwrap();
     sac.learn(200, &mut |_| Control::Continue).unwrap();
     sac
@@ -42,7 +59,10 @@ fn policy_round_trip_gives_the_same_actions() {
     // The ndarray backend reads the same file and agrees to float tolerance.
     let mut c = Policy::load_on(&path, &agvrl_rl::CpuBackend::NdArray.device()).unwrap();
     let xc = c.act(&obs, true).unwrap();
-    assert!(xa.iter().zip(&xc).all(|(p, q)| (p - q).abs() < 1e-4), "{xa:?} {xc:?}");
+    assert!(
+        xa.iter().zip(&xc).all(|(p, q)| (p - q).abs() < 1e-4),
+        "{xa:?} {xc:?}"
+    );
 }
 
 #[test]
@@ -74,12 +94,26 @@ fn policy_for_another_env_is_rejected() {
     let sac = small_sac(2);
     let policy = sac.policy(&default_device());
     let pendulum = make("pendulum").unwrap();
-    let e = policy.check_spaces(&pendulum.observation_space(), &pendulum.action_space()).unwrap_err();
-    assert!(matches!(e, RlError::Mismatch { what: "observation space", .. }), "{e}");
+    let e = policy
+        .check_spaces(&pendulum.observation_space(), &pendulum.action_space())
+        .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            RlError::Mismatch {
+                what: "observation space",
+                ..
+            }
+        ),
+        "{e}"
+    );
     let mut env = make("pendulum").unwrap();
     assert!(agvrl_rl::evaluate(&mut sac.policy(&default_device()), &mut env, 1, 0).is_err());
     let mut p = sac.policy(&default_device());
-    assert!(matches!(p.act(&[1.0, 2.0, 3.0], true), Err(RlError::Shape { .. })));
+    assert!(matches!(
+        p.act(&[1.0, 2.0, 3.0], true),
+        Err(RlError::Shape { .. })
+    ));
 }
 
 #[test]
@@ -89,7 +123,10 @@ fn a_large_sac_policy_file_stays_under_10_mb() {
     let sac = Sac::new(SacConfig::default(), env, &default_device(), 0).unwrap();
     let bytes = sac.policy_data().to_bytes().unwrap();
     assert!(bytes.len() < 10 * 1024 * 1024, "{}", bytes.len());
-    assert!(bytes.len() > 4 * (100 * 256 + 256 * 256), "weights are in the file");
+    assert!(
+        bytes.len() > 4 * (100 * 256 + 256 * 256),
+        "weights are in the file"
+    );
 }
 
 #[test]
@@ -106,14 +143,25 @@ fn sac_checkpoint_resumes_the_same_state() {
     resumed.learn(50, &mut |_| Control::Continue).unwrap();
     assert_eq!(resumed.num_timesteps(), sac.num_timesteps() + 50);
     // Wrong algorithm and wrong env are refused.
-    assert!(matches!(Ppo::load_checkpoint(&a, vec_env(2), &default_device()), Err(RlError::Mismatch { .. })));
+    assert!(matches!(
+        Ppo::load_checkpoint(&a, vec_env(2), &default_device()),
+        Err(RlError::Mismatch { .. })
+    ));
     let pend = agvrl_envs::VecEnv::new(vec![make("pendulum").unwrap()], 1).unwrap();
-    assert!(matches!(Sac::load_checkpoint(&a, pend, &default_device()), Err(RlError::Mismatch { .. })));
+    assert!(matches!(
+        Sac::load_checkpoint(&a, pend, &default_device()),
+        Err(RlError::Mismatch { .. })
+    ));
 }
 
 #[test]
 fn ppo_checkpoint_resumes_the_same_state() {
-    let cfg = PpoConfig { n_steps: 64, net_arch: vec![16], normalize_obs: true, ..PpoConfig::default() };
+    let cfg = PpoConfig {
+        n_steps: 64,
+        net_arch: vec![16],
+        normalize_obs: true,
+        ..PpoConfig::default()
+    };
     let mut ppo = Ppo::new(cfg, vec_env(2), &default_device(), 4).unwrap();
     ppo.learn(128, &mut |_| Control::Continue).unwrap();
     let (a, b) = (tmp("ppo-a.ckpt"), tmp("ppo-b.ckpt"));
@@ -125,5 +173,8 @@ fn ppo_checkpoint_resumes_the_same_state() {
     let mut bytes = std::fs::read(&a).unwrap();
     bytes.truncate(bytes.len() - 7);
     std::fs::write(&a, &bytes).unwrap();
-    assert!(matches!(Ppo::load_checkpoint(&a, vec_env(2), &default_device()), Err(RlError::BadFile { .. })));
+    assert!(matches!(
+        Ppo::load_checkpoint(&a, vec_env(2), &default_device()),
+        Err(RlError::BadFile { .. })
+    ));
 }

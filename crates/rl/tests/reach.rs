@@ -17,7 +17,12 @@ pub struct Reach {
 
 impl Reach {
     pub fn new() -> Self {
-        Self { x: 0.0, g: 0.0, t: 0, rng: Rng::new(0) }
+        Self {
+            x: 0.0,
+            g: 0.0,
+            t: 0,
+            rng: Rng::new(0),
+        }
     }
 
     fn obs(&self) -> Vec<f32> {
@@ -48,7 +53,13 @@ impl Env for Reach {
         let d = (self.g - self.x).abs();
         let terminated = d < 0.05;
         let truncated = !terminated && self.t >= 20;
-        Ok(Step { obs: self.obs(), reward: -d as f64, terminated, truncated, info: Info::default() })
+        Ok(Step {
+            obs: self.obs(),
+            reward: -d as f64,
+            terminated,
+            truncated,
+            info: Info::default(),
+        })
     }
     fn dt_s(&self) -> f64 {
         0.1

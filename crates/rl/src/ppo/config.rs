@@ -93,15 +93,26 @@ impl PpoConfig {
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(RlError::Config(format!("PPO: {m}")));
         if self.use_sde {
-            return bad("use_sde (gSDE) is not implemented; use plain Gaussian exploration (use_sde = false)");
+            return bad(
+                "use_sde (gSDE) is not implemented; use plain Gaussian exploration (use_sde = false)",
+            );
         }
-        if !(self.learning_rate > 0.0) || self.n_steps == 0 || self.batch_size == 0 || self.n_epochs == 0 {
+        if self.learning_rate.is_nan()
+            || self.learning_rate <= 0.0
+            || self.n_steps == 0
+            || self.batch_size == 0
+            || self.n_epochs == 0
+        {
             return bad("learning_rate, n_steps, batch_size and n_epochs must be > 0");
         }
         if !(0.0..=1.0).contains(&self.gamma) || !(0.0..=1.0).contains(&self.gae_lambda) {
             return bad("gamma and gae_lambda must lie in [0, 1]");
         }
-        if !(self.clip_range > 0.0) || !(self.max_grad_norm > 0.0) {
+        if self.clip_range.is_nan()
+            || self.clip_range <= 0.0
+            || self.max_grad_norm.is_nan()
+            || self.max_grad_norm <= 0.0
+        {
             return bad("clip_range and max_grad_norm must be > 0");
         }
         if self.net_arch.is_empty() || self.net_arch.contains(&0) {

@@ -13,9 +13,9 @@ pub use config::PpoConfig;
 
 use crate::checkpoint::{self, AdamMeta, ArrayWriter};
 use crate::error::Result;
-use crate::nets::{init_layer, mlp_forward, to_vec, Adam, HostParams, Init, MlpSpec};
+use crate::nets::{Adam, HostParams, Init, MlpSpec, init_layer, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
-use crate::policy::{check_space, ActionHead, Algorithm, Policy, PolicyData};
+use crate::policy::{ActionHead, Algorithm, Policy, PolicyData, check_space};
 use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
 use agvrl_envs::{BoxSpace, Env, VecEnv};
@@ -30,7 +30,11 @@ fn head_idx(cfg: &PpoConfig) -> usize {
 
 /// `(mean [1, b, a], value [1, b, 1])` for observations `x [1, b, o]`. `params` is
 /// `[trunk..., pi_w, pi_b, vf_w, vf_b, log_std]`.
-pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (Tensor<3>, Tensor<3>) {
+pub(crate) fn forward(
+    params: &[Tensor<3>],
+    x: Tensor<3>,
+    cfg: &PpoConfig,
+) -> (Tensor<3>, Tensor<3>) {
     let h0 = head_idx(cfg);
     let h = mlp_forward(&params[..h0], x, cfg.activation_fn, true);
     let mean = h.clone().narrow(0, 0, 1).matmul(params[h0].clone()) + params[h0 + 1].clone();
@@ -92,9 +96,18 @@ impl<E: Env> Ppo<E> {
         let mut rng = Rng::new(seed);
         let mut sizes = vec![obs_dim];
         sizes.extend(&cfg.net_arch);
-        let trunk = MlpSpec { n_members: 2, sizes, activation: cfg.activation_fn, activate_last: true };
+        let trunk = MlpSpec {
+            n_members: 2,
+            sizes,
+            activation: cfg.activation_fn,
+            activate_last: true,
+        };
         let (hidden, pi_init, vf_init) = if cfg.ortho_init {
-            (Init::Orthogonal(2f64.sqrt()), Init::Orthogonal(0.01), Init::Orthogonal(1.0))
+            (
+                Init::Orthogonal(2f64.sqrt()),
+                Init::Orthogonal(0.01),
+                Init::Orthogonal(1.0),
+            )
         } else {
             (Init::TorchDefault, Init::TorchDefault, Init::TorchDefault)
         };
@@ -151,7 +164,11 @@ impl<E: Env> Ppo<E> {
 
     /// Run rollouts and updates until `steps` more env steps are taken (whole rollouts);
     /// `callback` sees progress after every rollout + update and can stop early.
-    pub fn learn(&mut self, steps: u64, callback: &mut dyn FnMut(&Progress<'_>) -> Control) -> Result<()> {
+    pub fn learn(
+        &mut self,
+        steps: u64,
+        callback: &mut dyn FnMut(&Progress<'_>) -> Control,
+    ) -> Result<()> {
         let target = self.num_timesteps + steps;
         while self.num_timesteps < target {
             let rollout = self.collect_rollout()?;
@@ -173,7 +190,12 @@ impl<E: Env> Ppo<E> {
     }
 
     fn collect_rollout(&mut self) -> Result<Rollout> {
-        let (n_envs, o, a, n_steps) = (self.env.n_envs(), self.obs_dim, self.act_dim, self.cfg.n_steps);
+        let (n_envs, o, a, n_steps) = (
+            self.env.n_envs(),
+            self.obs_dim,
+            self.act_dim,
+            self.cfg.n_steps,
+        );
         let total = n_steps * n_envs;
         let dev = self.device.clone();
         let params = self.params.to_device(&dev);
@@ -184,7 +206,9 @@ impl<E: Env> Ppo<E> {
         let (mut obs, mut starts) = match self.last.take() {
             Some(l) => l,
             None => {
-                let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
+                let seed = self
+                    .seed
+                    .wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
                 let (o0, _) = self.env.reset(Some(seed))?;
                 if let Some(n) = &mut self.normalizer {
                     n.update(&o0);
@@ -203,7 +227,11 @@ impl<E: Env> Ppo<E> {
         let mut values = Vec::with_capacity(total);
         let mut episode_starts = Vec::with_capacity(total);
         let space = self.env.action_space().clone();
-        let value_of = |params: &[Tensor<3>], x: Vec<f32>, n: usize, cfg: &PpoConfig| -> Result<(Vec<f32>, Vec<f32>)> {
+        let value_of = |params: &[Tensor<3>],
+                        x: Vec<f32>,
+                        n: usize,
+                        cfg: &PpoConfig|
+         -> Result<(Vec<f32>, Vec<f32>)> {
             let t = Tensor::<3>::from_data(TensorData::new(x, [1, n, o]), &dev);
             let (mean, value) = forward(params, t, cfg);
             Ok((to_vec(mean)?, to_vec(value)?))
@@ -227,11 +255,16 @@ impl<E: Env> Ppo<E> {
             let st = self.env.step(&clipped)?;
             let mut rew: Vec<f32> = st.rewards.iter().map(|v| *v as f32).collect();
             // Truncated episodes bootstrap: r += gamma V(final_obs).
-            let trunc: Vec<usize> = (0..n_envs).filter(|&e| st.truncated[e] && !st.terminated[e]).collect();
+            let trunc: Vec<usize> = (0..n_envs)
+                .filter(|&e| st.truncated[e] && !st.terminated[e])
+                .collect();
             if !trunc.is_empty() {
                 let mut fx = Vec::with_capacity(trunc.len() * o);
                 for &e in &trunc {
-                    let f = st.infos[e].final_obs.as_deref().unwrap_or(&st.obs[e * o..(e + 1) * o]);
+                    let f = st.infos[e]
+                        .final_obs
+                        .as_deref()
+                        .unwrap_or(&st.obs[e * o..(e + 1) * o]);
                     fx.extend_from_slice(f);
                 }
                 let fx = self.normalized(&fx);
@@ -250,7 +283,9 @@ impl<E: Env> Ppo<E> {
             }
             self.episodes.record(&st.infos);
             self.num_timesteps += n_envs as u64;
-            starts = (0..n_envs).map(|e| st.terminated[e] || st.truncated[e]).collect();
+            starts = (0..n_envs)
+                .map(|e| st.terminated[e] || st.truncated[e])
+                .collect();
             obs = st.obs;
         }
         let (_, last_values) = value_of(&params, self.normalized(&obs), n_envs, &self.cfg)?;
@@ -278,7 +313,10 @@ impl<E: Env> Ppo<E> {
     /// The current policy (actor member, log std, normaliser) as host data.
     pub fn policy_data(&self) -> PolicyData {
         let h0 = head_idx(&self.cfg);
-        let mut params = HostParams { shapes: vec![], data: vec![] };
+        let mut params = HostParams {
+            shapes: vec![],
+            data: vec![],
+        };
         // Member 0 of each trunk tensor is the actor's.
         for (s, d) in self.params.shapes[..h0].iter().zip(&self.params.data[..h0]) {
             let per = s[1] * s[2];
@@ -293,9 +331,16 @@ impl<E: Env> Ppo<E> {
             algorithm: Algorithm::Ppo,
             observation_space: self.env.observation_space().clone(),
             action_space: self.env.action_space().clone(),
-            net: MlpSpec { n_members: 1, sizes, activation: self.cfg.activation_fn, activate_last: false },
+            net: MlpSpec {
+                n_members: 1,
+                sizes,
+                activation: self.cfg.activation_fn,
+                activate_last: false,
+            },
             params,
-            head: ActionHead::Gaussian { log_std: self.params.data[h0 + 4].clone() },
+            head: ActionHead::Gaussian {
+                log_std: self.params.data[h0 + 4].clone(),
+            },
             normalizer: self.normalizer.clone(),
             config_toml: self.cfg.to_toml(),
         }
@@ -336,7 +381,11 @@ impl<E: Env> Ppo<E> {
     /// Resume from a checkpoint with `env` (whose spaces must match); episodes restart.
     pub fn load_checkpoint(path: &Path, env: VecEnv<E>, device: &Device) -> Result<Self> {
         let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Ppo)?;
-        check_space("observation space", &h.observation_space, env.observation_space())?;
+        check_space(
+            "observation space",
+            &h.observation_space,
+            env.observation_space(),
+        )?;
         check_space("action space", &h.action_space, env.action_space())?;
         let mut s = Self::new(h.config.clone(), env, device, h.seed)?;
         let shapes = s.params.shapes.clone();
@@ -346,7 +395,10 @@ impl<E: Env> Ppo<E> {
         s.rng = h.rng;
         s.num_timesteps = h.num_timesteps;
         s.n_updates = h.n_updates;
-        s.episodes = Episodes { count: h.episodes, recent: h.recent_returns.into_iter().collect() };
+        s.episodes = Episodes {
+            count: h.episodes,
+            recent: h.recent_returns.into_iter().collect(),
+        };
         s.normalizer = h.normalizer;
         Ok(s)
     }

@@ -24,7 +24,11 @@ impl EntCoef {
                 .and_then(|v| v.parse::<f64>().ok())
                 .filter(|v| *v > 0.0)
                 .map(|v| Ok(Some(v)))
-                .unwrap_or_else(|| Err(RlError::Config(format!("ent_coef '{s}': use a number, \"auto\" or \"auto_<init>\"")))),
+                .unwrap_or_else(|| {
+                    Err(RlError::Config(format!(
+                        "ent_coef '{s}': use a number, \"auto\" or \"auto_<init>\""
+                    )))
+                }),
         }
     }
 }
@@ -100,7 +104,7 @@ impl SacConfig {
     /// Reject values the learner cannot run with.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(RlError::Config(format!("SAC: {m}")));
-        if !(self.learning_rate > 0.0) {
+        if self.learning_rate.is_nan() || self.learning_rate <= 0.0 {
             return bad("learning_rate must be > 0");
         }
         if self.batch_size == 0 || self.buffer_size == 0 {

@@ -13,9 +13,9 @@ pub use config::{EntCoef, SacConfig};
 use crate::buffer::ReplayBuffer;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter};
 use crate::error::{Result, RlError};
-use crate::nets::{mlp_forward, to_vec, Activation, Adam, HostParams, Init, MlpSpec};
+use crate::nets::{Activation, Adam, HostParams, Init, MlpSpec, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
-use crate::policy::{check_space, unsquash, ActionHead, Algorithm, Policy, PolicyData};
+use crate::policy::{ActionHead, Algorithm, Policy, PolicyData, check_space, unsquash};
 use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
 use agvrl_envs::{BoxSpace, Env, VecEnv};
@@ -50,6 +50,8 @@ pub struct Sac<E: Env> {
     losses: Losses,
     /// Current observations (raw), `None` until the envs are reset.
     last_obs: Option<Vec<f32>>,
+    /// Threads one gradient step may use (row blocks of the minibatch).
+    threads: usize,
     /// Device copies of the actor, critics and target critics, refreshed after each change.
     actor_dev: Vec<Tensor<3>>,
     critic_dev: Vec<Tensor<3>>,
@@ -77,10 +79,14 @@ struct Header {
 }
 
 fn finite_box(space: &BoxSpace) -> Result<()> {
-    if space.low.iter().chain(&space.high).all(|v| v.is_finite()) && space.low.iter().zip(&space.high).all(|(l, h)| l < h) {
+    if space.low.iter().chain(&space.high).all(|v| v.is_finite())
+        && space.low.iter().zip(&space.high).all(|(l, h)| l < h)
+    {
         Ok(())
     } else {
-        Err(RlError::Config("SAC needs a finite action box with low < high".into()))
+        Err(RlError::Config(
+            "SAC needs a finite action box with low < high".into(),
+        ))
     }
 }
 
@@ -97,7 +103,12 @@ impl<E: Env> Sac<E> {
             let mut sizes = vec![input];
             sizes.extend(&cfg.net_arch);
             sizes.push(out);
-            MlpSpec { n_members: members, sizes, activation: Activation::Relu, activate_last: false }
+            MlpSpec {
+                n_members: members,
+                sizes,
+                activation: Activation::Relu,
+                activate_last: false,
+            }
         };
         let actor_spec = hidden(obs_dim, 2 * act_dim, 1);
         let critic_spec = hidden(obs_dim + act_dim, 1, 2);
@@ -121,6 +132,7 @@ impl<E: Env> Sac<E> {
             target_entropy: cfg.target_entropy.unwrap_or(-(act_dim as f64)),
             buffer: ReplayBuffer::new(cfg.buffer_size, obs_dim, act_dim),
             normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(obs_dim)),
+            threads: 1,
             actor_dev: vec![],
             critic_dev: vec![],
             target_dev: vec![],
@@ -153,6 +165,13 @@ impl<E: Env> Sac<E> {
         self.target_dev = self.critic_target.to_device(&self.device);
     }
 
+    /// Let each gradient step split its minibatch over `threads` threads (default 1). The
+    /// result is deterministic for a given thread count but differs from other counts in the
+    /// last float bits.
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.max(1);
+    }
+
     /// The configuration.
     pub fn config(&self) -> &SacConfig {
         &self.cfg
@@ -176,7 +195,11 @@ impl<E: Env> Sac<E> {
     /// Run `steps` more env steps (rounded up to whole vector steps), training as configured;
     /// `callback` sees progress after every vector step and can stop early. Calling `learn`
     /// again continues the same episodes.
-    pub fn learn(&mut self, steps: u64, callback: &mut dyn FnMut(&Progress<'_>) -> Control) -> Result<()> {
+    pub fn learn(
+        &mut self,
+        steps: u64,
+        callback: &mut dyn FnMut(&Progress<'_>) -> Control,
+    ) -> Result<()> {
         let target = self.num_timesteps + steps;
         let n_envs = self.env.n_envs();
         let mut vec_steps = 0u64;
@@ -185,7 +208,9 @@ impl<E: Env> Sac<E> {
                 Some(o) => o,
                 None => {
                     // First reset uses the run seed; after a resume, a seed derived from the step count.
-                    let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
+                    let seed = self
+                        .seed
+                        .wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
                     let (o, _) = self.env.reset(Some(seed))?;
                     if let Some(n) = &mut self.normalizer {
                         n.update(&o);
@@ -194,7 +219,9 @@ impl<E: Env> Sac<E> {
                 }
             };
             let scaled = if self.num_timesteps < self.cfg.learning_starts {
-                (0..n_envs * self.act_dim).map(|_| (self.rng.uniform() * 2.0 - 1.0) as f32).collect()
+                (0..n_envs * self.act_dim)
+                    .map(|_| (self.rng.uniform() * 2.0 - 1.0) as f32)
+                    .collect()
             } else {
                 self.sample_scaled_actions(&obs)?
             };
@@ -210,7 +237,10 @@ impl<E: Env> Sac<E> {
             let st = self.env.step(&env_actions)?;
             let o = self.obs_dim;
             for e in 0..n_envs {
-                let next = st.infos[e].final_obs.as_deref().unwrap_or(&st.obs[e * o..(e + 1) * o]);
+                let next = st.infos[e]
+                    .final_obs
+                    .as_deref()
+                    .unwrap_or(&st.obs[e * o..(e + 1) * o]);
                 self.buffer.push(
                     &obs[e * o..(e + 1) * o],
                     &scaled[e * self.act_dim..(e + 1) * self.act_dim],
@@ -226,7 +256,9 @@ impl<E: Env> Sac<E> {
             self.num_timesteps += n_envs as u64;
             self.last_obs = Some(st.obs);
             vec_steps += 1;
-            if self.num_timesteps > self.cfg.learning_starts && vec_steps % self.cfg.train_freq == 0 {
+            if self.num_timesteps > self.cfg.learning_starts
+                && vec_steps.is_multiple_of(self.cfg.train_freq)
+            {
                 for _ in 0..self.cfg.gradient_steps {
                     self.update()?;
                 }
@@ -260,7 +292,9 @@ impl<E: Env> Sac<E> {
         let mut acts = Vec::with_capacity(n * a);
         for row in out.chunks_exact(2 * a) {
             for i in 0..a {
-                let std = row[a + i].clamp(crate::policy::LOG_STD_MIN, crate::policy::LOG_STD_MAX).exp();
+                let std = row[a + i]
+                    .clamp(crate::policy::LOG_STD_MIN, crate::policy::LOG_STD_MAX)
+                    .exp();
                 acts.push((row[i] + std * self.rng.normal() as f32).tanh());
             }
         }
@@ -332,7 +366,11 @@ impl<E: Env> Sac<E> {
     /// the saved weights, optimisers, buffer, RNG and counters; episodes restart.
     pub fn load_checkpoint(path: &Path, env: VecEnv<E>, device: &Device) -> Result<Self> {
         let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Sac)?;
-        check_space("observation space", &h.observation_space, env.observation_space())?;
+        check_space(
+            "observation space",
+            &h.observation_space,
+            env.observation_space(),
+        )?;
         check_space("action space", &h.action_space, env.action_space())?;
         let mut s = Self::new(h.config.clone(), env, device, h.seed)?;
         s.actor = r.params(&s.actor.shapes)?;
@@ -344,11 +382,19 @@ impl<E: Env> Sac<E> {
         s.ent_opt = match (&h.ent_opt, s.ent_opt.is_some()) {
             (Some(m), true) => Some(r.adam(m, &s.log_ent_coef.shapes)?),
             (None, false) => None,
-            _ => return Err(RlError::BadFile { path: path.to_path_buf(), reason: "entropy optimiser does not match the config".into() }),
+            _ => {
+                return Err(RlError::BadFile {
+                    path: path.to_path_buf(),
+                    reason: "entropy optimiser does not match the config".into(),
+                });
+            }
         };
         let (n, o, a) = (h.buffer_len, s.obs_dim, s.act_dim);
         if n > s.cfg.buffer_size || h.buffer_pos >= s.cfg.buffer_size.max(1) {
-            return Err(RlError::BadFile { path: path.to_path_buf(), reason: "replay buffer larger than its capacity".into() });
+            return Err(RlError::BadFile {
+                path: path.to_path_buf(),
+                reason: "replay buffer larger than its capacity".into(),
+            });
         }
         s.buffer.obs = r.array(Some(n * o))?;
         s.buffer.next_obs = r.array(Some(n * o))?;
@@ -360,7 +406,10 @@ impl<E: Env> Sac<E> {
         s.rng = h.rng;
         s.num_timesteps = h.num_timesteps;
         s.n_updates = h.n_updates;
-        s.episodes = Episodes { count: h.episodes, recent: h.recent_returns.into_iter().collect() };
+        s.episodes = Episodes {
+            count: h.episodes,
+            recent: h.recent_returns.into_iter().collect(),
+        };
         s.normalizer = h.normalizer;
         s.upload_all();
         Ok(s)

@@ -1,17 +1,22 @@
-//! One SAC gradient step, top to bottom as in SB3's `SAC.train`.
+//! One SAC gradient step, in SB3's `SAC.train` order: entropy coefficient, critic update,
+//! actor update through the just-updated critics, Polyak averaging.
 //!
-//! Graph work is kept to what the gradients need: the target is computed on plain tensors,
-//! the critic loss differentiates only the critics, and the actor loss runs through the
-//! just-updated critics as constants (their weight gradients are never formed). The actor's
-//! forward pass on the batch is done once and feeds both the entropy-coefficient and the
-//! actor loss.
+//! Graph work is kept to what the gradients need: the target and the entropy statistics come
+//! from one plain forward of the actor on `[obs; next_obs]`, the critic loss differentiates only
+//! the critics (one batched forward for both), and the actor loss runs through the updated
+//! critics as constants, so their weight gradients are never formed.
+//!
+//! With `threads > 1` the minibatch is split into row blocks whose losses (sums over rows
+//! divided by the full batch size) are differentiated on separate threads and their gradients
+//! summed in block order: the same update as one thread up to float summation order, and
+//! deterministic for a fixed thread count.
 
 use super::Sac;
 use crate::error::{Result, RlError};
-use crate::nets::{grads_of, mlp_forward, to_vec, Activation};
+use crate::nets::{Activation, grads_of, mlp_forward, to_vec};
 use crate::policy::{LOG_STD_MAX, LOG_STD_MIN};
 use agvrl_envs::Env;
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::{Device, Tensor, TensorData};
 
 const HALF_LN_2PI: f32 = 0.918_938_5;
 
@@ -24,7 +29,9 @@ pub(crate) fn squashed_sample(out: Tensor<3>, eps: Tensor<3>, a: usize) -> (Tens
     let y = u.tanh();
     // log N(u; mean, std) = -eps^2/2 - log std - ln(2 pi)/2, minus the tanh Jacobian.
     let gauss = (eps.powi_scalar(2) * -0.5 - log_std - HALF_LN_2PI).sum_dim(2);
-    let jac = (y.clone().powi_scalar(2).neg() + (1.0 + 1e-6)).log().sum_dim(2);
+    let jac = (y.clone().powi_scalar(2).neg() + (1.0 + 1e-6))
+        .log()
+        .sum_dim(2);
     (y, gauss - jac)
 }
 
@@ -32,63 +39,220 @@ fn min_of_twins(q: Tensor<3>) -> Tensor<3> {
     q.clone().narrow(0, 0, 1).min_pair(q.narrow(0, 1, 1))
 }
 
+/// One row block of the minibatch, host side.
+struct Block {
+    rows: usize,
+    obs: Vec<f32>,
+    next_obs: Vec<f32>,
+    actions: Vec<f32>,
+    rewards: Vec<f32>,
+    not_done: Vec<f32>,
+    eps_pi: Vec<f32>,
+    eps_next: Vec<f32>,
+}
+
+/// What a block contributes to the critic step.
+struct CriticOut {
+    grads: Vec<Vec<f32>>,
+    loss: f64,
+    log_prob_sum: f64,
+}
+
+/// Device weights and constants every block reads.
+struct Shared<'a> {
+    device: &'a Device,
+    actor: &'a [Tensor<3>],
+    critic: &'a [Tensor<3>],
+    target: &'a [Tensor<3>],
+    o: usize,
+    a: usize,
+    /// Full minibatch size: every block's loss is a sum over its rows divided by it.
+    batch: usize,
+    gamma: f64,
+    ent_coef: f64,
+}
+
+impl Shared<'_> {
+    fn t3(&self, v: &[f32], s: [usize; 3]) -> Tensor<3> {
+        Tensor::<3>::from_data(TensorData::new(v.to_vec(), s), self.device)
+    }
+
+    /// Entropy statistics, TD target and critic gradients for one block.
+    fn critic_block(&self, b: &Block) -> Result<CriticOut> {
+        let (n, o, a) = (b.rows, self.o, self.a);
+        let obs = self.t3(&b.obs, [1, n, o]);
+        let next_obs = self.t3(&b.next_obs, [1, n, o]);
+        // One plain actor forward on [obs; next_obs].
+        let both = Tensor::cat(vec![obs.clone(), next_obs.clone()], 1);
+        let eps = Tensor::cat(
+            vec![
+                self.t3(&b.eps_pi, [1, n, a]),
+                self.t3(&b.eps_next, [1, n, a]),
+            ],
+            1,
+        );
+        let (act, log_prob) = squashed_sample(
+            mlp_forward(self.actor, both, Activation::Relu, false),
+            eps,
+            a,
+        );
+        let log_prob_sum = to_vec(log_prob.clone().narrow(1, 0, n).sum())?[0] as f64;
+        let (next_action, next_log_prob) = (act.narrow(1, n, n), log_prob.narrow(1, n, n));
+        // Target: r + gamma (1 - terminated) (min Q_targ(s', a') - alpha log pi(a'|s')).
+        let q_next = mlp_forward(
+            self.target,
+            Tensor::cat(vec![next_obs, next_action], 2),
+            Activation::Relu,
+            false,
+        );
+        let q_next = min_of_twins(q_next) - next_log_prob * self.ent_coef;
+        let target_q =
+            self.t3(&b.rewards, [1, n, 1]) + self.t3(&b.not_done, [1, n, 1]) * q_next * self.gamma;
+        // 0.5 * sum over both critics of the MSE, one batched forward.
+        let critic: Vec<Tensor<3>> = self
+            .critic
+            .iter()
+            .map(|t| t.clone().autodiff().require_grad())
+            .collect();
+        let x = Tensor::cat(vec![obs, self.t3(&b.actions, [1, n, a])], 2).autodiff();
+        let q = mlp_forward(&critic, x, Activation::Relu, false);
+        let loss = (q - target_q.autodiff()).powi_scalar(2).sum() * (0.5 / self.batch as f64);
+        let grads = grads_of(&critic, &loss.backward())?;
+        Ok(CriticOut {
+            grads,
+            loss: to_vec(loss.inner())?[0] as f64,
+            log_prob_sum,
+        })
+    }
+
+    /// Actor gradients for one block: `sum(alpha log pi - min Q(s, pi(s))) / batch` through
+    /// the (updated) critics held constant.
+    fn actor_block(&self, b: &Block) -> Result<(Vec<Vec<f32>>, f64)> {
+        let (n, o, a) = (b.rows, self.o, self.a);
+        let obs = self.t3(&b.obs, [1, n, o]).autodiff();
+        let actor: Vec<Tensor<3>> = self
+            .actor
+            .iter()
+            .map(|t| t.clone().autodiff().require_grad())
+            .collect();
+        let out = mlp_forward(&actor, obs.clone(), Activation::Relu, false);
+        let (pi_action, log_prob) =
+            squashed_sample(out, self.t3(&b.eps_pi, [1, n, a]).autodiff(), a);
+        let q_pi = mlp_forward(
+            self.critic,
+            Tensor::cat(vec![obs, pi_action], 2),
+            Activation::Relu,
+            false,
+        );
+        let loss = (log_prob * self.ent_coef - min_of_twins(q_pi)).sum() / self.batch as f64;
+        let grads = grads_of(&actor, &loss.backward())?;
+        Ok((grads, to_vec(loss.inner())?[0] as f64))
+    }
+}
+
+/// Run `f` on every block, block 0 on this thread and the others on scoped threads; results
+/// in block order.
+fn run_blocks<T: Send>(blocks: &[Block], f: impl Fn(&Block) -> Result<T> + Sync) -> Result<Vec<T>> {
+    if blocks.len() == 1 {
+        return Ok(vec![f(&blocks[0])?]);
+    }
+    std::thread::scope(|s| {
+        let handles: Vec<_> = blocks[1..].iter().map(|b| s.spawn(|| f(b))).collect();
+        let mut out = vec![f(&blocks[0])?];
+        for h in handles {
+            out.push(
+                h.join()
+                    .map_err(|_| RlError::Tensor("SAC worker thread panicked".into()))??,
+            );
+        }
+        Ok(out)
+    })
+}
+
+fn sum_grads(mut parts: impl Iterator<Item = Vec<Vec<f32>>>) -> Vec<Vec<f32>> {
+    let mut acc = parts.next().unwrap_or_default();
+    for g in parts {
+        for (x, y) in acc.iter_mut().zip(g) {
+            x.iter_mut().zip(y).for_each(|(p, q)| *p += q);
+        }
+    }
+    acc
+}
+
 impl<E: Env> Sac<E> {
     pub(crate) fn update(&mut self) -> Result<()> {
         let (b, o, a) = (self.cfg.batch_size, self.obs_dim, self.act_dim);
-        let dev = self.device.clone();
-        let batch = self.buffer.sample(b, &mut self.rng, self.normalizer.as_ref());
-        let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &dev);
-        let obs = t3(batch.obs, [1, b, o]);
-        let next_obs = t3(batch.next_obs, [1, b, o]);
-        let actions = t3(batch.actions, [1, b, a]);
-        let rewards = t3(batch.rewards, [1, b, 1]);
-        let not_done = t3(batch.dones.iter().map(|d| 1.0 - d).collect(), [1, b, 1]);
-        let eps_pi = t3(self.rng.normals(b * a), [1, b, a]);
-        let eps_next = t3(self.rng.normals(b * a), [1, b, a]);
-
-        // Actor forward with gradients; reused below by the entropy and actor losses.
-        let actor_tr: Vec<Tensor<3>> = self.actor_dev.iter().map(|t| t.clone().autodiff().require_grad()).collect();
-        let out = mlp_forward(&actor_tr, obs.clone().autodiff(), Activation::Relu, false);
-        let (pi_action, log_prob) = squashed_sample(out, eps_pi.autodiff(), a);
-        let log_prob_host = to_vec(log_prob.clone().inner())?;
-        let mean_log_prob = log_prob_host.iter().map(|v| *v as f64).sum::<f64>() / b as f64;
-
-        // Entropy coefficient: alpha for this step is taken before its own update (as SB3).
+        let batch = self
+            .buffer
+            .sample(b, &mut self.rng, self.normalizer.as_ref());
+        let eps_pi = self.rng.normals(b * a);
+        let eps_next = self.rng.normals(b * a);
+        let k = self.threads.clamp(1, b);
+        let blocks: Vec<Block> = (0..k)
+            .map(|i| {
+                let (r0, r1) = (i * b / k, (i + 1) * b / k);
+                Block {
+                    rows: r1 - r0,
+                    obs: batch.obs[r0 * o..r1 * o].to_vec(),
+                    next_obs: batch.next_obs[r0 * o..r1 * o].to_vec(),
+                    actions: batch.actions[r0 * a..r1 * a].to_vec(),
+                    rewards: batch.rewards[r0..r1].to_vec(),
+                    not_done: batch.dones[r0..r1].iter().map(|d| 1.0 - d).collect(),
+                    eps_pi: eps_pi[r0 * a..r1 * a].to_vec(),
+                    eps_next: eps_next[r0 * a..r1 * a].to_vec(),
+                }
+            })
+            .collect();
+        // alpha for this step is taken before its own update (as SB3).
         let ent_coef = (self.log_ent_coef.data[0][0] as f64).exp();
+        let device = self.device.clone();
+        // Tensor clones are handles; the learner's copies are replaced as the step proceeds.
+        let (actor_dev, critic_dev, target_dev) = (
+            self.actor_dev.clone(),
+            self.critic_dev.clone(),
+            self.target_dev.clone(),
+        );
+        let shared = Shared {
+            device: &device,
+            actor: &actor_dev,
+            critic: &critic_dev,
+            target: &target_dev,
+            o,
+            a,
+            batch: b,
+            gamma: self.cfg.gamma,
+            ent_coef,
+        };
+        let critic_out = run_blocks(&blocks, |blk| shared.critic_block(blk))?;
+        let mean_log_prob = critic_out.iter().map(|c| c.log_prob_sum).sum::<f64>() / b as f64;
+        let critic_loss: f64 = critic_out.iter().map(|c| c.loss).sum();
+        let critic_grads = sum_grads(critic_out.into_iter().map(|c| c.grads));
         if let Some(opt) = &mut self.ent_opt {
             // d/d(log alpha) of -log alpha * (log_prob + target_entropy).mean()
             let g = -(mean_log_prob + self.target_entropy) as f32;
             opt.step(&mut self.log_ent_coef, &[vec![g]]);
         }
-
-        // Target: r + gamma (1 - terminated) (min Q_targ(s', a') - alpha log pi(a'|s')).
-        let next_out = mlp_forward(&self.actor_dev, next_obs.clone(), Activation::Relu, false);
-        let (next_action, next_log_prob) = squashed_sample(next_out, eps_next, a);
-        let q_next = mlp_forward(&self.target_dev, Tensor::cat(vec![next_obs, next_action], 2), Activation::Relu, false);
-        let q_next = min_of_twins(q_next) - next_log_prob * ent_coef;
-        let target_q = rewards + not_done * q_next * self.cfg.gamma;
-
-        // Critic loss: 0.5 * sum over both critics of MSE, one batched forward.
-        let critic_tr: Vec<Tensor<3>> = self.critic_dev.iter().map(|t| t.clone().autodiff().require_grad()).collect();
-        let q = mlp_forward(&critic_tr, Tensor::cat(vec![obs.clone(), actions], 2).autodiff(), Activation::Relu, false);
-        let critic_loss = (q - target_q.autodiff()).powi_scalar(2).sum() * (0.5 / b as f64);
-        let critic_grads = grads_of(&critic_tr, &critic_loss.backward())?;
-        let critic_loss = to_vec(critic_loss.inner())?[0] as f64;
         self.critic_opt.step(&mut self.critic, &critic_grads);
-        self.critic_dev = self.critic.to_device(&dev);
+        self.critic_dev = self.critic.to_device(&device);
+        let updated_critic = self.critic_dev.clone();
 
-        // Actor loss through the updated critics, held constant.
-        let q_pi = mlp_forward(&self.critic_dev, Tensor::cat(vec![obs.autodiff(), pi_action], 2), Activation::Relu, false);
-        let actor_loss = (log_prob * ent_coef - min_of_twins(q_pi)).mean();
-        let actor_grads = grads_of(&actor_tr, &actor_loss.backward())?;
-        let actor_loss = to_vec(actor_loss.inner())?[0] as f64;
+        let shared = Shared {
+            critic: &updated_critic,
+            ..shared
+        };
+        let actor_out = run_blocks(&blocks, |blk| shared.actor_block(blk))?;
+        let actor_loss: f64 = actor_out.iter().map(|x| x.1).sum();
+        let actor_grads = sum_grads(actor_out.into_iter().map(|x| x.0));
         self.actor_opt.step(&mut self.actor, &actor_grads);
-        self.actor_dev = self.actor.to_device(&dev);
+        self.actor_dev = self.actor.to_device(&device);
 
         self.n_updates += 1;
-        if self.n_updates % self.cfg.target_update_interval == 0 {
+        if self
+            .n_updates
+            .is_multiple_of(self.cfg.target_update_interval)
+        {
             self.critic_target.polyak(&self.critic, self.cfg.tau as f32);
-            self.target_dev = self.critic_target.to_device(&dev);
+            self.target_dev = self.critic_target.to_device(&device);
         }
         if !critic_loss.is_finite() || !actor_loss.is_finite() {
             return Err(RlError::NonFinite("SAC loss"));
