@@ -1,12 +1,32 @@
-//! agvrl-envs: the reinforcement-learning contract.
+//! agvrl-envs: the reinforcement-learning contract. `Env` (Gymnasium semantics), the `Vehicle`
+//! seam shared by the simulator and a real car, the paper's tasks, the registry, `VecEnv`, and
+//! the sim-to-real wrappers.
+//!
+//! ```text
+//! action in [-1,1]^2 -> Task::control -> Control -> Vehicle::actuate (one control period)
+//!   -> Vehicle::sense -> SensorFrame -> Task: observation, reward, termination
+//!   -> TimeLimit (truncation) -> VecEnv (auto-reset, final_obs) -> learner
+//! ```
+//!
+//! Invariants: `api` sees agvrl-sim only through its plain `msg` types; rewards live only in
+//! `task::reward`; every random draw comes from a RNG seeded through `reset`; a NaN or
+//! wrong-length action is an error and never reaches the vehicle.
 #![warn(missing_docs)]
 
 pub mod api;
+pub mod bench;
+pub mod check;
 pub mod pendulum;
 pub mod registry;
+pub mod sim_vehicle;
+pub mod task;
+pub mod task_env;
 pub mod vec_env;
 pub mod wrappers;
 
-pub use api::{BoxSpace, Env, EnvError, Info, Step};
-pub use registry::{make, ENV_IDS};
+pub use api::{BoxSpace, Control, Env, EnvError, Info, SensorFrame, Step, Vehicle};
+pub use check::check_env;
+pub use registry::{make, make_vehicle, make_with, EnvConfig, ENV_IDS};
+pub use sim_vehicle::{Randomisation, SimVehicle, SpawnMode};
+pub use task_env::TaskEnv;
 pub use vec_env::{VecEnv, VecStep};

@@ -1,16 +1,144 @@
 //! `make(id, config)`: every env agvrl ships, by id.
 
-use crate::api::{Env, EnvError};
+use crate::api::{Env, EnvError, Vehicle};
 use crate::pendulum::Pendulum;
-use crate::wrappers::TimeLimit;
+use crate::sim_vehicle::{Randomisation, SimVehicle, SpawnMode};
+use crate::task::racing::RacingConfig;
+use crate::task::search::SearchConfig;
+use crate::task::{CommonConfig, ObsConfig, Racing, Search, SearchReward};
+use crate::task_env::TaskEnv;
+use crate::wrappers::{NoiseConfig, Noisy, TimeLimit};
+use agvrl_sim::sensors::LidarConfig;
+use agvrl_sim::{ActionMapping, DynamicsMode, SceneSource, SimConfig};
+use serde::{Deserialize, Serialize};
 
 /// Ids `make` knows.
-pub const ENV_IDS: &[&str] = &["pendulum"];
+pub const ENV_IDS: &[&str] = &["search-outdoor-20", "search-outdoor-50", "search-urban-20", "search-urban-50", "racing-oval", "pendulum"];
 
-/// Build the env registered under `id`.
+/// Settings of the vehicle envs (ignored by `pendulum`). Loadable from TOML; unknown keys are
+/// an error.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EnvConfig {
+    /// Built-in vehicle name or the path of a vehicle TOML.
+    pub vehicle: String,
+    /// Dynamics mode.
+    pub dynamics: DynamicsMode,
+    /// Physics substeps per 1/30 s control period.
+    pub substeps: u32,
+    /// LiDAR.
+    pub lidar: LidarConfig,
+    /// Observation composition.
+    pub observation: ObsConfig,
+    /// Action mapping.
+    pub action_mapping: ActionMapping,
+    /// R_search form.
+    pub search_reward: SearchReward,
+    /// Where episodes start.
+    pub spawn: SpawnMode,
+    /// Sensor noise and latency.
+    pub noise: NoiseConfig,
+    /// Per-episode domain randomisation.
+    pub randomisation: Randomisation,
+    /// Time limit, control steps (truncation).
+    pub max_steps: u64,
+}
+
+impl Default for EnvConfig {
+    fn default() -> Self {
+        Self {
+            vehicle: "xtenth_car".into(),
+            dynamics: DynamicsMode::Raycast,
+            substeps: 4,
+            lidar: LidarConfig::default(),
+            observation: ObsConfig::default(),
+            action_mapping: ActionMapping::Scaled,
+            search_reward: SearchReward::AutovrlCode,
+            spawn: SpawnMode::Random,
+            noise: NoiseConfig::default(),
+            randomisation: Randomisation::default(),
+            max_steps: 1000,
+        }
+    }
+}
+
+impl EnvConfig {
+    /// The `paper` preset: AutoVRL's observation (100 raw ranges), its action mapping and
+    /// fixed spawn, no noise, no randomisation.
+    pub fn paper() -> Self {
+        Self { observation: ObsConfig::paper(), action_mapping: ActionMapping::Paper, spawn: SpawnMode::Fixed, ..Self::default() }
+    }
+
+    /// The `sim2real` preset: the default with sensor noise, latency and randomisation on.
+    pub fn sim2real() -> Self {
+        Self { noise: NoiseConfig::sim2real(), randomisation: Randomisation::sim2real(), ..Self::default() }
+    }
+
+    /// A named preset: `default`, `paper` or `sim2real`.
+    pub fn preset(name: &str) -> Result<Self, EnvError> {
+        match name {
+            "default" => Ok(Self::default()),
+            "paper" => Ok(Self::paper()),
+            "sim2real" => Ok(Self::sim2real()),
+            other => Err(EnvError::Config(format!("unknown preset '{other}'; presets: default, paper, sim2real"))),
+        }
+    }
+}
+
+fn scene_of(id: &str) -> Option<&'static str> {
+    Some(match id {
+        "search-outdoor-20" => "outdoor-20",
+        "search-outdoor-50" => "outdoor-50",
+        "search-urban-20" => "urban-20",
+        "search-urban-50" => "urban-50",
+        "racing-oval" => "oval",
+        _ => return None,
+    })
+}
+
+fn unknown(id: &str) -> EnvError {
+    EnvError::UnknownId { id: id.to_string(), valid: ENV_IDS.iter().map(|s| s.to_string()).collect() }
+}
+
+/// The vehicle of env `id` (no task), for tools that drive a vehicle directly.
+pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvError> {
+    let scene = scene_of(id).ok_or_else(|| unknown(id))?;
+    if cfg.max_steps == 0 {
+        return Err(EnvError::Config("max_steps must be at least 1".into()));
+    }
+    let sim = SimConfig {
+        scene: SceneSource::Builtin(scene.into()),
+        vehicle: cfg.vehicle.clone(),
+        mode: cfg.dynamics,
+        substeps: cfg.substeps,
+        lidar: cfg.lidar.clone(),
+        ..SimConfig::default()
+    };
+    let v = SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?;
+    Ok(if cfg.noise.is_off() { Box::new(v) } else { Box::new(Noisy::new(v, cfg.noise)) })
+}
+
+/// Build the env registered under `id` with the default `EnvConfig`.
 pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
-    match id {
-        "pendulum" => Ok(Box::new(TimeLimit::new(Pendulum::new(), 200))),
-        _ => Err(EnvError::UnknownId { id: id.to_string(), valid: ENV_IDS.iter().map(|s| s.to_string()).collect() }),
+    make_with(id, &EnvConfig::default())
+}
+
+/// Build the env registered under `id` with `cfg`, wrapped in its time limit.
+pub fn make_with(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
+    if id == "pendulum" {
+        return Ok(Box::new(TimeLimit::new(Pendulum::new(), 200)));
+    }
+    let vehicle = make_vehicle(id, cfg)?;
+    let limit = vehicle.steering_limit_rad();
+    let common = CommonConfig { observation: cfg.observation, action_mapping: cfg.action_mapping, n_rays: cfg.lidar.n_rays, range_max_m: cfg.lidar.range_max_m };
+    if id == "racing-oval" {
+        let task = Racing::new(RacingConfig { common, ..RacingConfig::default() }, limit);
+        Ok(Box::new(TimeLimit::new(TaskEnv::new(vehicle, task), cfg.max_steps)))
+    } else {
+        let task = Search::new(
+            SearchConfig { common, reward: cfg.search_reward, slow_penalty: id == "search-outdoor-50" && cfg.search_reward == SearchReward::AutovrlCode, ..SearchConfig::default() },
+            limit,
+        );
+        Ok(Box::new(TimeLimit::new(TaskEnv::new(vehicle, task), cfg.max_steps)))
     }
 }

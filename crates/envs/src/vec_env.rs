@@ -150,7 +150,7 @@ impl<E: Env> VecEnv<E> {
         };
         let steps: Vec<crate::api::Step> = match &self.pool {
             Some(pool) => pool.install(|| {
-                self.slots.par_iter_mut().zip(actions.par_chunks(act_dim)).map(step_one).collect()
+                self.slots.par_iter_mut().zip(actions.par_chunks(act_dim)).map(step_one).collect::<Result<Vec<_>, EnvError>>()
             })?,
             None => self.slots.iter_mut().zip(actions.chunks(act_dim)).map(step_one).collect::<Result<_, _>>()?,
         };

@@ -7,7 +7,7 @@ use crate::sensors::imu::ImuState;
 use crate::sensors::{gps, GpsConfig, Lidar, LidarConfig};
 use crate::vehicle::body::Body;
 use crate::vehicle::{ackermann_split, BodyParams, Control, DriveModel, DynamicsMode, VehicleModel};
-use crate::world::{groups, World};
+use crate::world::World;
 use crate::SimError;
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -111,6 +111,7 @@ pub struct Sim {
     time_s: f64,
     steps: u64,
     vel_w: (Vector, Vector),
+    pristine: (crate::world::WorldSnapshot, Body),
 }
 
 impl Sim {
@@ -157,6 +158,10 @@ impl Sim {
         let pose2 = PlanarPose { x_m: spawn.x_m, y_m: spawn.y_m, yaw_rad: spawn.yaw_deg.to_radians() };
         let body = Body::new(&mut world, &model, cfg.mode, spawn_pose(&model, pose2), body_params(&nominal))?;
         let lidar = Lidar::new(cfg.lidar.clone());
+        // One physics step first, so the snapshot holds a built broad phase: the wheel rays of
+        // the first substep after every reset then see the ground.
+        world.pw.step();
+        let pristine = (world.snapshot(), body.clone());
         let mut sim = Self {
             cfg,
             world,
@@ -173,6 +178,7 @@ impl Sim {
             time_s: 0.0,
             steps: 0,
             vel_w: (Vector::ZERO, Vector::ZERO),
+            pristine,
         };
         sim.reset(pose2)?;
         Ok(sim)
@@ -218,6 +224,8 @@ impl Sim {
     pub fn reset(&mut self, pose: PlanarPose) -> Result<(), SimError> {
         let p = spawn_pose(&self.model, pose);
         let bp = body_params(&self.params);
+        self.world.restore(&self.pristine.0);
+        self.body.clone_from(&self.pristine.1);
         self.body.reset(&mut self.world, &self.model, p, bp)?;
         self.wheel_speed = 0.0;
         self.control = Control::default();
@@ -388,13 +396,17 @@ impl Sim {
     }
 
     /// Whether a vertical cylinder of `radius_m` standing at (x, y) from the ground to 1 m
-    /// touches no scene object (spawn and coverage checks).
+    /// touches no scene object (spawn and coverage checks). Tests the static scene directly, so
+    /// the answer does not depend on the broad phase's state.
     pub fn free_at(&self, x: f32, y: f32, radius_m: f32) -> bool {
         let shape = Cylinder::new(0.45, radius_m);
         let pose = Pose::from_parts(Vector::new(x, y, 0.55), Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2));
-        let groups = InteractionGroups::new(Group::ALL, groups::OBSTACLE, InteractionTestMode::And);
-        let q = self.world.pw.query_pipeline_with_filter(QueryFilter::default().groups(groups));
-        q.intersect_shape(pose, &shape).next().is_none()
+        let aabb = Aabb::new(Vector::new(x - radius_m, y - radius_m, 0.1), Vector::new(x + radius_m, y + radius_m, 1.0));
+        !self.world.statics.entries.iter().any(|e| {
+            e.object_id.is_some()
+                && e.aabb.intersects(&aabb)
+                && rapier3d::parry::query::intersection_test(&pose, &shape, &e.pose, e.shape.as_ref()).map(|i| i.intersecting).unwrap_or(true)
+        })
     }
 
     /// The physics world (read-only), for renderers and tests.

@@ -126,3 +126,49 @@ impl World {
         }
     }
 }
+
+/// A copy of the rapier state, restored at every reset so episodes replay bit for bit (contact
+/// caches, islands and the broad phase would otherwise remember earlier episodes).
+#[derive(Clone)]
+pub struct WorldSnapshot {
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    islands: IslandManager,
+    broad_phase: BroadPhaseBvh,
+    narrow_phase: NarrowPhase,
+    ccd_solver: CCDSolver,
+}
+
+impl World {
+    /// Copy the rapier state.
+    pub fn snapshot(&self) -> WorldSnapshot {
+        let pw = &self.pw;
+        WorldSnapshot {
+            bodies: pw.bodies.clone(),
+            colliders: pw.colliders.clone(),
+            impulse_joints: pw.impulse_joints.clone(),
+            multibody_joints: pw.multibody_joints.clone(),
+            islands: pw.islands.clone(),
+            broad_phase: pw.broad_phase.clone(),
+            narrow_phase: pw.narrow_phase.clone(),
+            ccd_solver: pw.ccd_solver.clone(),
+        }
+    }
+
+    /// Put the rapier state back to `snap`, with fresh solver workspaces.
+    pub fn restore(&mut self, snap: &WorldSnapshot) {
+        let pw = &mut self.pw;
+        pw.bodies.clone_from(&snap.bodies);
+        pw.colliders.clone_from(&snap.colliders);
+        pw.impulse_joints.clone_from(&snap.impulse_joints);
+        pw.multibody_joints.clone_from(&snap.multibody_joints);
+        pw.islands.clone_from(&snap.islands);
+        pw.broad_phase.clone_from(&snap.broad_phase);
+        pw.narrow_phase.clone_from(&snap.narrow_phase);
+        pw.ccd_solver.clone_from(&snap.ccd_solver);
+        pw.physics_pipeline = PhysicsPipeline::new();
+        pw.collision_pipeline = CollisionPipeline::new();
+    }
+}

@@ -130,6 +130,21 @@ mod issue_2_dynamics {
                 out
             };
             assert!(traj() == traj(), "{mode:?}: two runs differ");
+            // And within one simulator: a reset forgets the earlier episode entirely.
+            let mut s = sim(SceneSource::Builtin("outdoor-20".into()), mode);
+            let mut replay = || {
+                s.reset(PlanarPose { x_m: 1.0, y_m: -2.0, yaw_rad: 0.7 }).unwrap();
+                let mut out = Vec::new();
+                let mut x = 0.3f64;
+                for _ in 0..200 {
+                    x = (x * 3.7 * (1.0 - x)).clamp(0.0, 1.0);
+                    s.step(Control { throttle: x, steering_rad: 0.36 * (2.0 * x - 1.0) }).unwrap();
+                    out.push(s.base_pose().translation.to_array());
+                }
+                out
+            };
+            let (a, b) = (replay(), replay());
+            assert!(a == b, "{mode:?}: replay after reset differs");
         }
     }
 

@@ -3,6 +3,8 @@
 
 mod env;
 mod space;
+mod vehicle;
 
 pub use env::*;
 pub use space::BoxSpace;
+pub use vehicle::*;

@@ -41,11 +41,13 @@ const STEER_DAMPING: f32 = 50.0;
 const SUSPENSION_STIFFNESS: f32 = 400.0;
 const SUSPENSION_REST_M: f32 = 0.03;
 
+#[derive(Clone)]
 pub(crate) enum Body {
     Raycast { chassis: RigidBodyHandle, controller: DynamicRayCastVehicleController, colliders: Vec<ColliderHandle> },
     Multibody(Box<MultibodyCar>),
 }
 
+#[derive(Clone)]
 pub(crate) struct MultibodyCar {
     template: UrdfRobot,
     joint_names: Vec<String>,

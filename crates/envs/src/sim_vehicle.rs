@@ -1,0 +1,182 @@
+//! `SimVehicle`: the `Vehicle` seam over agvrl-sim, with seeded spawns and per-episode domain
+//! randomisation.
+
+use crate::api::{Control, EnvError, MapInfo, SensorFrame, Vehicle};
+use agvrl_sim::{PlanarPose, Sim, SimConfig, VehicleParams};
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use serde::{Deserialize, Serialize};
+
+/// Where episodes start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SpawnMode {
+    /// Seeded, uniformly over free space (on a track: anywhere on the centre line, facing the
+    /// racing direction, with a small lateral and heading jitter).
+    #[default]
+    Random,
+    /// AutoVRL's fixed spawn of the scene.
+    Fixed,
+}
+
+/// Per-episode domain randomisation: each factor is drawn uniformly in `[1 - x, 1 + x]`, the
+/// steering offset in `[-x, x]` rad. All zero: off.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Randomisation {
+    /// Relative spread of tyre friction.
+    pub friction: f64,
+    /// Relative spread of mass.
+    pub mass: f64,
+    /// Relative spread of C_T.
+    pub c_t: f64,
+    /// Relative spread of C_d.
+    pub c_d: f64,
+    /// Relative spread of C_r.
+    pub c_r: f64,
+    /// Largest steering offset, rad.
+    pub steering_offset_rad: f64,
+}
+
+impl Randomisation {
+    /// The `sim2real` preset: friction +-20 %, mass +-10 %, C_T +-10 %, C_d and C_r +-20 %,
+    /// steering offset up to 0.02 rad (about 1 degree of servo trim).
+    pub fn sim2real() -> Self {
+        Self { friction: 0.2, mass: 0.1, c_t: 0.1, c_d: 0.2, c_r: 0.2, steering_offset_rad: 0.02 }
+    }
+
+    fn draw(&self, nominal: VehicleParams, rng: &mut StdRng) -> VehicleParams {
+        let mut f = |x: f64| if x > 0.0 { rng.random_range(1.0 - x..1.0 + x) } else { 1.0 };
+        let mut p = nominal;
+        p.tyre_friction *= f(self.friction) as f32;
+        p.mass_scale *= f(self.mass) as f32;
+        p.drive.c_t *= f(self.c_t);
+        p.drive.c_d *= f(self.c_d);
+        p.drive.c_r *= f(self.c_r);
+        p.steering_offset_rad = if self.steering_offset_rad > 0.0 {
+            rng.random_range(-self.steering_offset_rad..self.steering_offset_rad)
+        } else {
+            0.0
+        };
+        p
+    }
+}
+
+/// Clearance kept between a random spawn and any obstacle, metres.
+const SPAWN_CLEARANCE_M: f32 = 1.2;
+/// Coverage grid cell, metres.
+const CELL_M: f32 = 0.5;
+
+/// The simulated vehicle.
+pub struct SimVehicle {
+    sim: Sim,
+    spawn: SpawnMode,
+    randomisation: Randomisation,
+    map: MapInfo,
+    rng: StdRng,
+}
+
+impl SimVehicle {
+    /// Build the simulation once; episodes only move the vehicle.
+    pub fn new(cfg: SimConfig, spawn: SpawnMode, randomisation: Randomisation) -> Result<Self, EnvError> {
+        let sim = Sim::new(cfg)?;
+        let half = sim.scene().half_extent_m();
+        let track = sim.scene().file.track.as_ref().map(|t| t.oval());
+        let mut free_cells = Vec::new();
+        let (nx, ny) = ((2.0 * half[0] / CELL_M) as i32, (2.0 * half[1] / CELL_M) as i32);
+        for i in 0..nx {
+            for j in 0..ny {
+                let (x, y) = (-half[0] + (i as f32 + 0.5) * CELL_M, -half[1] + (j as f32 + 0.5) * CELL_M);
+                let on_track = track.map(|t| t.lateral_offset_m(x, y).abs() < 0.5 * (t.outer_radius_m - t.inner_radius_m)).unwrap_or(true);
+                if on_track && sim.free_at(x, y, 0.5 * CELL_M) {
+                    free_cells.push([x, y]);
+                }
+            }
+        }
+        Ok(Self {
+            map: MapInfo { half_extent_m: half, track, free_cells, cell_m: CELL_M },
+            sim,
+            spawn,
+            randomisation,
+            rng: StdRng::seed_from_u64(0),
+        })
+    }
+
+    /// The simulator (read-only).
+    pub fn sim(&self) -> &Sim {
+        &self.sim
+    }
+
+    /// The simulator.
+    pub fn sim_mut(&mut self) -> &mut Sim {
+        &mut self.sim
+    }
+
+    fn random_pose(&mut self) -> PlanarPose {
+        if let Some(t) = self.map.track {
+            let s = self.rng.random_range(0.0..t.lap_length_m());
+            let ([x, y], [dx, dy]) = t.centreline_at(s);
+            let lateral = self.rng.random_range(-0.2..0.2f32);
+            let yaw = dy.atan2(dx) + self.rng.random_range(-0.15..0.15f32);
+            // Normal pointing to the outer wall: the direction turned right (clockwise lap).
+            return PlanarPose { x_m: x + lateral * dy, y_m: y - lateral * dx, yaw_rad: yaw };
+        }
+        let half = self.map.half_extent_m;
+        for _ in 0..1000 {
+            let x = self.rng.random_range(-half[0] + SPAWN_CLEARANCE_M..half[0] - SPAWN_CLEARANCE_M);
+            let y = self.rng.random_range(-half[1] + SPAWN_CLEARANCE_M..half[1] - SPAWN_CLEARANCE_M);
+            if self.sim.free_at(x, y, SPAWN_CLEARANCE_M) {
+                let yaw = self.rng.random_range(-std::f32::consts::PI..std::f32::consts::PI);
+                return PlanarPose { x_m: x, y_m: y, yaw_rad: yaw };
+            }
+        }
+        self.sim.default_spawn()
+    }
+
+    fn frame(&mut self) -> SensorFrame {
+        SensorFrame {
+            stamp_s: self.sim.time_s(),
+            scan: Some(self.sim.lidar_scan()),
+            imu: Some(self.sim.imu()),
+            gps: Some(self.sim.gps()),
+            image: None,
+            contact: Some(!self.sim.contacts().is_empty()),
+            applied: self.sim.control(),
+        }
+    }
+}
+
+impl Vehicle for SimVehicle {
+    fn reset(&mut self, seed: u64) -> Result<SensorFrame, EnvError> {
+        self.rng = StdRng::seed_from_u64(seed);
+        let params = self.randomisation.draw(self.sim.nominal_params(), &mut self.rng);
+        self.sim.set_params(params);
+        let pose = match self.spawn {
+            SpawnMode::Random => self.random_pose(),
+            SpawnMode::Fixed => self.sim.default_spawn(),
+        };
+        self.sim.reset(pose)?;
+        Ok(self.frame())
+    }
+
+    fn actuate(&mut self, control: Control) -> Result<(), EnvError> {
+        self.sim.step(control)?;
+        Ok(())
+    }
+
+    fn sense(&mut self) -> Result<SensorFrame, EnvError> {
+        Ok(self.frame())
+    }
+
+    fn control_period_s(&self) -> f64 {
+        self.sim.config().control_period_s
+    }
+
+    fn steering_limit_rad(&self) -> f64 {
+        self.sim.vehicle().spec.steering.max_rad
+    }
+
+    fn map(&self) -> Option<&MapInfo> {
+        Some(&self.map)
+    }
+}

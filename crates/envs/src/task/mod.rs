@@ -1,0 +1,189 @@
+//! Tasks turn a `SensorFrame` into observation, reward and termination: the same code in
+//! simulation and on the car.
+
+pub mod racing;
+pub mod reward;
+pub mod search;
+
+use crate::api::{BoxSpace, Control, MapInfo, RewardTerms, SensorFrame, SensorNeeds, TerminationCause};
+use agvrl_sim::ActionMapping;
+use serde::{Deserialize, Serialize};
+
+pub use racing::Racing;
+pub use reward::SearchReward;
+pub use search::Search;
+
+/// What a task concluded about one step.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Outcome {
+    /// Reward parts (sum = reward).
+    pub terms: RewardTerms,
+    /// Why the episode ended, if it did.
+    pub termination: Option<TerminationCause>,
+    /// Racing metrics.
+    pub racing: Option<crate::api::RacingInfo>,
+    /// Search metrics.
+    pub search: Option<crate::api::SearchInfo>,
+}
+
+/// A task.
+pub trait Task: Send {
+    /// Sensors needed every frame.
+    fn needs(&self) -> SensorNeeds;
+    /// Observation space.
+    fn observation_space(&self) -> BoxSpace;
+    /// Map a (finite, in-range) action to a control.
+    fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control;
+    /// Start an episode from its first frame.
+    fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>);
+    /// The observation of a frame.
+    fn observe(&self, frame: &SensorFrame) -> Vec<f32>;
+    /// Reward and termination after a step.
+    fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome;
+}
+
+/// How LiDAR ranges enter the observation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RangeScale {
+    /// Metres, as AutoVRL.
+    Raw,
+    /// Divided by the LiDAR's range_max, in [0, 1].
+    #[default]
+    Normalised,
+}
+
+/// Composition of the observation vector: the LiDAR ranges, then the enabled extras in this
+/// order (speed / 2 m/s, yaw rate / 2 rad/s, steering / limit, throttle).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ObsConfig {
+    /// How ranges are scaled.
+    pub ranges: RangeScale,
+    /// Forward speed from the IMU's velocity estimate.
+    pub speed: bool,
+    /// Yaw rate from the gyroscope.
+    pub yaw_rate: bool,
+    /// The steering angle in force.
+    pub steering: bool,
+    /// The throttle in force.
+    pub throttle: bool,
+}
+
+impl Default for ObsConfig {
+    /// Normalised ranges plus speed, yaw rate, steering and throttle.
+    fn default() -> Self {
+        Self { ranges: RangeScale::Normalised, speed: true, yaw_rate: true, steering: true, throttle: true }
+    }
+}
+
+impl ObsConfig {
+    /// AutoVRL's observation: the raw LiDAR ranges only.
+    pub fn paper() -> Self {
+        Self { ranges: RangeScale::Raw, speed: false, yaw_rate: false, steering: false, throttle: false }
+    }
+
+    fn n_extra(&self) -> usize {
+        [self.speed, self.yaw_rate, self.steering, self.throttle].iter().filter(|b| **b).count()
+    }
+
+    /// Needs of this composition.
+    pub fn needs(&self) -> SensorNeeds {
+        SensorNeeds { scan: true, imu: self.speed || self.yaw_rate, gps: false, image: false }
+    }
+
+    /// The space for `n_rays` rays of range `range_max_m`.
+    pub fn space(&self, n_rays: usize, range_max_m: f32) -> BoxSpace {
+        let hi = match self.ranges {
+            RangeScale::Raw => range_max_m,
+            RangeScale::Normalised => 1.0,
+        };
+        let mut s = BoxSpace::uniform(n_rays, 0.0, hi);
+        for (on, lo, hi) in [(self.speed, -5.0, 5.0), (self.yaw_rate, -5.0, 5.0), (self.steering, -1.0, 1.0), (self.throttle, 0.0, 1.0)] {
+            if on {
+                s.low.push(lo);
+                s.high.push(hi);
+            }
+        }
+        s
+    }
+
+    /// Build the observation (the frame's needs were checked by the env).
+    pub fn observe(&self, frame: &SensorFrame, steering_limit_rad: f64) -> Vec<f32> {
+        let mut out = Vec::new();
+        if let Some(scan) = &frame.scan {
+            out.reserve(scan.ranges.len() + self.n_extra());
+            match self.ranges {
+                RangeScale::Raw => out.extend(scan.ranges.iter().map(|r| r.clamp(0.0, scan.range_max))),
+                RangeScale::Normalised => out.extend(scan.ranges.iter().map(|r| (r / scan.range_max).clamp(0.0, 1.0))),
+            }
+        }
+        let imu = frame.imu.as_ref();
+        if self.speed {
+            out.push((imu.map(|i| i.lin_vel_b[0]).unwrap_or(0.0) / 2.0).clamp(-5.0, 5.0) as f32);
+        }
+        if self.yaw_rate {
+            out.push((imu.map(|i| i.ang_vel_b[2]).unwrap_or(0.0) / 2.0).clamp(-5.0, 5.0) as f32);
+        }
+        if self.steering {
+            out.push((frame.applied.steering_rad / steering_limit_rad).clamp(-1.0, 1.0) as f32);
+        }
+        if self.throttle {
+            out.push(frame.applied.throttle.clamp(0.0, 1.0) as f32);
+        }
+        out
+    }
+}
+
+/// Settings both LiDAR tasks share.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CommonConfig {
+    /// Observation composition.
+    pub observation: ObsConfig,
+    /// Action -> control mapping.
+    pub action_mapping: ActionMapping,
+    /// Number of LiDAR rays (must match the vehicle's LiDAR).
+    pub n_rays: usize,
+    /// LiDAR range_max, metres.
+    pub range_max_m: f32,
+}
+
+impl Default for CommonConfig {
+    fn default() -> Self {
+        Self { observation: ObsConfig::default(), action_mapping: ActionMapping::Scaled, n_rays: 100, range_max_m: 12.0 }
+    }
+}
+
+/// Termination shared by the tasks: too close (r_m below `threshold_m`), real contact,
+/// flipped, or out of the map. Returns the first that applies, in that order.
+pub fn common_termination(frame: &SensorFrame, map: Option<&MapInfo>, threshold_m: f32) -> Option<TerminationCause> {
+    if let Some(scan) = &frame.scan {
+        if scan.min_range() < threshold_m {
+            return Some(TerminationCause::TooClose);
+        }
+    }
+    if frame.contact == Some(true) {
+        return Some(TerminationCause::Contact);
+    }
+    if let Some(imu) = &frame.imu {
+        let [x, y, _, _] = imu.orientation_xyzw;
+        // World z of the body's z axis: 1 - 2 (x^2 + y^2).
+        if 1.0 - 2.0 * (x * x + y * y) < 0.5 {
+            return Some(TerminationCause::Flipped);
+        }
+    }
+    if let (Some(m), Some(g)) = (map, &frame.gps) {
+        let [px, py, _] = g.position_m;
+        if px.abs() as f32 > m.half_extent_m[0] + 0.5 || py.abs() as f32 > m.half_extent_m[1] + 0.5 {
+            return Some(TerminationCause::OutOfBounds);
+        }
+    }
+    None
+}
+
+pub(crate) fn map_control(mapping: ActionMapping, action: &[f32], limit: f64) -> Control {
+    let a0 = action.first().copied().unwrap_or(0.0) as f64;
+    let a1 = action.get(1).copied().unwrap_or(0.0) as f64;
+    mapping.control(a0, a1, limit)
+}

@@ -1,0 +1,158 @@
+//! Search / exploration (the paper's R_search): drive fast, keep a clearance band, avoid
+//! obstacles. Reports coverage of the free map and the distance travelled.
+
+use super::reward::{self, SearchReward, PENALTY};
+use super::{common_termination, map_control, CommonConfig, Outcome, Task};
+use crate::api::{BoxSpace, Control, MapInfo, SearchInfo, SensorFrame, SensorNeeds};
+use serde::{Deserialize, Serialize};
+
+/// Search settings.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SearchConfig {
+    /// Shared settings.
+    #[serde(flatten)]
+    pub common: CommonConfig,
+    /// Reward form.
+    pub reward: SearchReward,
+    /// AutoVRL's outdoor-50 extra -50 when T < 0.1.
+    pub slow_penalty: bool,
+    /// The episode ends when the minimum range falls below this, metres (AutoVRL: 0.6).
+    pub terminate_below_m: f32,
+    /// A free cell counts as covered once the vehicle came this close, metres.
+    pub coverage_radius_m: f32,
+}
+
+impl Default for SearchConfig {
+    fn default() -> Self {
+        Self {
+            common: CommonConfig::default(),
+            reward: SearchReward::AutovrlCode,
+            slow_penalty: false,
+            terminate_below_m: 0.6,
+            coverage_radius_m: 2.0,
+        }
+    }
+}
+
+/// The search task.
+pub struct Search {
+    cfg: SearchConfig,
+    steering_limit: f64,
+    grid: Grid,
+    covered: Vec<bool>,
+    n_covered: usize,
+    distance_m: f64,
+    last_xy: Option<[f64; 2]>,
+}
+
+#[derive(Default)]
+struct Grid {
+    origin: [f32; 2],
+    cell: f32,
+    nx: i32,
+    ny: i32,
+    index: Vec<i32>,
+    n_free: usize,
+}
+
+impl Search {
+    /// A search task.
+    pub fn new(cfg: SearchConfig, steering_limit_rad: f64) -> Self {
+        Self { cfg, steering_limit: steering_limit_rad, grid: Grid::default(), covered: vec![], n_covered: 0, distance_m: 0.0, last_xy: None }
+    }
+
+    fn cover(&mut self, x: f32, y: f32) {
+        let g = &self.grid;
+        if g.n_free == 0 {
+            return;
+        }
+        let r = self.cfg.coverage_radius_m;
+        let (i0, i1) = (((x - r - g.origin[0]) / g.cell).floor() as i32, ((x + r - g.origin[0]) / g.cell).ceil() as i32);
+        let (j0, j1) = (((y - r - g.origin[1]) / g.cell).floor() as i32, ((y + r - g.origin[1]) / g.cell).ceil() as i32);
+        for i in i0.max(0)..i1.min(g.nx) {
+            for j in j0.max(0)..j1.min(g.ny) {
+                let k = g.index[(i * g.ny + j) as usize];
+                if k < 0 || self.covered[k as usize] {
+                    continue;
+                }
+                let cx = g.origin[0] + (i as f32 + 0.5) * g.cell;
+                let cy = g.origin[1] + (j as f32 + 0.5) * g.cell;
+                if (cx - x).powi(2) + (cy - y).powi(2) <= r * r {
+                    self.covered[k as usize] = true;
+                    self.n_covered += 1;
+                }
+            }
+        }
+    }
+
+    fn info(&self) -> SearchInfo {
+        let coverage = if self.grid.n_free > 0 { self.n_covered as f64 / self.grid.n_free as f64 } else { 0.0 };
+        SearchInfo { coverage, distance_m: self.distance_m }
+    }
+}
+
+impl Task for Search {
+    fn needs(&self) -> SensorNeeds {
+        self.cfg.common.observation.needs()
+    }
+
+    fn observation_space(&self) -> BoxSpace {
+        self.cfg.common.observation.space(self.cfg.common.n_rays, self.cfg.common.range_max_m)
+    }
+
+    fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
+        map_control(self.cfg.common.action_mapping, action, steering_limit_rad)
+    }
+
+    fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
+        self.grid = Grid::default();
+        if let Some(m) = map {
+            let cell = m.cell_m.max(1e-3);
+            let origin = [-m.half_extent_m[0], -m.half_extent_m[1]];
+            let nx = (2.0 * m.half_extent_m[0] / cell).ceil() as i32;
+            let ny = (2.0 * m.half_extent_m[1] / cell).ceil() as i32;
+            let mut index = vec![-1; (nx * ny).max(0) as usize];
+            let mut n_free = 0;
+            for c in &m.free_cells {
+                let i = ((c[0] - origin[0]) / cell).floor() as i32;
+                let j = ((c[1] - origin[1]) / cell).floor() as i32;
+                if (0..nx).contains(&i) && (0..ny).contains(&j) {
+                    index[(i * ny + j) as usize] = n_free as i32;
+                    n_free += 1;
+                }
+            }
+            self.grid = Grid { origin, cell, nx, ny, index, n_free };
+        }
+        self.covered = vec![false; self.grid.n_free];
+        self.n_covered = 0;
+        self.distance_m = 0.0;
+        self.last_xy = frame.gps.as_ref().map(|g| [g.position_m[0], g.position_m[1]]);
+        if let Some([x, y]) = self.last_xy {
+            self.cover(x as f32, y as f32);
+        }
+    }
+
+    fn observe(&self, frame: &SensorFrame) -> Vec<f32> {
+        self.cfg.common.observation.observe(frame, self.steering_limit)
+    }
+
+    fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
+        let d = frame.scan.as_ref().map(|s| s.min_range()).unwrap_or(f32::INFINITY) as f64;
+        let c = frame.applied;
+        let mut terms = reward::search(self.cfg.reward, d.min(1e6), c.throttle, c.steering_rad, self.cfg.slow_penalty);
+        let termination = common_termination(frame, map, self.cfg.terminate_below_m);
+        if termination.is_some() && terms.collision == 0.0 {
+            terms.collision = PENALTY;
+        }
+        if let Some(g) = &frame.gps {
+            let xy = [g.position_m[0], g.position_m[1]];
+            if let Some(p) = self.last_xy {
+                self.distance_m += ((xy[0] - p[0]).powi(2) + (xy[1] - p[1]).powi(2)).sqrt();
+            }
+            self.last_xy = Some(xy);
+            self.cover(xy[0] as f32, xy[1] as f32);
+        }
+        Outcome { terms, termination, racing: None, search: Some(self.info()) }
+    }
+}

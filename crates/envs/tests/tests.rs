@@ -1,0 +1,315 @@
+//! Issue 3 acceptance tests.
+
+use agvrl_envs::api::{Control, MapInfo, SensorFrame, TerminationCause};
+use agvrl_envs::pendulum::{angle_normalize, Pendulum};
+use agvrl_envs::task::racing::RacingConfig;
+use agvrl_envs::task::{Racing, Task};
+use agvrl_envs::wrappers::TimeLimit;
+use agvrl_envs::*;
+
+fn quick_cfg() -> EnvConfig {
+    EnvConfig::default()
+}
+
+mod issue_3_contract {
+    use super::*;
+
+    #[test]
+    fn check_env_passes_on_every_registered_id() {
+        for id in ENV_IDS {
+            for cfg in [EnvConfig::default(), EnvConfig::paper(), EnvConfig::sim2real()] {
+                let name = format!("{id} {:?}", cfg.spawn);
+                let mut env = make_with(id, &EnvConfig { max_steps: 60, ..cfg }).unwrap();
+                check_env(env.as_mut(), 150).unwrap_or_else(|e| panic!("{name}: {e}"));
+            }
+        }
+    }
+
+    #[test]
+    fn unknown_id_lists_the_valid_ids() {
+        let e = make("racing-moon").err().unwrap().to_string();
+        assert!(e.contains("racing-moon") && e.contains("racing-oval") && e.contains("pendulum"), "{e}");
+    }
+
+    #[test]
+    fn nan_is_rejected_and_out_of_range_is_clamped() {
+        let mut a = make("racing-oval").unwrap();
+        let mut b = make("racing-oval").unwrap();
+        a.reset(Some(3)).unwrap();
+        b.reset(Some(3)).unwrap();
+        assert!(a.step(&[f32::NAN, 0.0]).is_err());
+        assert!(a.step(&[0.0]).is_err());
+        for _ in 0..20 {
+            let sa = a.step(&[5.0, -7.0]).unwrap();
+            let sb = b.step(&[1.0, -1.0]).unwrap();
+            assert_eq!(sa.obs, sb.obs);
+        }
+    }
+
+    #[test]
+    fn observation_presets_have_the_documented_shapes() {
+        let mut env = make_with("search-outdoor-20", &EnvConfig::paper()).unwrap();
+        let (obs, _) = env.reset(Some(1)).unwrap();
+        assert_eq!(obs.len(), 100);
+        assert!(obs.iter().any(|v| *v > 1.0), "paper preset keeps metres");
+        let mut env = make("search-outdoor-20").unwrap();
+        let (obs, _) = env.reset(Some(1)).unwrap();
+        assert_eq!(obs.len(), 104);
+        assert!(obs[..100].iter().all(|v| (0.0..=1.0).contains(v)));
+    }
+
+    #[test]
+    fn a_task_refuses_a_vehicle_without_the_sensors_it_needs() {
+        struct Blind;
+        impl Vehicle for Blind {
+            fn reset(&mut self, _: u64) -> Result<SensorFrame, EnvError> {
+                Ok(SensorFrame { scan: Some(Default::default()), ..SensorFrame::default() })
+            }
+            fn actuate(&mut self, _: Control) -> Result<(), EnvError> {
+                Ok(())
+            }
+            fn sense(&mut self) -> Result<SensorFrame, EnvError> {
+                self.reset(0)
+            }
+            fn control_period_s(&self) -> f64 {
+                1.0 / 30.0
+            }
+            fn steering_limit_rad(&self) -> f64 {
+                0.36
+            }
+        }
+        let mut env = TaskEnv::new(Blind, Racing::new(RacingConfig::default(), 0.36));
+        let e = env.reset(Some(0)).err().unwrap().to_string();
+        assert!(e.contains("IMU"), "{e}");
+    }
+}
+
+mod issue_3_episodes {
+    use super::*;
+
+    #[test]
+    fn driving_into_a_wall_terminates_and_is_not_truncated() {
+        let cfg = EnvConfig { spawn: SpawnMode::Fixed, ..quick_cfg() };
+        let mut env = make_with("racing-oval", &cfg).unwrap();
+        env.reset(Some(0)).unwrap();
+        // Straight down the +x straight: the curve's outer wall stops it.
+        for t in 0..1000 {
+            let st = env.step(&[1.0, 0.0]).unwrap();
+            if st.done() {
+                assert!(st.terminated && !st.truncated, "step {t}");
+                assert!(matches!(st.info.termination, Some(TerminationCause::TooClose | TerminationCause::Contact)));
+                assert_eq!(st.info.reward_terms.collision, -50.0);
+                assert!(env.step(&[0.0, 0.0]).is_err(), "stepping a terminated episode needs a reset");
+                return;
+            }
+        }
+        panic!("never terminated");
+    }
+
+    #[test]
+    fn the_time_limit_truncates_without_terminating() {
+        let mut env = make_with("search-outdoor-20", &EnvConfig { max_steps: 5, ..quick_cfg() }).unwrap();
+        env.reset(Some(2)).unwrap();
+        for t in 1..=5 {
+            // Scaled mapping: a0 = -1 is zero throttle; the car stays put.
+            let st = env.step(&[-1.0, 0.0]).unwrap();
+            assert_eq!(st.truncated, t == 5);
+            assert!(!st.terminated);
+        }
+        let mut p = make("pendulum").unwrap();
+        p.reset(Some(0)).unwrap();
+        for t in 1..=200 {
+            let st = p.step(&[0.0]).unwrap();
+            assert_eq!((st.truncated, st.terminated), (t == 200, false));
+        }
+    }
+
+    #[test]
+    fn pendulum_matches_gymnasium_closed_form() {
+        let mut p = Pendulum::new();
+        for (th, thd, u) in [(0.3f64, -0.5f64, 1.5f64), (3.0, 7.9, -2.0), (-2.0, 0.0, 5.0)] {
+            p.set_state(th, thd);
+            let st = p.step(&[u as f32]).unwrap();
+            let uc = u.clamp(-2.0, 2.0);
+            let nthd = (thd + (3.0 * 10.0 / 2.0 * th.sin() + 3.0 * uc) * 0.05).clamp(-8.0, 8.0);
+            let nth = th + nthd * 0.05;
+            let cost = angle_normalize(th).powi(2) + 0.1 * thd * thd + 0.001 * uc * uc;
+            assert!((st.reward + cost).abs() < 1e-12);
+            assert_eq!(p.state(), (nth, nthd));
+            assert_eq!(st.obs, vec![nth.cos() as f32, nth.sin() as f32, nthd as f32]);
+        }
+    }
+
+    #[test]
+    fn search_reports_coverage_and_distance() {
+        let cfg = EnvConfig { spawn: SpawnMode::Fixed, ..quick_cfg() };
+        let mut env = make_with("search-outdoor-20", &cfg).unwrap();
+        env.reset(Some(0)).unwrap();
+        let mut last = None;
+        for _ in 0..150 {
+            let st = env.step(&[0.2, 0.3]).unwrap();
+            last = st.info.search.clone();
+            if st.done() {
+                break;
+            }
+        }
+        let s = last.unwrap();
+        assert!(s.distance_m > 1.0 && s.coverage > 0.01 && s.coverage < 0.5, "{s:?}");
+    }
+
+    /// Pure pursuit along the oval's centre line, from the GPS: a known-good driver.
+    fn pursue(frame: &SensorFrame, map: &MapInfo) -> f32 {
+        let t = map.track.unwrap();
+        let g = frame.gps.as_ref().unwrap();
+        let (x, y, yaw) = (g.position_m[0] as f32, g.position_m[1] as f32, g.rpy_rad[2] as f32);
+        let s = t.centreline_s(x, y);
+        let ([tx, ty], _) = t.centreline_at(s + 1.2);
+        let alpha = (ty - y).atan2(tx - x) - yaw;
+        let alpha = alpha.sin().atan2(alpha.cos());
+        let delta = (2.0 * 0.33 * alpha.sin() / 1.2).atan();
+        (delta / 0.36).clamp(-1.0, 1.0)
+    }
+
+    #[test]
+    fn racing_counts_laps_along_the_centre_line() {
+        let sim = agvrl_sim::SimConfig { scene: agvrl_sim::SceneSource::Builtin("oval".into()), ..Default::default() };
+        let vehicle = SimVehicle::new(sim, SpawnMode::Fixed, Randomisation::default()).unwrap();
+        let mut env = TaskEnv::new(vehicle, Racing::new(RacingConfig::default(), 0.36));
+        env.reset(Some(0)).unwrap();
+        let mut info = None;
+        for _ in 0..1500 {
+            let steer = pursue(env.last_frame().unwrap(), env.vehicle().map().unwrap());
+            let st = env.step(&[0.2, steer]).unwrap();
+            assert!(!st.terminated, "a centre-line driver never gets within 0.8 m: {:?}", st.info.termination);
+            info = st.info.racing.clone();
+            if info.as_ref().unwrap().laps >= 1 {
+                break;
+            }
+        }
+        let r = info.unwrap();
+        assert_eq!(r.laps, 1, "{r:?}");
+        let lap_s = r.last_lap_s.unwrap();
+        assert_eq!(r.best_lap_s, Some(lap_s));
+        // 53.1 m at no more than the top speed of 1.79 m/s.
+        assert!(lap_s > 53.1 / 1.8 && lap_s < 120.0, "lap {lap_s} s");
+    }
+}
+
+mod issue_3_vec_and_noise {
+    use super::*;
+
+    fn actions(n: usize, t: usize) -> Vec<f32> {
+        (0..n * 2).map(|k| (((t * 7 + k * 13) % 17) as f32 / 8.0) - 1.0).collect()
+    }
+
+    #[test]
+    fn vec_env_equals_serial_stepping_for_any_thread_count() {
+        let cfg = EnvConfig { max_steps: 40, ..quick_cfg() };
+        let mk = || (0..3).map(|_| make_with("search-urban-20", &cfg).unwrap()).collect::<Vec<_>>();
+        let mut v1 = VecEnv::new(mk(), 1).unwrap();
+        let mut v2 = VecEnv::new(mk(), 2).unwrap();
+        let mut serial = mk();
+        let (o1, _) = v1.reset(Some(10)).unwrap();
+        let (o2, _) = v2.reset(Some(10)).unwrap();
+        let mut os: Vec<f32> = Vec::new();
+        for (i, e) in serial.iter_mut().enumerate() {
+            os.extend(e.reset(Some(10 + i as u64)).unwrap().0);
+        }
+        assert_eq!(o1, o2);
+        assert_eq!(o1, os);
+        let mut saw_done = false;
+        for t in 0..100 {
+            let a = actions(3, t);
+            let s1 = v1.step(&a).unwrap();
+            let s2 = v2.step(&a).unwrap();
+            assert_eq!(s1.obs, s2.obs);
+            assert_eq!(s1.rewards, s2.rewards);
+            for (i, e) in serial.iter_mut().enumerate() {
+                let st = e.step(&a[i * 2..i * 2 + 2]).unwrap();
+                assert_eq!(st.reward, s1.rewards[i]);
+                if st.done() {
+                    saw_done = true;
+                    assert_eq!(s1.infos[i].final_obs.as_ref(), Some(&st.obs), "final_obs keeps the last observation");
+                    assert!(s1.infos[i].episode.is_some());
+                    let (o, _) = e.reset(None).unwrap();
+                    assert_eq!(&s1.obs[i * 104..(i + 1) * 104], &o[..]);
+                } else {
+                    assert_eq!(&s1.obs[i * 104..(i + 1) * 104], &st.obs[..]);
+                }
+            }
+        }
+        assert!(saw_done, "the test must cross an auto-reset");
+    }
+
+    #[test]
+    fn noise_is_seeded_and_changes_observations() {
+        let run = |cfg: &EnvConfig| {
+            let mut env = make_with("search-outdoor-20", cfg).unwrap();
+            let mut out = vec![env.reset(Some(4)).unwrap().0];
+            for t in 0..30 {
+                out.push(env.step(&actions(1, t)).unwrap().obs);
+            }
+            out
+        };
+        let clean = run(&EnvConfig::default());
+        let noisy = run(&EnvConfig::sim2real());
+        assert_eq!(noisy, run(&EnvConfig::sim2real()), "same seed, same noise");
+        assert_ne!(clean, noisy);
+    }
+
+    #[test]
+    fn latency_delays_commands_by_k_periods() {
+        let base = EnvConfig { spawn: SpawnMode::Fixed, ..quick_cfg() };
+        let late = EnvConfig { noise: wrappers::NoiseConfig { latency_steps: 3, ..Default::default() }, ..base.clone() };
+        let mut a = make_with("search-outdoor-20", &base).unwrap();
+        let mut b = make_with("search-outdoor-20", &late).unwrap();
+        a.reset(Some(0)).unwrap();
+        b.reset(Some(0)).unwrap();
+        // Without latency: three idle periods, then the commands. With 3 periods of latency:
+        // the commands from the start. Both cars must drive the same trajectory.
+        let cmd = |k: usize| [1.0f32, if k < 20 { 0.5 } else { -0.5 }];
+        let mut moved = false;
+        for t in 0..40 {
+            let sa = a.step(&if t < 3 { [-1.0, 0.0] } else { cmd(t - 3) }).unwrap();
+            let sb = b.step(&cmd(t)).unwrap();
+            assert_eq!(sa.obs, sb.obs, "step {t}");
+            moved |= sb.obs[100] > 0.1;
+        }
+        assert!(moved);
+    }
+
+    #[test]
+    fn randomisation_draws_parameters_per_episode_from_the_seed() {
+        let sim = || agvrl_sim::SimConfig { scene: agvrl_sim::SceneSource::Builtin("oval".into()), ..Default::default() };
+        let mut v = SimVehicle::new(sim(), SpawnMode::Random, Randomisation::sim2real()).unwrap();
+        v.reset(1).unwrap();
+        let p1 = v.sim().params();
+        v.reset(2).unwrap();
+        let p2 = v.sim().params();
+        v.reset(1).unwrap();
+        assert_eq!(v.sim().params(), p1);
+        assert_ne!(p1, p2);
+        let nominal = v.sim().nominal_params();
+        assert!((p1.drive.c_t / nominal.drive.c_t - 1.0).abs() <= 0.1);
+        assert!(p1.steering_offset_rad.abs() <= 0.02);
+    }
+
+    #[test]
+    fn time_limit_passes_termination_through() {
+        let cfg = EnvConfig { spawn: SpawnMode::Fixed, ..quick_cfg() };
+        let inner = {
+            let sim = agvrl_sim::SimConfig { scene: agvrl_sim::SceneSource::Builtin("oval".into()), ..Default::default() };
+            TaskEnv::new(SimVehicle::new(sim, cfg.spawn, cfg.randomisation).unwrap(), Racing::new(RacingConfig::default(), 0.36))
+        };
+        let mut env = TimeLimit::new(inner, 100_000);
+        env.reset(Some(0)).unwrap();
+        let _ = env.inner().task().observation_space();
+        loop {
+            let st = env.step(&[1.0, 0.0]).unwrap();
+            if st.done() {
+                assert!(st.terminated && !st.truncated);
+                break;
+            }
+        }
+    }
+}
