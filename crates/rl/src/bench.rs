@@ -115,31 +115,56 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
     let reps = if quick { 3 } else { 7 };
     let mut lines = vec![format!("backend={} reps={reps}", backend.name())];
 
-    // Plain 256^3 product.
+    // Plain 256^3 products: one thread, then one independent product per thread on two.
     let mut rng = Rng::new(1);
-    let m = |rng: &mut Rng| {
-        Tensor::<2>::from_data(TensorData::new(rng.normals(256 * 256), [256, 256]), &device)
-    };
-    let (x, y) = (m(&mut rng), m(&mut rng));
     let inner = 50;
-    let mut gf = vec![];
-    for r in 0..=reps {
-        let t = Instant::now();
-        let mut acc = 0.0f32;
-        for _ in 0..inner {
-            acc +=
-                crate::nets::to_vec(x.clone().matmul(y.clone()).narrow(0, 0, 1).narrow(1, 0, 1))?
-                    [0];
+    let sgemm = |threads: usize, rng: &mut Rng| -> Result<f64> {
+        let mats: Vec<(Tensor<2>, Tensor<2>)> = (0..threads)
+            .map(|_| {
+                let mut m = || {
+                    Tensor::<2>::from_data(
+                        TensorData::new(rng.normals(256 * 256), [256, 256]),
+                        &device,
+                    )
+                };
+                (m(), m())
+            })
+            .collect();
+        let run = |(x, y): &(Tensor<2>, Tensor<2>)| -> Result<f32> {
+            let mut acc = 0.0f32;
+            for _ in 0..inner {
+                acc += crate::nets::to_vec(
+                    x.clone().matmul(y.clone()).narrow(0, 0, 1).narrow(1, 0, 1),
+                )?[0];
+            }
+            Ok(acc)
+        };
+        let mut gf = vec![];
+        for r in 0..=reps {
+            let t = Instant::now();
+            let accs: Vec<Result<f32>> = std::thread::scope(|s| {
+                let hs: Vec<_> = mats.iter().map(|m| s.spawn(move || run(m))).collect();
+                hs.into_iter()
+                    .map(|h| h.join().unwrap_or(Ok(0.0)))
+                    .collect()
+            });
+            let s = t.elapsed().as_secs_f64();
+            for a in accs {
+                std::hint::black_box(a?);
+            }
+            if r > 0 {
+                gf.push(2.0 * 256f64.powi(3) * (inner * threads) as f64 / s / 1e9);
+            }
         }
-        let s = t.elapsed().as_secs_f64();
-        std::hint::black_box(acc);
-        if r > 0 {
-            gf.push(2.0 * 256f64.powi(3) * inner as f64 / s / 1e9);
-        }
-    }
+        Ok(median(gf))
+    };
     lines.push(format!(
-        "sgemm_gflops={:.1} size=256x256x256 reps={reps}",
-        median(gf)
+        "sgemm_gflops={:.1} threads=1 size=256x256x256 reps={reps}",
+        sgemm(1, &mut rng)?
+    ));
+    lines.push(format!(
+        "sgemm_gflops_2threads={:.1} reps={reps}",
+        sgemm(2, &mut rng)?
     ));
 
     // SAC updates (one update per env step, buffer pre-filled), on 1 and 2 threads.

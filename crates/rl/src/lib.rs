@@ -10,16 +10,24 @@
 //! learner --save_checkpoint--> checkpoint --load_checkpoint--> learner (resume)
 //! ```
 //!
+//! Entry points: [`Sac::new`] / [`Ppo::new`] (config, `VecEnv`, device, seed), `learn(steps,
+//! callback)` with [`Progress`] and [`Control`], `save_policy`, `save_checkpoint` /
+//! `load_checkpoint`, [`Policy::load`] + [`Policy::act`], [`evaluate`], [`bench::run`],
+//! [`learning::pendulum_sac`] / [`learning::pendulum_ppo`].
+//!
 //! Invariants:
 //! - The learners know nothing of vehicles: observations and actions are flat `f32` rows; the
 //!   action space's box is honoured (SAC maps `[-1, 1]` onto it, PPO clips to it).
 //! - Termination stops bootstrapping, truncation bootstraps from `Info::final_obs`.
 //! - All randomness comes from one seeded [`rng::Rng`] per learner: the same seed on one thread
-//!   gives the same run, bit for bit.
+//!   gives the same run, bit for bit (also for a fixed `Sac::set_threads` count).
 //! - The Burn `Device` is chosen by the caller ([`device`]); weights are held on the host and
 //!   mirrored to the device, so a policy file loads on any backend without autodiff.
 //! - Files (policy, checkpoint) are written atomically and carry a CRC-32; a truncated,
 //!   corrupted or mismatching file is an error, never a silently wrong policy.
+//!
+//! Features: none; both CPU backends (flex, the default, and ndarray) are always built and
+//! picked at run time with [`CpuBackend`].
 //!
 //! Limitations: no gSDE, no discrete actions, no learning-rate schedules; envs restart their
 //! episodes on resume (the `Env` trait has no state snapshot).

@@ -1,4 +1,4 @@
-//! Speed figures: `cargo run --release -p agvrl-rl --example bench -- [quick] [flex|ndarray]`.
+//! Speed figures: `cargo run --release -p agvrl-rl --example rl_bench -- [quick] [flex|ndarray]`.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
