@@ -1,1 +1,119 @@
+//! End-to-end tests of the `agvrl` binary.
 
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn agvrl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_agvrl")).args(args).output().expect("run agvrl")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("agvrl-e2e-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn tiny_config(dir: &Path) -> PathBuf {
+    let p = dir.join("tiny.toml");
+    std::fs::write(
+        &p,
+        "env = \"racing-oval\"\nalgo = \"ppo\"\nsteps = 512\nseed = 1\nn_envs = 2\nthreads = 1\neval_episodes = 1\n\
+         [env_config]\nmax_steps = 100\n[ppo]\nn_steps = 128\nbatch_size = 64\nn_epochs = 2\n",
+    )
+    .unwrap();
+    p
+}
+
+mod issue_5_cli {
+    use super::*;
+
+    #[test]
+    fn train_writes_a_complete_run_directory_and_eval_reads_it() {
+        let d = tmp("train");
+        let run = d.join("run");
+        let cfg = tiny_config(&d);
+        let o = agvrl(&["train", "--config", cfg.to_str().unwrap(), "--out", run.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        for f in ["config.toml", "metrics.csv", "policy.agvrl", "checkpoint.ckpt", "eval.txt"] {
+            let p = run.join(f);
+            assert!(p.metadata().map(|m| m.len() > 0).unwrap_or(false), "missing {f}");
+        }
+        assert!(!PathBuf::from(format!("{}.partial", run.display())).exists());
+        let csv = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
+        assert!(csv.lines().count() >= 3, "{csv}");
+        let o = agvrl(&["eval", "--run", run.to_str().unwrap(), "--episodes", "2"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let out = stdout(&o);
+        for key in ["mean_return=", "episodes=2", "collisions=", "laps=", "best_lap_s="] {
+            assert!(out.contains(key), "{key} missing in:\n{out}");
+        }
+        // A truncated policy file is refused with a one-line error.
+        let pf = run.join("policy.agvrl");
+        let bytes = std::fs::read(&pf).unwrap();
+        std::fs::write(&pf, &bytes[..bytes.len() / 2]).unwrap();
+        let o = agvrl(&["eval", "--run", run.to_str().unwrap()]);
+        assert!(!o.status.success());
+        let err = stderr(&o);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains("policy.agvrl"), "{err}");
+    }
+
+    #[test]
+    fn bad_inputs_fail_with_a_one_line_error() {
+        let d = tmp("bad");
+        let bad = d.join("bad.toml");
+        std::fs::write(&bad, "env = \"racing-oval\"\nlearning_rat = 0.1\n").unwrap();
+        let o = agvrl(&["train", "--config", bad.to_str().unwrap(), "--out", d.join("r").to_str().unwrap()]);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains("learning_rat"), "{}", stderr(&o));
+        assert_eq!(stderr(&o).trim().lines().count(), 1, "{}", stderr(&o));
+        let o = agvrl(&["train", "--env", "racing-moon", "--out", d.join("r2").to_str().unwrap()]);
+        assert!(!o.status.success());
+        let e = stderr(&o);
+        assert!(e.contains("racing-moon") && e.contains("racing-oval"), "{e}");
+        let o = agvrl(&["probe", "--env", "racing-oval", "--pose", "1,2"]);
+        assert!(!o.status.success() && stderr(&o).contains("x,y,yaw"));
+    }
+
+    #[test]
+    fn probe_prints_json_whose_ranges_match_the_scene() {
+        let o = agvrl(&["probe", "--env", "racing-oval", "--pose", "4,0,-1.5707964"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("valid JSON");
+        let ranges = v["scan"]["ranges"].as_array().unwrap();
+        assert_eq!(ranges.len(), 100);
+        // On the straight, 1 m from both walls: the +-45 degree rays read sqrt(2) m.
+        for r in [&ranges[0], &ranges[99]] {
+            let r = r.as_f64().unwrap();
+            assert!((r - std::f64::consts::SQRT_2).abs() < 0.01, "{r}");
+        }
+        assert!(v["gps"]["position_m"][0].as_f64().unwrap() - 4.0 < 1e-6);
+    }
+
+    #[test]
+    fn envs_lists_every_id() {
+        let o = agvrl(&["envs"]);
+        assert!(o.status.success());
+        let out = stdout(&o);
+        for id in ["search-outdoor-20", "search-outdoor-50", "search-urban-20", "search-urban-50", "racing-oval", "pendulum"] {
+            assert!(out.contains(id), "{out}");
+        }
+    }
+
+    #[test]
+    fn bench_quick_prints_key_value_lines() {
+        let o = agvrl(&["bench", "--quick", "--only", "sim"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let out = stdout(&o);
+        assert!(out.lines().any(|l| l.starts_with("scene=oval mode=raycast") && l.contains("sim_steps_per_s=")), "{out}");
+    }
+}

@@ -2,6 +2,7 @@
 //! id (random actions, resets included), the task layer's overhead over the bare simulator,
 //! and VecEnv throughput on 1 and 2 threads.
 
+use crate::registry::scene_of;
 use crate::{make, Env, VecEnv, ENV_IDS};
 use agvrl_sim::bench::{median_s, wander};
 use agvrl_sim::{SceneSource, Sim, SimConfig};
@@ -91,15 +92,4 @@ pub fn run(quick: bool) -> Vec<String> {
         }
     }
     out
-}
-
-fn scene_of(id: &str) -> Option<&'static str> {
-    Some(match id {
-        "search-outdoor-20" => "outdoor-20",
-        "search-outdoor-50" => "outdoor-50",
-        "search-urban-20" => "urban-20",
-        "search-urban-50" => "urban-50",
-        "racing-oval" => "oval",
-        _ => return None,
-    })
 }

@@ -85,7 +85,8 @@ impl EnvConfig {
     }
 }
 
-fn scene_of(id: &str) -> Option<&'static str> {
+/// The built-in scene behind a vehicle env id.
+pub fn scene_of(id: &str) -> Option<&'static str> {
     Some(match id {
         "search-outdoor-20" => "outdoor-20",
         "search-outdoor-50" => "outdoor-50",

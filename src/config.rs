@@ -1,0 +1,87 @@
+//! The run configuration: one TOML file says which env, which algorithm and which settings.
+
+use agvrl_envs::EnvConfig;
+use agvrl_rl::{PpoConfig, SacConfig};
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The default job, also embedded so the binary works outside a checkout.
+pub const DEFAULT_TOML: &str = include_str!("../configs/default.toml");
+
+/// A training run.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunConfig {
+    /// Env id.
+    pub env: String,
+    /// `ppo` or `sac`.
+    pub algo: String,
+    /// Environment steps to train.
+    pub steps: u64,
+    /// Seed of everything.
+    pub seed: u64,
+    /// Parallel envs.
+    pub n_envs: usize,
+    /// Threads stepping the envs.
+    pub threads: usize,
+    /// Deterministic episodes evaluated after training.
+    pub eval_episodes: usize,
+    /// Env settings.
+    pub env_config: EnvConfig,
+    /// PPO settings (used when algo = "ppo").
+    pub ppo: PpoConfig,
+    /// SAC settings (used when algo = "sac").
+    pub sac: SacConfig,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            env: "racing-oval".into(),
+            algo: "ppo".into(),
+            steps: 100_000,
+            seed: 0,
+            n_envs: 8,
+            threads: 2,
+            eval_episodes: 3,
+            env_config: EnvConfig::default(),
+            ppo: PpoConfig::default(),
+            sac: SacConfig::default(),
+        }
+    }
+}
+
+impl RunConfig {
+    /// Parse a run TOML; `origin` names it in errors.
+    pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
+        let cfg: RunConfig = toml::from_str(text).map_err(|e| anyhow::anyhow!("{origin}: {}", e.message().trim()))?;
+        cfg.validate().with_context(|| origin.to_string())?;
+        Ok(cfg)
+    }
+
+    /// Load a run TOML file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+        Self::from_toml(&text, &path.display().to_string())
+    }
+
+    /// Check values a typo would break.
+    pub fn validate(&self) -> Result<()> {
+        if !agvrl_envs::ENV_IDS.contains(&self.env.as_str()) {
+            bail!("unknown env id '{}'; valid ids: {}", self.env, agvrl_envs::ENV_IDS.join(", "));
+        }
+        if self.algo != "ppo" && self.algo != "sac" {
+            bail!("unknown algo '{}'; use ppo or sac", self.algo);
+        }
+        if self.n_envs == 0 || self.threads == 0 || self.steps == 0 {
+            bail!("steps, n_envs and threads must be at least 1");
+        }
+        Ok(())
+    }
+
+    /// The fully resolved TOML (every default written out).
+    pub fn to_toml(&self) -> Result<String> {
+        Ok(toml::to_string_pretty(self)?)
+    }
+}

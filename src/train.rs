@@ -1,0 +1,239 @@
+//! `agvrl train` and `agvrl eval`.
+
+use crate::config::{RunConfig, DEFAULT_TOML};
+use crate::runs::{stamp, write_atomic, RunDir};
+use agvrl_envs::{make_with, Env, EnvConfig, VecEnv};
+use agvrl_rl::{Control, Policy, Ppo, Progress, Sac};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Name of the policy file in a run directory.
+pub const POLICY_FILE: &str = "policy.agvrl";
+
+#[derive(Args, Default)]
+pub struct TrainArgs {
+    /// Environment id (see `agvrl envs`).
+    #[arg(long)]
+    pub env: Option<String>,
+    /// Algorithm: ppo or sac.
+    #[arg(long)]
+    pub algo: Option<String>,
+    /// Environment steps to train.
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Seed of the whole run.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Number of parallel environments.
+    #[arg(long)]
+    pub n_envs: Option<usize>,
+    /// Run configuration TOML (default: configs/default.toml).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Run directory to create (default: runs/<date-time>-<env>-<algo>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Args)]
+pub struct EvalArgs {
+    /// A run directory written by `agvrl train`.
+    #[arg(long)]
+    pub run: PathBuf,
+    /// Number of deterministic episodes.
+    #[arg(long, default_value_t = 5)]
+    pub episodes: usize,
+}
+
+struct Row {
+    step: u64,
+    episodes: u64,
+    mean_return: Option<f64>,
+    policy_loss: f64,
+    value_loss: f64,
+    entropy: f64,
+    steps_per_s: f64,
+}
+
+fn resolve(a: &TrainArgs) -> Result<RunConfig> {
+    let mut cfg = match &a.config {
+        Some(p) => RunConfig::load(p)?,
+        None => RunConfig::from_toml(DEFAULT_TOML, "configs/default.toml (built in)")?,
+    };
+    if let Some(v) = &a.env {
+        cfg.env = v.clone();
+    }
+    if let Some(v) = &a.algo {
+        cfg.algo = v.clone();
+    }
+    if let Some(v) = a.steps {
+        cfg.steps = v;
+    }
+    if let Some(v) = a.seed {
+        cfg.seed = v;
+    }
+    if let Some(v) = a.n_envs {
+        cfg.n_envs = v;
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+fn vec_env(cfg: &RunConfig) -> Result<VecEnv<Box<dyn Env>>> {
+    let envs = (0..cfg.n_envs).map(|_| make_with(&cfg.env, &cfg.env_config)).collect::<Result<Vec<_>, _>>()?;
+    Ok(VecEnv::new(envs, cfg.threads)?)
+}
+
+pub fn train(a: TrainArgs) -> Result<()> {
+    let cfg = resolve(&a)?;
+    let out = a.out.clone().unwrap_or_else(|| PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)));
+    let run = RunDir::create(out)?;
+    write_atomic(&run.file("config.toml"), cfg.to_toml()?.as_bytes())?;
+    let device = agvrl_rl::default_device();
+    let bar = ProgressBar::new(cfg.steps);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    eprintln!("training {} on {} for {} steps (seed {}, {} envs)", cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs);
+    let t0 = Instant::now();
+    let mut rows: Vec<Row> = Vec::new();
+    let mut on_progress = |p: &Progress<'_>| {
+        let done = p.steps.min(cfg.steps);
+        bar.set_position(done);
+        let mean = p.mean_return();
+        if let Some(m) = mean {
+            bar.set_message(format!("mean return {m:.1}"));
+        }
+        rows.push(Row {
+            step: p.steps,
+            episodes: p.episodes,
+            mean_return: mean,
+            policy_loss: p.losses.policy,
+            value_loss: p.losses.value,
+            entropy: p.losses.entropy,
+            steps_per_s: p.steps as f64 / t0.elapsed().as_secs_f64().max(1e-9),
+        });
+        Control::Continue
+    };
+    let chunks = 10u64;
+    let per_chunk = cfg.steps.div_ceil(chunks);
+    let policy_path = run.file(POLICY_FILE);
+    if cfg.algo == "ppo" {
+        let mut learner = Ppo::new(cfg.ppo.clone(), vec_env(&cfg)?, &device, cfg.seed)?;
+        while learner.num_timesteps() < cfg.steps {
+            learner.learn(per_chunk.min(cfg.steps - learner.num_timesteps()), &mut on_progress)?;
+            learner.save_checkpoint(&run.file("checkpoint.ckpt"))?;
+        }
+        learner.save_policy(&policy_path)?;
+    } else {
+        let mut learner = Sac::new(cfg.sac.clone(), vec_env(&cfg)?, &device, cfg.seed)?;
+        while learner.num_timesteps() < cfg.steps {
+            learner.learn(per_chunk.min(cfg.steps - learner.num_timesteps()), &mut on_progress)?;
+            learner.save_checkpoint(&run.file("checkpoint.ckpt"))?;
+        }
+        learner.save_policy(&policy_path)?;
+    }
+    bar.finish_and_clear();
+    let train_s = t0.elapsed().as_secs_f64();
+    let mut csv = String::from("step,episodes,mean_return,policy_loss,value_loss,entropy,steps_per_s\n");
+    for r in &rows {
+        let mean = r.mean_return.map(|m| format!("{m:.4}")).unwrap_or_default();
+        let _ = writeln!(csv, "{},{},{mean},{:.6},{:.6},{:.6},{:.1}", r.step, r.episodes, r.policy_loss, r.value_loss, r.entropy, r.steps_per_s);
+    }
+    write_atomic(&run.file("metrics.csv"), csv.as_bytes())?;
+    let mut policy = Policy::load(&policy_path)?;
+    let summary = evaluate(&mut policy, &cfg.env, &cfg.env_config, cfg.eval_episodes, cfg.seed + 1_000_000)?;
+    let mut text = format!("train_s={train_s:.1}\n");
+    for l in summary.lines() {
+        let _ = writeln!(text, "{l}");
+    }
+    write_atomic(&run.file("eval.txt"), text.as_bytes())?;
+    let dir = run.finish()?;
+    println!("run_dir={}", dir.display());
+    print!("{text}");
+    Ok(())
+}
+
+/// What deterministic evaluation found.
+pub struct Summary {
+    pub episodes: usize,
+    pub mean_return: f64,
+    pub collisions: usize,
+    pub laps: u32,
+    pub best_lap_s: Option<f64>,
+    pub coverage: Option<f64>,
+    pub racing: bool,
+}
+
+impl Summary {
+    pub fn lines(&self) -> Vec<String> {
+        let mut v = vec![
+            format!("mean_return={:.2}", self.mean_return),
+            format!("episodes={}", self.episodes),
+            format!("collisions={}", self.collisions),
+        ];
+        if let Some(c) = self.coverage {
+            v.push(format!("coverage={c:.3}"));
+        }
+        if self.racing {
+            v.push(format!("laps={}", self.laps));
+            v.push(format!("best_lap_s={}", self.best_lap_s.map(|b| format!("{b:.2}")).unwrap_or_else(|| "none".into())));
+        }
+        v
+    }
+}
+
+pub fn evaluate(policy: &mut Policy, env_id: &str, env_cfg: &EnvConfig, episodes: usize, seed: u64) -> Result<Summary> {
+    let mut env = make_with(env_id, env_cfg)?;
+    policy.check_spaces(&env.observation_space(), &env.action_space()).context("the policy does not fit this env")?;
+    let mut s = Summary { episodes, mean_return: 0.0, collisions: 0, laps: 0, best_lap_s: None, coverage: None, racing: false };
+    let mut cov_sum = 0.0;
+    for k in 0..episodes {
+        let (mut obs, _) = env.reset(Some(seed + k as u64))?;
+        loop {
+            let act = policy.act(&obs, true)?;
+            let st = env.step(&act)?;
+            s.mean_return += st.reward;
+            if st.done() {
+                if st.terminated {
+                    s.collisions += 1;
+                }
+                if let Some(r) = &st.info.racing {
+                    s.racing = true;
+                    s.laps += r.laps;
+                    if let Some(b) = r.best_lap_s {
+                        s.best_lap_s = Some(s.best_lap_s.map_or(b, |x: f64| x.min(b)));
+                    }
+                }
+                if let Some(c) = &st.info.search {
+                    cov_sum += c.coverage;
+                }
+                break;
+            }
+            obs = st.obs;
+        }
+    }
+    s.mean_return /= episodes.max(1) as f64;
+    if env_id.starts_with("search") {
+        s.coverage = Some(cov_sum / episodes.max(1) as f64);
+    }
+    Ok(s)
+}
+
+pub fn eval(a: EvalArgs) -> Result<()> {
+    if a.episodes == 0 {
+        bail!("--episodes must be at least 1");
+    }
+    let cfg = RunConfig::load(&a.run.join("config.toml")).with_context(|| format!("{} is not a run directory", a.run.display()))?;
+    let mut policy = Policy::load(&a.run.join(POLICY_FILE)).with_context(|| format!("loading {}", a.run.join(POLICY_FILE).display()))?;
+    let s = evaluate(&mut policy, &cfg.env, &cfg.env_config, a.episodes, cfg.seed + 2_000_000)?;
+    for l in s.lines() {
+        println!("{l}");
+    }
+    Ok(())
+}
