@@ -2,7 +2,7 @@
 
 use agvrl_envs::EnvConfig;
 use agvrl_rl::{PpoConfig, SacConfig};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -69,7 +69,11 @@ impl RunConfig {
     /// Check values a typo would break.
     pub fn validate(&self) -> Result<()> {
         if !agvrl_envs::ENV_IDS.contains(&self.env.as_str()) {
-            bail!("unknown env id '{}'; valid ids: {}", self.env, agvrl_envs::ENV_IDS.join(", "));
+            bail!(
+                "unknown env id '{}'; valid ids: {}",
+                self.env,
+                agvrl_envs::ENV_IDS.join(", ")
+            );
         }
         if self.algo != "ppo" && self.algo != "sac" {
             bail!("unknown algo '{}'; use ppo or sac", self.algo);

@@ -77,9 +77,15 @@ fn envs() -> Result<()> {
 fn bench(quick: bool, learning: bool, only: Option<&str>) -> Result<()> {
     let want = |part: &str| only.is_none_or(|o| o == part);
     if let Some(o) = only {
-        anyhow::ensure!(["sim", "envs", "rl"].contains(&o), "--only takes sim, envs or rl, not '{o}'");
+        anyhow::ensure!(
+            ["sim", "envs", "rl"].contains(&o),
+            "--only takes sim, envs or rl, not '{o}'"
+        );
     }
-    println!("build=release quick={quick} threads_available={}", std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+    println!(
+        "build=release quick={quick} threads_available={}",
+        std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+    );
     if want("sim") {
         for l in agvrl_sim::bench::run(quick) {
             println!("{l}");

@@ -2,7 +2,7 @@
 
 use agvrl_envs::registry::scene_of;
 use agvrl_sim::{PlanarPose, SceneSource, Sim, SimConfig};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::Args;
 
 #[derive(Args)]
@@ -17,7 +17,10 @@ pub struct ProbeArgs {
 
 pub fn probe(a: ProbeArgs) -> Result<()> {
     let Some(scene) = scene_of(&a.env) else {
-        bail!("'{}' is not a vehicle env; vehicle envs: search-outdoor-20, search-outdoor-50, search-urban-20, search-urban-50, racing-oval", a.env)
+        bail!(
+            "'{}' is not a vehicle env; vehicle envs: search-outdoor-20, search-outdoor-50, search-urban-20, search-urban-50, racing-oval",
+            a.env
+        )
     };
     let p: Vec<f32> = a
         .pose
@@ -25,12 +28,21 @@ pub fn probe(a: ProbeArgs) -> Result<()> {
         .map(|s| s.trim().parse::<f32>())
         .collect::<Result<_, _>>()
         .with_context(|| format!("--pose '{}': expected x,y,yaw numbers", a.pose))?;
-    let [x, y, yaw] = p[..] else { bail!("--pose '{}': expected three numbers x,y,yaw", a.pose) };
+    let [x, y, yaw] = p[..] else {
+        bail!("--pose '{}': expected three numbers x,y,yaw", a.pose)
+    };
     if !(x.is_finite() && y.is_finite() && yaw.is_finite()) {
         bail!("--pose must be finite");
     }
-    let mut sim = Sim::new(SimConfig { scene: SceneSource::Builtin(scene.into()), ..SimConfig::default() })?;
-    sim.reset(PlanarPose { x_m: x, y_m: y, yaw_rad: yaw })?;
+    let mut sim = Sim::new(SimConfig {
+        scene: SceneSource::Builtin(scene.into()),
+        ..SimConfig::default()
+    })?;
+    sim.reset(PlanarPose {
+        x_m: x,
+        y_m: y,
+        yaw_rad: yaw,
+    })?;
     let scan = sim.lidar_scan();
     let out = serde_json::json!({
         "env": a.env,

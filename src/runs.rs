@@ -7,7 +7,10 @@ use std::time::{SystemTime, UNIX_EPOCH};
 
 /// `YYYYMMDD-HHMMSS` in UTC.
 pub fn stamp() -> String {
-    let secs = SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0) as i64;
+    let secs = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0) as i64;
     let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
     // Civil date from days since 1970-01-01 (H. Hinnant's algorithm).
     let z = days + 719_468;
@@ -19,7 +22,12 @@ pub fn stamp() -> String {
     let d = doy - (153 * mp + 2) / 5 + 1;
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + i64::from(m <= 2);
-    format!("{y:04}{m:02}{d:02}-{:02}{:02}{:02}", rem / 3600, rem % 3600 / 60, rem % 60)
+    format!(
+        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
 }
 
 /// Write `bytes` to `path` through a temporary file and a rename.
@@ -44,7 +52,10 @@ impl RunDir {
         }
         let partial = PathBuf::from(format!("{}.partial", path.display()));
         std::fs::create_dir_all(&partial).with_context(|| format!("creating {}", partial.display()))?;
-        Ok(Self { final_path: path, partial })
+        Ok(Self {
+            final_path: path,
+            partial,
+        })
     }
 
     /// Path of a file inside the run.
@@ -54,7 +65,8 @@ impl RunDir {
 
     /// Publish the run under its final name.
     pub fn finish(self) -> Result<PathBuf> {
-        std::fs::rename(&self.partial, &self.final_path).with_context(|| format!("renaming {} to {}", self.partial.display(), self.final_path.display()))?;
+        std::fs::rename(&self.partial, &self.final_path)
+            .with_context(|| format!("renaming {} to {}", self.partial.display(), self.final_path.display()))?;
         Ok(self.final_path)
     }
 }

@@ -1,10 +1,10 @@
 //! `agvrl train` and `agvrl eval`.
 
-use crate::config::{RunConfig, DEFAULT_TOML};
-use crate::runs::{stamp, write_atomic, RunDir};
-use agvrl_envs::{make_with, Env, EnvConfig, VecEnv};
+use crate::config::{DEFAULT_TOML, RunConfig};
+use crate::runs::{RunDir, stamp, write_atomic};
+use agvrl_envs::{Env, EnvConfig, VecEnv, make_with};
 use agvrl_rl::{Control, Policy, Ppo, Progress, Sac};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::fmt::Write as _;
@@ -84,13 +84,18 @@ fn resolve(a: &TrainArgs) -> Result<RunConfig> {
 }
 
 fn vec_env(cfg: &RunConfig) -> Result<VecEnv<Box<dyn Env>>> {
-    let envs = (0..cfg.n_envs).map(|_| make_with(&cfg.env, &cfg.env_config)).collect::<Result<Vec<_>, _>>()?;
+    let envs = (0..cfg.n_envs)
+        .map(|_| make_with(&cfg.env, &cfg.env_config))
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(VecEnv::new(envs, cfg.threads)?)
 }
 
 pub fn train(a: TrainArgs) -> Result<()> {
     let cfg = resolve(&a)?;
-    let out = a.out.clone().unwrap_or_else(|| PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)));
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)));
     let run = RunDir::create(out)?;
     write_atomic(&run.file("config.toml"), cfg.to_toml()?.as_bytes())?;
     let device = agvrl_rl::default_device();
@@ -99,7 +104,10 @@ pub fn train(a: TrainArgs) -> Result<()> {
         ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    eprintln!("training {} on {} for {} steps (seed {}, {} envs)", cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs);
+    eprintln!(
+        "training {} on {} for {} steps (seed {}, {} envs)",
+        cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs
+    );
     let t0 = Instant::now();
     let mut rows: Vec<Row> = Vec::new();
     let mut on_progress = |p: &Progress<'_>| {
@@ -143,11 +151,21 @@ pub fn train(a: TrainArgs) -> Result<()> {
     let mut csv = String::from("step,episodes,mean_return,policy_loss,value_loss,entropy,steps_per_s\n");
     for r in &rows {
         let mean = r.mean_return.map(|m| format!("{m:.4}")).unwrap_or_default();
-        let _ = writeln!(csv, "{},{},{mean},{:.6},{:.6},{:.6},{:.1}", r.step, r.episodes, r.policy_loss, r.value_loss, r.entropy, r.steps_per_s);
+        let _ = writeln!(
+            csv,
+            "{},{},{mean},{:.6},{:.6},{:.6},{:.1}",
+            r.step, r.episodes, r.policy_loss, r.value_loss, r.entropy, r.steps_per_s
+        );
     }
     write_atomic(&run.file("metrics.csv"), csv.as_bytes())?;
     let mut policy = Policy::load(&policy_path)?;
-    let summary = evaluate(&mut policy, &cfg.env, &cfg.env_config, cfg.eval_episodes, cfg.seed + 1_000_000)?;
+    let summary = evaluate(
+        &mut policy,
+        &cfg.env,
+        &cfg.env_config,
+        cfg.eval_episodes,
+        cfg.seed + 1_000_000,
+    )?;
     let mut text = format!("train_s={train_s:.1}\n");
     for l in summary.lines() {
         let _ = writeln!(text, "{l}");
@@ -182,7 +200,12 @@ impl Summary {
         }
         if self.racing {
             v.push(format!("laps={}", self.laps));
-            v.push(format!("best_lap_s={}", self.best_lap_s.map(|b| format!("{b:.2}")).unwrap_or_else(|| "none".into())));
+            v.push(format!(
+                "best_lap_s={}",
+                self.best_lap_s
+                    .map(|b| format!("{b:.2}"))
+                    .unwrap_or_else(|| "none".into())
+            ));
         }
         v
     }
@@ -190,8 +213,18 @@ impl Summary {
 
 pub fn evaluate(policy: &mut Policy, env_id: &str, env_cfg: &EnvConfig, episodes: usize, seed: u64) -> Result<Summary> {
     let mut env = make_with(env_id, env_cfg)?;
-    policy.check_spaces(&env.observation_space(), &env.action_space()).context("the policy does not fit this env")?;
-    let mut s = Summary { episodes, mean_return: 0.0, collisions: 0, laps: 0, best_lap_s: None, coverage: None, racing: false };
+    policy
+        .check_spaces(&env.observation_space(), &env.action_space())
+        .context("the policy does not fit this env")?;
+    let mut s = Summary {
+        episodes,
+        mean_return: 0.0,
+        collisions: 0,
+        laps: 0,
+        best_lap_s: None,
+        coverage: None,
+        racing: false,
+    };
     let mut cov_sum = 0.0;
     for k in 0..episodes {
         let (mut obs, _) = env.reset(Some(seed + k as u64))?;
@@ -229,8 +262,10 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     if a.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
-    let cfg = RunConfig::load(&a.run.join("config.toml")).with_context(|| format!("{} is not a run directory", a.run.display()))?;
-    let mut policy = Policy::load(&a.run.join(POLICY_FILE)).with_context(|| format!("loading {}", a.run.join(POLICY_FILE).display()))?;
+    let cfg = RunConfig::load(&a.run.join("config.toml"))
+        .with_context(|| format!("{} is not a run directory", a.run.display()))?;
+    let mut policy = Policy::load(&a.run.join(POLICY_FILE))
+        .with_context(|| format!("loading {}", a.run.join(POLICY_FILE).display()))?;
     let s = evaluate(&mut policy, &cfg.env, &cfg.env_config, a.episodes, cfg.seed + 2_000_000)?;
     for l in s.lines() {
         println!("{l}");

@@ -4,7 +4,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn agvrl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_agvrl")).args(args).output().expect("run agvrl")
+    Command::new(env!("CARGO_BIN_EXE_agvrl"))
+        .args(args)
+        .output()
+        .expect("run agvrl")
 }
 
 fn tmp(name: &str) -> PathBuf {
@@ -41,9 +44,21 @@ mod issue_5_cli {
         let d = tmp("train");
         let run = d.join("run");
         let cfg = tiny_config(&d);
-        let o = agvrl(&["train", "--config", cfg.to_str().unwrap(), "--out", run.to_str().unwrap()]);
+        let o = agvrl(&[
+            "train",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--out",
+            run.to_str().unwrap(),
+        ]);
         assert!(o.status.success(), "{}", stderr(&o));
-        for f in ["config.toml", "metrics.csv", "policy.agvrl", "checkpoint.ckpt", "eval.txt"] {
+        for f in [
+            "config.toml",
+            "metrics.csv",
+            "policy.agvrl",
+            "checkpoint.ckpt",
+            "eval.txt",
+        ] {
             let p = run.join(f);
             assert!(p.metadata().map(|m| m.len() > 0).unwrap_or(false), "missing {f}");
         }
@@ -72,7 +87,13 @@ mod issue_5_cli {
         let d = tmp("bad");
         let bad = d.join("bad.toml");
         std::fs::write(&bad, "env = \"racing-oval\"\nlearning_rat = 0.1\n").unwrap();
-        let o = agvrl(&["train", "--config", bad.to_str().unwrap(), "--out", d.join("r").to_str().unwrap()]);
+        let o = agvrl(&[
+            "train",
+            "--config",
+            bad.to_str().unwrap(),
+            "--out",
+            d.join("r").to_str().unwrap(),
+        ]);
         assert!(!o.status.success());
         assert!(stderr(&o).contains("learning_rat"), "{}", stderr(&o));
         assert_eq!(stderr(&o).trim().lines().count(), 1, "{}", stderr(&o));
@@ -104,7 +125,14 @@ mod issue_5_cli {
         let o = agvrl(&["envs"]);
         assert!(o.status.success());
         let out = stdout(&o);
-        for id in ["search-outdoor-20", "search-outdoor-50", "search-urban-20", "search-urban-50", "racing-oval", "pendulum"] {
+        for id in [
+            "search-outdoor-20",
+            "search-outdoor-50",
+            "search-urban-20",
+            "search-urban-50",
+            "racing-oval",
+            "pendulum",
+        ] {
             assert!(out.contains(id), "{out}");
         }
     }
@@ -114,6 +142,10 @@ mod issue_5_cli {
         let o = agvrl(&["bench", "--quick", "--only", "sim"]);
         assert!(o.status.success(), "{}", stderr(&o));
         let out = stdout(&o);
-        assert!(out.lines().any(|l| l.starts_with("scene=oval mode=raycast") && l.contains("sim_steps_per_s=")), "{out}");
+        assert!(
+            out.lines()
+                .any(|l| l.starts_with("scene=oval mode=raycast") && l.contains("sim_steps_per_s=")),
+            "{out}"
+        );
     }
 }

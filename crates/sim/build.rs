@@ -24,7 +24,9 @@ fn main() {
     println!("cargo:rerun-if-changed={}", root.display());
     let mut files = Vec::new();
     walk(&root, &root, &mut files);
-    let mut src = String::from("/// Built-in asset files: (path relative to `assets/`, contents).\npub static EMBEDDED: &[(&str, &str)] = &[\n");
+    let mut src = String::from(
+        "/// Built-in asset files: (path relative to `assets/`, contents).\npub static EMBEDDED: &[(&str, &str)] = &[\n",
+    );
     for (rel, path) in &files {
         println!("cargo:rerun-if-changed={}", path.display());
         let abs = path.canonicalize().unwrap_or(path.clone());

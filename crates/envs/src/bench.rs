@@ -3,13 +3,15 @@
 //! and VecEnv throughput on 1 and 2 threads.
 
 use crate::registry::scene_of;
-use crate::{make, Env, VecEnv, ENV_IDS};
+use crate::{ENV_IDS, Env, VecEnv, make};
 use agvrl_sim::bench::{median_s, wander};
 use agvrl_sim::{SceneSource, Sim, SimConfig};
 use std::hint::black_box;
 
 fn actions(t: usize, n: usize, dim: usize) -> Vec<f32> {
-    (0..n * dim).map(|k| ((((t * 7919 + k * 104_729) % 2001) as f32) / 1000.0) - 1.0).collect()
+    (0..n * dim)
+        .map(|k| ((((t * 7919 + k * 104_729) % 2001) as f32) / 1000.0) - 1.0)
+        .collect()
 }
 
 fn env_rate(env: &mut dyn Env, steps: usize, reps: usize) -> f64 {
@@ -48,7 +50,11 @@ pub fn run(quick: bool) -> Vec<String> {
         let mut line = format!("env={id} steps_per_s={rate:.0}");
         if let Some(scene) = scene_of(id) {
             // The same steps on the bare simulator (physics + one LiDAR scan).
-            let mut sim = Sim::new(SimConfig { scene: SceneSource::Builtin(scene.into()), ..SimConfig::default() }).ok();
+            let mut sim = Sim::new(SimConfig {
+                scene: SceneSource::Builtin(scene.into()),
+                ..SimConfig::default()
+            })
+            .ok();
             if let Some(sim) = sim.as_mut() {
                 let spawn = sim.default_spawn();
                 let mut x = 0.37;
@@ -62,7 +68,10 @@ pub fn run(quick: bool) -> Vec<String> {
                             black_box(sim.lidar_scan());
                         }
                     });
-                line.push_str(&format!(" sim_steps_per_s={sim_rate:.0} task_overhead_pct={:.1}", 100.0 * (sim_rate / rate - 1.0)));
+                line.push_str(&format!(
+                    " sim_steps_per_s={sim_rate:.0} task_overhead_pct={:.1}",
+                    100.0 * (sim_rate / rate - 1.0)
+                ));
             }
         }
         out.push(format!("{line} reps={reps}"));
@@ -71,8 +80,12 @@ pub fn run(quick: bool) -> Vec<String> {
         let n_envs = 8;
         let mut rates = Vec::new();
         for threads in [1, 2] {
-            let Ok(envs) = (0..n_envs).map(|_| make(id)).collect::<Result<Vec<_>, _>>() else { continue };
-            let Ok(mut v) = VecEnv::new(envs, threads) else { continue };
+            let Ok(envs) = (0..n_envs).map(|_| make(id)).collect::<Result<Vec<_>, _>>() else {
+                continue;
+            };
+            let Ok(mut v) = VecEnv::new(envs, threads) else {
+                continue;
+            };
             let dim = v.action_space().dim();
             let _ = v.reset(Some(0));
             let rounds = steps / n_envs;
@@ -85,10 +98,15 @@ pub fn run(quick: bool) -> Vec<String> {
             });
             let rate = (rounds * n_envs) as f64 / s;
             rates.push(rate);
-            out.push(format!("env={id} n_envs={n_envs} threads={threads} vec_steps_per_s={rate:.0} reps={reps}"));
+            out.push(format!(
+                "env={id} n_envs={n_envs} threads={threads} vec_steps_per_s={rate:.0} reps={reps}"
+            ));
         }
         if let [one, two] = rates[..] {
-            out.push(format!("env={id} n_envs={n_envs} vec_speedup_2_threads={:.2}", two / one));
+            out.push(format!(
+                "env={id} n_envs={n_envs} vec_speedup_2_threads={:.2}",
+                two / one
+            ));
         }
     }
     out

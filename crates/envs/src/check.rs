@@ -28,7 +28,12 @@ fn rollout(env: &mut dyn Env, seed: u64, steps: usize) -> Result<Vec<(Vec<f32>, 
     let (obs, _) = env.reset(Some(seed)).map_err(|e| format!("reset: {e}"))?;
     let mut out = vec![(obs, 0.0, false, false)];
     for t in 0..steps {
-        let a: Vec<f32> = act_space.low.iter().zip(&act_space.high).map(|(lo, hi)| rng.random_range(*lo..=*hi)).collect();
+        let a: Vec<f32> = act_space
+            .low
+            .iter()
+            .zip(&act_space.high)
+            .map(|(lo, hi)| rng.random_range(*lo..=*hi))
+            .collect();
         let st = env.step(&a).map_err(|e| format!("step {t}: {e}"))?;
         if !st.obs.iter().all(|v| v.is_finite()) {
             return Err(format!("step {t}: observation not finite"));

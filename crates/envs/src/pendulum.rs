@@ -1,7 +1,7 @@
 //! Gymnasium's Pendulum-v1, exactly: the reference task for checking SAC and PPO against
 //! published learning results.
 
-use crate::api::{validate_action, BoxSpace, Env, EnvError, Info, Step};
+use crate::api::{BoxSpace, Env, EnvError, Info, Step, validate_action};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use std::f64::consts::PI;
@@ -41,7 +41,12 @@ impl Default for Pendulum {
 impl Pendulum {
     /// A pendulum that needs `reset` before `step`.
     pub fn new() -> Self {
-        Self { theta: 0.0, theta_dot: 0.0, rng: StdRng::seed_from_u64(0), ready: false }
+        Self {
+            theta: 0.0,
+            theta_dot: 0.0,
+            rng: StdRng::seed_from_u64(0),
+            ready: false,
+        }
     }
 
     /// Current (theta, theta_dot), radians and rad/s.
@@ -68,7 +73,10 @@ pub fn angle_normalize(x: f64) -> f64 {
 
 impl Env for Pendulum {
     fn observation_space(&self) -> BoxSpace {
-        BoxSpace { low: vec![-1.0, -1.0, -MAX_SPEED as f32], high: vec![1.0, 1.0, MAX_SPEED as f32] }
+        BoxSpace {
+            low: vec![-1.0, -1.0, -MAX_SPEED as f32],
+            high: vec![1.0, 1.0, MAX_SPEED as f32],
+        }
     }
 
     fn action_space(&self) -> BoxSpace {
@@ -93,11 +101,17 @@ impl Env for Pendulum {
         let u = (action[0] as f64).clamp(-MAX_TORQUE, MAX_TORQUE);
         let (th, thdot) = (self.theta, self.theta_dot);
         let cost = angle_normalize(th).powi(2) + 0.1 * thdot * thdot + 0.001 * u * u;
-        let new_thdot = (thdot + (3.0 * G / (2.0 * L) * th.sin() + 3.0 / (M * L * L) * u) * DT)
-            .clamp(-MAX_SPEED, MAX_SPEED);
+        let new_thdot =
+            (thdot + (3.0 * G / (2.0 * L) * th.sin() + 3.0 / (M * L * L) * u) * DT).clamp(-MAX_SPEED, MAX_SPEED);
         self.theta = th + new_thdot * DT;
         self.theta_dot = new_thdot;
-        Ok(Step { obs: self.obs(), reward: -cost, terminated: false, truncated: false, info: Info::default() })
+        Ok(Step {
+            obs: self.obs(),
+            reward: -cost,
+            terminated: false,
+            truncated: false,
+            info: Info::default(),
+        })
     }
 
     fn dt_s(&self) -> f64 {

@@ -13,7 +13,14 @@ use agvrl_sim::{ActionMapping, DynamicsMode, SceneSource, SimConfig};
 use serde::{Deserialize, Serialize};
 
 /// Ids `make` knows.
-pub const ENV_IDS: &[&str] = &["search-outdoor-20", "search-outdoor-50", "search-urban-20", "search-urban-50", "racing-oval", "pendulum"];
+pub const ENV_IDS: &[&str] = &[
+    "search-outdoor-20",
+    "search-outdoor-50",
+    "search-urban-20",
+    "search-urban-50",
+    "racing-oval",
+    "pendulum",
+];
 
 /// Settings of the vehicle envs (ignored by `pendulum`). Loadable from TOML; unknown keys are
 /// an error.
@@ -66,12 +73,21 @@ impl EnvConfig {
     /// The `paper` preset: AutoVRL's observation (100 raw ranges), its action mapping and
     /// fixed spawn, no noise, no randomisation.
     pub fn paper() -> Self {
-        Self { observation: ObsConfig::paper(), action_mapping: ActionMapping::Paper, spawn: SpawnMode::Fixed, ..Self::default() }
+        Self {
+            observation: ObsConfig::paper(),
+            action_mapping: ActionMapping::Paper,
+            spawn: SpawnMode::Fixed,
+            ..Self::default()
+        }
     }
 
     /// The `sim2real` preset: the default with sensor noise, latency and randomisation on.
     pub fn sim2real() -> Self {
-        Self { noise: NoiseConfig::sim2real(), randomisation: Randomisation::sim2real(), ..Self::default() }
+        Self {
+            noise: NoiseConfig::sim2real(),
+            randomisation: Randomisation::sim2real(),
+            ..Self::default()
+        }
     }
 
     /// A named preset: `default`, `paper` or `sim2real`.
@@ -80,7 +96,9 @@ impl EnvConfig {
             "default" => Ok(Self::default()),
             "paper" => Ok(Self::paper()),
             "sim2real" => Ok(Self::sim2real()),
-            other => Err(EnvError::Config(format!("unknown preset '{other}'; presets: default, paper, sim2real"))),
+            other => Err(EnvError::Config(format!(
+                "unknown preset '{other}'; presets: default, paper, sim2real"
+            ))),
         }
     }
 }
@@ -98,7 +116,10 @@ pub fn scene_of(id: &str) -> Option<&'static str> {
 }
 
 fn unknown(id: &str) -> EnvError {
-    EnvError::UnknownId { id: id.to_string(), valid: ENV_IDS.iter().map(|s| s.to_string()).collect() }
+    EnvError::UnknownId {
+        id: id.to_string(),
+        valid: ENV_IDS.iter().map(|s| s.to_string()).collect(),
+    }
 }
 
 /// The vehicle of env `id` (no task), for tools that drive a vehicle directly.
@@ -116,7 +137,11 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
         ..SimConfig::default()
     };
     let v = SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?;
-    Ok(if cfg.noise.is_off() { Box::new(v) } else { Box::new(Noisy::new(v, cfg.noise)) })
+    Ok(if cfg.noise.is_off() {
+        Box::new(v)
+    } else {
+        Box::new(Noisy::new(v, cfg.noise))
+    })
 }
 
 /// Build the env registered under `id` with the default `EnvConfig`.
@@ -131,13 +156,29 @@ pub fn make_with(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
     }
     let vehicle = make_vehicle(id, cfg)?;
     let limit = vehicle.steering_limit_rad();
-    let common = CommonConfig { observation: cfg.observation, action_mapping: cfg.action_mapping, n_rays: cfg.lidar.n_rays, range_max_m: cfg.lidar.range_max_m };
+    let common = CommonConfig {
+        observation: cfg.observation,
+        action_mapping: cfg.action_mapping,
+        n_rays: cfg.lidar.n_rays,
+        range_max_m: cfg.lidar.range_max_m,
+    };
     if id == "racing-oval" {
-        let task = Racing::new(RacingConfig { common, ..RacingConfig::default() }, limit);
+        let task = Racing::new(
+            RacingConfig {
+                common,
+                ..RacingConfig::default()
+            },
+            limit,
+        );
         Ok(Box::new(TimeLimit::new(TaskEnv::new(vehicle, task), cfg.max_steps)))
     } else {
         let task = Search::new(
-            SearchConfig { common, reward: cfg.search_reward, slow_penalty: id == "search-outdoor-50" && cfg.search_reward == SearchReward::AutovrlCode, ..SearchConfig::default() },
+            SearchConfig {
+                common,
+                reward: cfg.search_reward,
+                slow_penalty: id == "search-outdoor-50" && cfg.search_reward == SearchReward::AutovrlCode,
+                ..SearchConfig::default()
+            },
             limit,
         );
         Ok(Box::new(TimeLimit::new(TaskEnv::new(vehicle, task), cfg.max_steps)))

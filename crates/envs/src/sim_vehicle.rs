@@ -42,11 +42,24 @@ impl Randomisation {
     /// The `sim2real` preset: friction +-20 %, mass +-10 %, C_T +-10 %, C_d and C_r +-20 %,
     /// steering offset up to 0.02 rad (about 1 degree of servo trim).
     pub fn sim2real() -> Self {
-        Self { friction: 0.2, mass: 0.1, c_t: 0.1, c_d: 0.2, c_r: 0.2, steering_offset_rad: 0.02 }
+        Self {
+            friction: 0.2,
+            mass: 0.1,
+            c_t: 0.1,
+            c_d: 0.2,
+            c_r: 0.2,
+            steering_offset_rad: 0.02,
+        }
     }
 
     fn draw(&self, nominal: VehicleParams, rng: &mut StdRng) -> VehicleParams {
-        let mut f = |x: f64| if x > 0.0 { rng.random_range(1.0 - x..1.0 + x) } else { 1.0 };
+        let mut f = |x: f64| {
+            if x > 0.0 {
+                rng.random_range(1.0 - x..1.0 + x)
+            } else {
+                1.0
+            }
+        };
         let mut p = nominal;
         p.tyre_friction *= f(self.friction) as f32;
         p.mass_scale *= f(self.mass) as f32;
@@ -86,15 +99,25 @@ impl SimVehicle {
         let (nx, ny) = ((2.0 * half[0] / CELL_M) as i32, (2.0 * half[1] / CELL_M) as i32);
         for i in 0..nx {
             for j in 0..ny {
-                let (x, y) = (-half[0] + (i as f32 + 0.5) * CELL_M, -half[1] + (j as f32 + 0.5) * CELL_M);
-                let on_track = track.map(|t| t.lateral_offset_m(x, y).abs() < 0.5 * (t.outer_radius_m - t.inner_radius_m)).unwrap_or(true);
+                let (x, y) = (
+                    -half[0] + (i as f32 + 0.5) * CELL_M,
+                    -half[1] + (j as f32 + 0.5) * CELL_M,
+                );
+                let on_track = track
+                    .map(|t| t.lateral_offset_m(x, y).abs() < 0.5 * (t.outer_radius_m - t.inner_radius_m))
+                    .unwrap_or(true);
                 if on_track && sim.free_at(x, y, 0.5 * CELL_M) {
                     free_cells.push([x, y]);
                 }
             }
         }
         Ok(Self {
-            map: MapInfo { half_extent_m: half, track, free_cells, cell_m: CELL_M },
+            map: MapInfo {
+                half_extent_m: half,
+                track,
+                free_cells,
+                cell_m: CELL_M,
+            },
             sim,
             spawn,
             randomisation,
@@ -119,15 +142,27 @@ impl SimVehicle {
             let lateral = self.rng.random_range(-0.2..0.2f32);
             let yaw = dy.atan2(dx) + self.rng.random_range(-0.15..0.15f32);
             // Normal pointing to the outer wall: the direction turned right (clockwise lap).
-            return PlanarPose { x_m: x + lateral * dy, y_m: y - lateral * dx, yaw_rad: yaw };
+            return PlanarPose {
+                x_m: x + lateral * dy,
+                y_m: y - lateral * dx,
+                yaw_rad: yaw,
+            };
         }
         let half = self.map.half_extent_m;
         for _ in 0..1000 {
-            let x = self.rng.random_range(-half[0] + SPAWN_CLEARANCE_M..half[0] - SPAWN_CLEARANCE_M);
-            let y = self.rng.random_range(-half[1] + SPAWN_CLEARANCE_M..half[1] - SPAWN_CLEARANCE_M);
+            let x = self
+                .rng
+                .random_range(-half[0] + SPAWN_CLEARANCE_M..half[0] - SPAWN_CLEARANCE_M);
+            let y = self
+                .rng
+                .random_range(-half[1] + SPAWN_CLEARANCE_M..half[1] - SPAWN_CLEARANCE_M);
             if self.sim.free_at(x, y, SPAWN_CLEARANCE_M) {
                 let yaw = self.rng.random_range(-std::f32::consts::PI..std::f32::consts::PI);
-                return PlanarPose { x_m: x, y_m: y, yaw_rad: yaw };
+                return PlanarPose {
+                    x_m: x,
+                    y_m: y,
+                    yaw_rad: yaw,
+                };
             }
         }
         self.sim.default_spawn()

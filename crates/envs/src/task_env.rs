@@ -1,7 +1,7 @@
 //! `TaskEnv<V, T>`: a `Vehicle` driven by a `Task` is an `Env`. The same code runs in simulation
 //! and on the car; nothing here asks which vehicle it drives.
 
-use crate::api::{validate_action, BoxSpace, Env, EnvError, Info, SensorFrame, Step, Vehicle};
+use crate::api::{BoxSpace, Env, EnvError, Info, SensorFrame, Step, Vehicle, validate_action};
 use crate::task::Task;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
@@ -18,7 +18,13 @@ pub struct TaskEnv<V, T> {
 impl<V: Vehicle, T: Task> TaskEnv<V, T> {
     /// Combine a vehicle and a task.
     pub fn new(vehicle: V, task: T) -> Self {
-        Self { vehicle, task, rng: StdRng::seed_from_u64(0), ready: false, last: None }
+        Self {
+            vehicle,
+            task,
+            rng: StdRng::seed_from_u64(0),
+            ready: false,
+            last: None,
+        }
     }
 
     /// The vehicle.

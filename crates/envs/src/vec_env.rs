@@ -2,8 +2,8 @@
 //! convention): when an episode ends, `obs` holds the first observation of the next episode
 //! and `infos[i].final_obs` the last one of the episode that ended.
 
-use crate::api::{BoxSpace, EnvError, EpisodeSummary, Info};
 use crate::Env;
+use crate::api::{BoxSpace, EnvError, EpisodeSummary, Info};
 use rayon::prelude::*;
 
 /// The result of stepping every env once. Observations are flat, row `i` belongs to env `i`.
@@ -42,11 +42,18 @@ impl<E: Env> VecEnv<E> {
     /// Wrap `envs` (all with the same spaces); `threads` = 1 steps them serially on the
     /// caller's thread, more uses a rayon pool of that size.
     pub fn new(envs: Vec<E>, threads: usize) -> Result<Self, EnvError> {
-        let first = envs.first().ok_or_else(|| EnvError::Config("VecEnv needs at least one env".into()))?;
+        let first = envs
+            .first()
+            .ok_or_else(|| EnvError::Config("VecEnv needs at least one env".into()))?;
         let obs_space = first.observation_space();
         let act_space = first.action_space();
-        if envs.iter().any(|e| e.observation_space() != obs_space || e.action_space() != act_space) {
-            return Err(EnvError::Config("VecEnv envs must share observation and action spaces".into()));
+        if envs
+            .iter()
+            .any(|e| e.observation_space() != obs_space || e.action_space() != act_space)
+        {
+            return Err(EnvError::Config(
+                "VecEnv envs must share observation and action spaces".into(),
+            ));
         }
         let pool = if threads > 1 {
             Some(
@@ -132,7 +139,10 @@ impl<E: Env> VecEnv<E> {
     pub fn step(&mut self, actions: &[f32]) -> Result<VecStep, EnvError> {
         let n = self.n_envs();
         if actions.len() != n * self.act_dim {
-            return Err(EnvError::ActionShape { expected: n * self.act_dim, got: actions.len() });
+            return Err(EnvError::ActionShape {
+                expected: n * self.act_dim,
+                got: actions.len(),
+            });
         }
         let act_dim = self.act_dim;
         let step_one = |(s, a): (&mut Slot<E>, &[f32])| -> Result<crate::api::Step, EnvError> {
@@ -150,9 +160,18 @@ impl<E: Env> VecEnv<E> {
         };
         let steps: Vec<crate::api::Step> = match &self.pool {
             Some(pool) => pool.install(|| {
-                self.slots.par_iter_mut().zip(actions.par_chunks(act_dim)).map(step_one).collect::<Result<Vec<_>, EnvError>>()
+                self.slots
+                    .par_iter_mut()
+                    .zip(actions.par_chunks(act_dim))
+                    .map(step_one)
+                    .collect::<Result<Vec<_>, EnvError>>()
             })?,
-            None => self.slots.iter_mut().zip(actions.chunks(act_dim)).map(step_one).collect::<Result<_, _>>()?,
+            None => self
+                .slots
+                .iter_mut()
+                .zip(actions.chunks(act_dim))
+                .map(step_one)
+                .collect::<Result<_, _>>()?,
         };
         let mut out = VecStep {
             obs: Vec::with_capacity(n * self.obs_dim),

@@ -1,7 +1,7 @@
 //! Issue 3 acceptance tests.
 
 use agvrl_envs::api::{Control, MapInfo, SensorFrame, TerminationCause};
-use agvrl_envs::pendulum::{angle_normalize, Pendulum};
+use agvrl_envs::pendulum::{Pendulum, angle_normalize};
 use agvrl_envs::task::racing::RacingConfig;
 use agvrl_envs::task::{Racing, Task};
 use agvrl_envs::wrappers::TimeLimit;
@@ -28,7 +28,10 @@ mod issue_3_contract {
     #[test]
     fn unknown_id_lists_the_valid_ids() {
         let e = make("racing-moon").err().unwrap().to_string();
-        assert!(e.contains("racing-moon") && e.contains("racing-oval") && e.contains("pendulum"), "{e}");
+        assert!(
+            e.contains("racing-moon") && e.contains("racing-oval") && e.contains("pendulum"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -63,7 +66,10 @@ mod issue_3_contract {
         struct Blind;
         impl Vehicle for Blind {
             fn reset(&mut self, _: u64) -> Result<SensorFrame, EnvError> {
-                Ok(SensorFrame { scan: Some(Default::default()), ..SensorFrame::default() })
+                Ok(SensorFrame {
+                    scan: Some(Default::default()),
+                    ..SensorFrame::default()
+                })
             }
             fn actuate(&mut self, _: Control) -> Result<(), EnvError> {
                 Ok(())
@@ -89,7 +95,10 @@ mod issue_3_episodes {
 
     #[test]
     fn driving_into_a_wall_terminates_and_is_not_truncated() {
-        let cfg = EnvConfig { spawn: SpawnMode::Fixed, ..quick_cfg() };
+        let cfg = EnvConfig {
+            spawn: SpawnMode::Fixed,
+            ..quick_cfg()
+        };
         let mut env = make_with("racing-oval", &cfg).unwrap();
         env.reset(Some(0)).unwrap();
         // Straight down the +x straight: the curve's outer wall stops it.
@@ -97,9 +106,15 @@ mod issue_3_episodes {
             let st = env.step(&[1.0, 0.0]).unwrap();
             if st.done() {
                 assert!(st.terminated && !st.truncated, "step {t}");
-                assert!(matches!(st.info.termination, Some(TerminationCause::TooClose | TerminationCause::Contact)));
+                assert!(matches!(
+                    st.info.termination,
+                    Some(TerminationCause::TooClose | TerminationCause::Contact)
+                ));
                 assert_eq!(st.info.reward_terms.collision, -50.0);
-                assert!(env.step(&[0.0, 0.0]).is_err(), "stepping a terminated episode needs a reset");
+                assert!(
+                    env.step(&[0.0, 0.0]).is_err(),
+                    "stepping a terminated episode needs a reset"
+                );
                 return;
             }
         }
@@ -108,7 +123,14 @@ mod issue_3_episodes {
 
     #[test]
     fn the_time_limit_truncates_without_terminating() {
-        let mut env = make_with("search-outdoor-20", &EnvConfig { max_steps: 5, ..quick_cfg() }).unwrap();
+        let mut env = make_with(
+            "search-outdoor-20",
+            &EnvConfig {
+                max_steps: 5,
+                ..quick_cfg()
+            },
+        )
+        .unwrap();
         env.reset(Some(2)).unwrap();
         for t in 1..=5 {
             // Scaled mapping: a0 = -1 is zero throttle; the car stays put.
@@ -142,7 +164,10 @@ mod issue_3_episodes {
 
     #[test]
     fn search_reports_coverage_and_distance() {
-        let cfg = EnvConfig { spawn: SpawnMode::Fixed, ..quick_cfg() };
+        let cfg = EnvConfig {
+            spawn: SpawnMode::Fixed,
+            ..quick_cfg()
+        };
         let mut env = make_with("search-outdoor-20", &cfg).unwrap();
         env.reset(Some(0)).unwrap();
         let mut last = None;
@@ -172,7 +197,10 @@ mod issue_3_episodes {
 
     #[test]
     fn racing_counts_laps_along_the_centre_line() {
-        let sim = agvrl_sim::SimConfig { scene: agvrl_sim::SceneSource::Builtin("oval".into()), ..Default::default() };
+        let sim = agvrl_sim::SimConfig {
+            scene: agvrl_sim::SceneSource::Builtin("oval".into()),
+            ..Default::default()
+        };
         let vehicle = SimVehicle::new(sim, SpawnMode::Fixed, Randomisation::default()).unwrap();
         let mut env = TaskEnv::new(vehicle, Racing::new(RacingConfig::default(), 0.36));
         env.reset(Some(0)).unwrap();
@@ -180,7 +208,11 @@ mod issue_3_episodes {
         for _ in 0..1500 {
             let steer = pursue(env.last_frame().unwrap(), env.vehicle().map().unwrap());
             let st = env.step(&[0.2, steer]).unwrap();
-            assert!(!st.terminated, "a centre-line driver never gets within 0.8 m: {:?}", st.info.termination);
+            assert!(
+                !st.terminated,
+                "a centre-line driver never gets within 0.8 m: {:?}",
+                st.info.termination
+            );
             info = st.info.racing.clone();
             if info.as_ref().unwrap().laps >= 1 {
                 break;
@@ -199,13 +231,22 @@ mod issue_3_vec_and_noise {
     use super::*;
 
     fn actions(n: usize, t: usize) -> Vec<f32> {
-        (0..n * 2).map(|k| (((t * 7 + k * 13) % 17) as f32 / 8.0) - 1.0).collect()
+        (0..n * 2)
+            .map(|k| (((t * 7 + k * 13) % 17) as f32 / 8.0) - 1.0)
+            .collect()
     }
 
     #[test]
     fn vec_env_equals_serial_stepping_for_any_thread_count() {
-        let cfg = EnvConfig { max_steps: 40, ..quick_cfg() };
-        let mk = || (0..3).map(|_| make_with("search-urban-20", &cfg).unwrap()).collect::<Vec<_>>();
+        let cfg = EnvConfig {
+            max_steps: 40,
+            ..quick_cfg()
+        };
+        let mk = || {
+            (0..3)
+                .map(|_| make_with("search-urban-20", &cfg).unwrap())
+                .collect::<Vec<_>>()
+        };
         let mut v1 = VecEnv::new(mk(), 1).unwrap();
         let mut v2 = VecEnv::new(mk(), 2).unwrap();
         let mut serial = mk();
@@ -229,7 +270,11 @@ mod issue_3_vec_and_noise {
                 assert_eq!(st.reward, s1.rewards[i]);
                 if st.done() {
                     saw_done = true;
-                    assert_eq!(s1.infos[i].final_obs.as_ref(), Some(&st.obs), "final_obs keeps the last observation");
+                    assert_eq!(
+                        s1.infos[i].final_obs.as_ref(),
+                        Some(&st.obs),
+                        "final_obs keeps the last observation"
+                    );
                     assert!(s1.infos[i].episode.is_some());
                     let (o, _) = e.reset(None).unwrap();
                     assert_eq!(&s1.obs[i * 104..(i + 1) * 104], &o[..]);
@@ -259,8 +304,17 @@ mod issue_3_vec_and_noise {
 
     #[test]
     fn latency_delays_commands_by_k_periods() {
-        let base = EnvConfig { spawn: SpawnMode::Fixed, ..quick_cfg() };
-        let late = EnvConfig { noise: wrappers::NoiseConfig { latency_steps: 3, ..Default::default() }, ..base.clone() };
+        let base = EnvConfig {
+            spawn: SpawnMode::Fixed,
+            ..quick_cfg()
+        };
+        let late = EnvConfig {
+            noise: wrappers::NoiseConfig {
+                latency_steps: 3,
+                ..Default::default()
+            },
+            ..base.clone()
+        };
         let mut a = make_with("search-outdoor-20", &base).unwrap();
         let mut b = make_with("search-outdoor-20", &late).unwrap();
         a.reset(Some(0)).unwrap();
@@ -280,7 +334,10 @@ mod issue_3_vec_and_noise {
 
     #[test]
     fn randomisation_draws_parameters_per_episode_from_the_seed() {
-        let sim = || agvrl_sim::SimConfig { scene: agvrl_sim::SceneSource::Builtin("oval".into()), ..Default::default() };
+        let sim = || agvrl_sim::SimConfig {
+            scene: agvrl_sim::SceneSource::Builtin("oval".into()),
+            ..Default::default()
+        };
         let mut v = SimVehicle::new(sim(), SpawnMode::Random, Randomisation::sim2real()).unwrap();
         v.reset(1).unwrap();
         let p1 = v.sim().params();
@@ -296,10 +353,19 @@ mod issue_3_vec_and_noise {
 
     #[test]
     fn time_limit_passes_termination_through() {
-        let cfg = EnvConfig { spawn: SpawnMode::Fixed, ..quick_cfg() };
+        let cfg = EnvConfig {
+            spawn: SpawnMode::Fixed,
+            ..quick_cfg()
+        };
         let inner = {
-            let sim = agvrl_sim::SimConfig { scene: agvrl_sim::SceneSource::Builtin("oval".into()), ..Default::default() };
-            TaskEnv::new(SimVehicle::new(sim, cfg.spawn, cfg.randomisation).unwrap(), Racing::new(RacingConfig::default(), 0.36))
+            let sim = agvrl_sim::SimConfig {
+                scene: agvrl_sim::SceneSource::Builtin("oval".into()),
+                ..Default::default()
+            };
+            TaskEnv::new(
+                SimVehicle::new(sim, cfg.spawn, cfg.randomisation).unwrap(),
+                Racing::new(RacingConfig::default(), 0.36),
+            )
         };
         let mut env = TimeLimit::new(inner, 100_000);
         env.reset(Some(0)).unwrap();

@@ -52,7 +52,10 @@ impl AssetSource {
                 .iter()
                 .filter_map(|(p, _)| {
                     let rest = p.strip_prefix(dir)?.strip_prefix('/')?;
-                    (!rest.contains('/')).then_some(rest)?.strip_suffix(&format!(".{ext}")).map(str::to_string)
+                    (!rest.contains('/'))
+                        .then_some(rest)?
+                        .strip_suffix(&format!(".{ext}"))
+                        .map(str::to_string)
                 })
                 .collect(),
             AssetSource::Dir(root) => std::fs::read_dir(root.join(dir))

@@ -1,7 +1,7 @@
 //! Speed figures of the simulator as `key=value` lines (medians over repetitions after a
 //! warm-up, single thread). `agvrl bench` prints them.
 
-use crate::{Control, DynamicsMode, PlanarPose, SceneSource, Sim, SimConfig, SCENE_IDS};
+use crate::{Control, DynamicsMode, PlanarPose, SCENE_IDS, SceneSource, Sim, SimConfig};
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -21,7 +21,10 @@ pub fn median_s(reps: usize, mut f: impl FnMut()) -> f64 {
 /// A deterministic pseudo-random control sequence (logistic map), so every run drives the same.
 pub fn wander(x: &mut f64) -> Control {
     *x = (*x * 3.9 * (1.0 - *x)).clamp(1e-6, 1.0 - 1e-6);
-    Control { throttle: 0.4 + 0.6 * *x, steering_rad: 0.36 * (2.0 * *x - 1.0) }
+    Control {
+        throttle: 0.4 + 0.6 * *x,
+        steering_rad: 0.36 * (2.0 * *x - 1.0),
+    }
 }
 
 /// Simulator figures per scene and dynamics mode. `quick` shortens the runs (CI smoke test).
@@ -31,7 +34,11 @@ pub fn run(quick: bool) -> Vec<String> {
     let mut out = Vec::new();
     for mode in [DynamicsMode::Raycast, DynamicsMode::Multibody] {
         for id in SCENE_IDS {
-            let cfg = SimConfig { scene: SceneSource::Builtin(id.to_string()), mode, ..SimConfig::default() };
+            let cfg = SimConfig {
+                scene: SceneSource::Builtin(id.to_string()),
+                mode,
+                ..SimConfig::default()
+            };
             let load_s = median_s(reps.min(3), || {
                 black_box(Sim::new(cfg.clone()).ok());
             });

@@ -26,6 +26,6 @@ pub mod world;
 
 pub use error::SimError;
 pub use rapier3d;
-pub use scene::{Scene, SceneKind, SCENE_IDS};
+pub use scene::{SCENE_IDS, Scene, SceneKind};
 pub use sim::{PlanarPose, SceneSource, Sim, SimConfig, VehicleParams};
 pub use vehicle::{ActionMapping, Control, DriveModel, DynamicsMode};

@@ -132,7 +132,11 @@ impl OvalTrack {
         let h = self.straight_m / 2.0;
         let r = self.centre_radius_m();
         if y.abs() <= h {
-            if x >= 0.0 { h - y } else { self.straight_m + PI * r + (y + h) }
+            if x >= 0.0 {
+                h - y
+            } else {
+                self.straight_m + PI * r + (y + h)
+            }
         } else if y < -h {
             let a = (-(y + h)).atan2(x).clamp(0.0, PI);
             self.straight_m + a * r

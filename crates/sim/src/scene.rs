@@ -1,9 +1,9 @@
 //! Scenes: a TOML file (ground, boundary walls, an optional oval track, decals and placed object
 //! models), the objects it places, and a seeded procedural generator per scene kind.
 
+use crate::SimError;
 use crate::assets::AssetSource;
 use crate::urdf::{ShapeSpec, UrdfModel};
-use crate::SimError;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rapier3d::prelude::*;
@@ -108,7 +108,11 @@ pub struct TrackSpec {
 impl TrackSpec {
     /// The track's plain geometry (progress along the centre line).
     pub fn oval(&self) -> crate::msg::OvalTrack {
-        crate::msg::OvalTrack { straight_m: self.straight_m, inner_radius_m: self.inner_radius_m, outer_radius_m: self.outer_radius_m }
+        crate::msg::OvalTrack {
+            straight_m: self.straight_m,
+            inner_radius_m: self.inner_radius_m,
+            outer_radius_m: self.outer_radius_m,
+        }
     }
 
     /// Walls as boxes: (half extents, pose).
@@ -118,8 +122,14 @@ impl TrackSpec {
         let h = self.straight_m / 2.0;
         let mut out = Vec::new();
         for sx in [-1.0f32, 1.0] {
-            out.push((Vector::new(t / 2.0, h, hz), Pose::translation(sx * (self.inner_radius_m - t / 2.0), 0.0, hz)));
-            out.push((Vector::new(t / 2.0, h, hz), Pose::translation(sx * (self.outer_radius_m + t / 2.0), 0.0, hz)));
+            out.push((
+                Vector::new(t / 2.0, h, hz),
+                Pose::translation(sx * (self.inner_radius_m - t / 2.0), 0.0, hz),
+            ));
+            out.push((
+                Vector::new(t / 2.0, h, hz),
+                Pose::translation(sx * (self.outer_radius_m + t / 2.0), 0.0, hz),
+            ));
         }
         let n = (180.0 / self.segment_deg).round().max(1.0) as usize;
         let step = PI / n as f32;
@@ -131,7 +141,10 @@ impl TrackSpec {
                     let half_len = face_r * (step / 2.0).tan() + t / 2.0;
                     let rc = face_r + side * t / 2.0;
                     let rot = Rotation::from_rotation_z(mid);
-                    out.push((Vector::new(t / 2.0, half_len, hz), Pose::from_parts(Vector::new(rc * c, cy + rc * s, hz), rot)));
+                    out.push((
+                        Vector::new(t / 2.0, half_len, hz),
+                        Pose::from_parts(Vector::new(rc * c, cy + rc * s, hz), rot),
+                    ));
                 }
             }
         }
@@ -212,7 +225,10 @@ impl Scene {
         if src.read(&rel).is_err() {
             return Err(SimError::Invalid {
                 context: "scene".into(),
-                msg: format!("unknown scene '{id}'; built-in scenes: {}", src.list("scenes", "toml").join(", ")),
+                msg: format!(
+                    "unknown scene '{id}'; built-in scenes: {}",
+                    src.list("scenes", "toml").join(", ")
+                ),
             });
         }
         Self::load(src, &rel)
@@ -221,21 +237,33 @@ impl Scene {
     /// Load the scene TOML at `rel`; object models come from `objects/` of the built-in assets.
     pub fn load(src: &AssetSource, rel: &str) -> Result<Self, SimError> {
         let text = src.read(rel)?;
-        let file: SceneFile =
-            toml::from_str(&text).map_err(|e| SimError::Toml { path: src.display_path(rel), msg: e.to_string() })?;
-        Self::build(file, &AssetSource::builtin(), &src.display_path(rel).display().to_string())
+        let file: SceneFile = toml::from_str(&text).map_err(|e| SimError::Toml {
+            path: src.display_path(rel),
+            msg: e.to_string(),
+        })?;
+        Self::build(
+            file,
+            &AssetSource::builtin(),
+            &src.display_path(rel).display().to_string(),
+        )
     }
 
     /// Build the objects of `file`, reading models from `objects/` of `models`.
     pub fn build(file: SceneFile, models: &AssetSource, context: &str) -> Result<Self, SimError> {
-        let invalid = |msg: String| SimError::Invalid { context: context.to_string(), msg };
+        let invalid = |msg: String| SimError::Invalid {
+            context: context.to_string(),
+            msg,
+        };
         let [gx, gy] = file.ground.size_m;
         if !(gx > 0.0 && gy > 0.0 && file.ground.friction >= 0.0) {
             return Err(invalid("ground.size_m must be positive and friction >= 0".into()));
         }
         let catalog: HashMap<String, CatalogEntry> = {
             let text = models.read("objects/catalog.toml")?;
-            toml::from_str(&text).map_err(|e| SimError::Toml { path: models.display_path("objects/catalog.toml"), msg: e.to_string() })?
+            toml::from_str(&text).map_err(|e| SimError::Toml {
+                path: models.display_path("objects/catalog.toml"),
+                msg: e.to_string(),
+            })?
         };
         let mut objects = Vec::new();
         if let Some(b) = &file.boundary {
@@ -258,23 +286,48 @@ impl Scene {
                     color: b.color,
                 });
             }
-            objects.push(SceneObject { id: 0, model: "boundary".into(), class: "wall".into(), shapes });
+            objects.push(SceneObject {
+                id: 0,
+                model: "boundary".into(),
+                class: "wall".into(),
+                shapes,
+            });
         }
         if let Some(t) = &file.track {
-            if !(t.straight_m >= 0.0 && t.inner_radius_m > 0.0 && t.outer_radius_m > t.inner_radius_m && t.segment_deg > 0.0) {
-                return Err(invalid("track needs straight_m >= 0 and 0 < inner_radius_m < outer_radius_m".into()));
+            if !(t.straight_m >= 0.0
+                && t.inner_radius_m > 0.0
+                && t.outer_radius_m > t.inner_radius_m
+                && t.segment_deg > 0.0)
+            {
+                return Err(invalid(
+                    "track needs straight_m >= 0 and 0 < inner_radius_m < outer_radius_m".into(),
+                ));
             }
             let shapes = t
                 .wall_boxes()
                 .into_iter()
-                .map(|(he, pose)| ShapeSpec { shape: SharedShape::cuboid(he.x, he.y, he.z), pose, link: "wall".into(), color: t.color })
+                .map(|(he, pose)| ShapeSpec {
+                    shape: SharedShape::cuboid(he.x, he.y, he.z),
+                    pose,
+                    link: "wall".into(),
+                    color: t.color,
+                })
                 .collect();
-            objects.push(SceneObject { id: 0, model: "track".into(), class: "wall".into(), shapes });
+            objects.push(SceneObject {
+                id: 0,
+                model: "track".into(),
+                class: "wall".into(),
+                shapes,
+            });
         }
         let mut cache: HashMap<String, UrdfModel> = HashMap::new();
         for (i, p) in file.objects.iter().enumerate() {
             if p.scale.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-                return Err(invalid(format!("object {} ('{}'): scale must be positive", i + 1, p.model)));
+                return Err(invalid(format!(
+                    "object {} ('{}'): scale must be positive",
+                    i + 1,
+                    p.model
+                )));
             }
             let entry = catalog.get(&p.model).ok_or_else(|| {
                 let mut known: Vec<&String> = catalog.keys().collect();
@@ -287,17 +340,31 @@ impl Scene {
                 ))
             })?;
             if !cache.contains_key(&p.model) {
-                cache.insert(p.model.clone(), UrdfModel::read(models, &format!("objects/{}.urdf", p.model))?);
+                cache.insert(
+                    p.model.clone(),
+                    UrdfModel::read(models, &format!("objects/{}.urdf", p.model))?,
+                );
             }
             let model = &cache[&p.model];
             let scale = Vector::from_array(p.scale);
-            let place = Pose::from_parts(Vector::new(p.x_m, p.y_m, 0.0), Rotation::from_rotation_z(p.yaw_deg.to_radians()));
+            let place = Pose::from_parts(
+                Vector::new(p.x_m, p.y_m, 0.0),
+                Rotation::from_rotation_z(p.yaw_deg.to_radians()),
+            );
             let shapes = model
                 .collision_shapes(models, scale, |_| true)?
                 .into_iter()
-                .map(|s| ShapeSpec { pose: place * s.pose, ..s })
+                .map(|s| ShapeSpec {
+                    pose: place * s.pose,
+                    ..s
+                })
                 .collect();
-            objects.push(SceneObject { id: 0, model: p.model.clone(), class: entry.class.clone(), shapes });
+            objects.push(SceneObject {
+                id: 0,
+                model: p.model.clone(),
+                class: entry.class.clone(),
+                shapes,
+            });
         }
         for (i, o) in objects.iter_mut().enumerate() {
             o.id = i as u32;
@@ -320,9 +387,22 @@ impl Scene {
         let mut file = SceneFile {
             name: format!("{}-procedural-{seed}", kind_name(kind)),
             kind,
-            ground: GroundSpec { size_m: [2.0 * half_m + 1.0; 2], friction: 1.0, color: [0.36, 0.5, 0.26] },
-            boundary: Some(BoundarySpec { inner_half_m: half_m, thickness_m: 0.5, height_m: 1.0, color: [0.6, 0.6, 0.6] }),
-            spawn: SpawnSpec { x_m: 0.0, y_m: 0.0, yaw_deg: 0.0 },
+            ground: GroundSpec {
+                size_m: [2.0 * half_m + 1.0; 2],
+                friction: 1.0,
+                color: [0.36, 0.5, 0.26],
+            },
+            boundary: Some(BoundarySpec {
+                inner_half_m: half_m,
+                thickness_m: 0.5,
+                height_m: 1.0,
+                color: [0.6, 0.6, 0.6],
+            }),
+            spawn: SpawnSpec {
+                x_m: 0.0,
+                y_m: 0.0,
+                yaw_deg: 0.0,
+            },
             track: None,
             decals: vec![],
             objects: vec![],
@@ -337,7 +417,9 @@ impl Scene {
                 let x = rng.random_range(-half_m + radius..half_m - radius);
                 let y = rng.random_range(-half_m + radius..half_m - radius);
                 if (x * x + y * y).sqrt() < clearance_m + radius
-                    || taken.iter().any(|(tx, ty, tr)| ((x - tx).powi(2) + (y - ty).powi(2)).sqrt() < radius + tr + spacing)
+                    || taken
+                        .iter()
+                        .any(|(tx, ty, tr)| ((x - tx).powi(2) + (y - ty).powi(2)).sqrt() < radius + tr + spacing)
                 {
                     continue;
                 }
@@ -355,7 +437,13 @@ impl Scene {
             SceneKind::Outdoor => {
                 // AutoVRL's densities: 11 objects on 400 m^2, 73 on 2500 m^2.
                 let n = (area * 0.028).round() as usize;
-                place(&mut rng, n, &[("tree", 0.6), ("rock_1", 1.7), ("rock_2", 1.1)], &mut file.objects, 1.2);
+                place(
+                    &mut rng,
+                    n,
+                    &[("tree", 0.6), ("rock_1", 1.7), ("rock_2", 1.1)],
+                    &mut file.objects,
+                    1.2,
+                );
             }
             SceneKind::Urban => {
                 let road_half = (half_m * 0.3).clamp(3.0, 7.5);
@@ -380,8 +468,16 @@ impl Scene {
                         continue;
                     }
                     let y = side * rng.random_range(y_lo..half_m - sy / 2.0);
-                    let r = [x - sx / 2.0 - 1.0, x + sx / 2.0 + 1.0, y - sy / 2.0 - 1.0, y + sy / 2.0 + 1.0];
-                    if taken.iter().any(|t| r[0] < t[1] && r[1] > t[0] && r[2] < t[3] && r[3] > t[2]) {
+                    let r = [
+                        x - sx / 2.0 - 1.0,
+                        x + sx / 2.0 + 1.0,
+                        y - sy / 2.0 - 1.0,
+                        y + sy / 2.0 + 1.0,
+                    ];
+                    if taken
+                        .iter()
+                        .any(|t| r[0] < t[1] && r[1] > t[0] && r[2] < t[3] && r[3] > t[2])
+                    {
                         continue;
                     }
                     taken.push(r);
@@ -403,12 +499,26 @@ impl Scene {
                     if x.abs() < clearance_m + 3.0 {
                         continue;
                     }
-                    let y = if rng.random::<bool>() { road_half - 1.2 } else { -road_half + 1.2 };
-                    if file.objects.iter().any(|o| o.model.starts_with("car") && (o.x_m - x).abs() < 6.0 && (o.y_m - y).abs() < 1.0) {
+                    let y = if rng.random::<bool>() {
+                        road_half - 1.2
+                    } else {
+                        -road_half + 1.2
+                    };
+                    if file
+                        .objects
+                        .iter()
+                        .any(|o| o.model.starts_with("car") && (o.x_m - x).abs() < 6.0 && (o.y_m - y).abs() < 1.0)
+                    {
                         continue;
                     }
                     let model = if rng.random::<bool>() { "car_1" } else { "car_2" };
-                    file.objects.push(Placement { model: model.into(), x_m: x, y_m: y, yaw_deg: 0.0, scale: [1.0; 3] });
+                    file.objects.push(Placement {
+                        model: model.into(),
+                        x_m: x,
+                        y_m: y,
+                        yaw_deg: 0.0,
+                        scale: [1.0; 3],
+                    });
                     placed += 1;
                 }
             }
@@ -418,7 +528,11 @@ impl Scene {
                 file.boundary = None;
                 file.ground.size_m = [2.0 * (inner + 4.0) + 2.0, straight + 2.0 * (inner + 4.0) + 2.0];
                 file.ground.color = [0.5, 0.5, 0.5];
-                file.spawn = SpawnSpec { x_m: inner + 1.0, y_m: 0.0, yaw_deg: -90.0 };
+                file.spawn = SpawnSpec {
+                    x_m: inner + 1.0,
+                    y_m: 0.0,
+                    yaw_deg: -90.0,
+                };
                 file.track = Some(TrackSpec {
                     straight_m: straight,
                     inner_radius_m: inner,

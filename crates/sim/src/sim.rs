@@ -1,14 +1,14 @@
 //! `Sim`: one vehicle in one scene, stepped one control period at a time.
 
+use crate::SimError;
 use crate::assets::AssetSource;
 use crate::msg::{GpsReading, ImuReading, LaserScan};
 use crate::scene::{Scene, SceneKind};
 use crate::sensors::imu::ImuState;
-use crate::sensors::{gps, GpsConfig, Lidar, LidarConfig};
+use crate::sensors::{GpsConfig, Lidar, LidarConfig, gps};
 use crate::vehicle::body::Body;
-use crate::vehicle::{ackermann_split, BodyParams, Control, DriveModel, DynamicsMode, VehicleModel};
+use crate::vehicle::{BodyParams, Control, DriveModel, DynamicsMode, VehicleModel, ackermann_split};
 use crate::world::World;
-use crate::SimError;
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -117,7 +117,10 @@ pub struct Sim {
 impl Sim {
     /// Build the world once: scene, vehicle at the scene's spawn, sensors.
     pub fn new(cfg: SimConfig) -> Result<Self, SimError> {
-        let invalid = |msg: String| SimError::Invalid { context: "sim config".into(), msg };
+        let invalid = |msg: String| SimError::Invalid {
+            context: "sim config".into(),
+            msg,
+        };
         if !(cfg.control_period_s > 0.0 && cfg.control_period_s.is_finite()) || cfg.substeps == 0 {
             return Err(invalid("control_period_s must be positive and substeps >= 1".into()));
         }
@@ -133,7 +136,11 @@ impl Sim {
             SceneSource::Builtin(id) => Scene::builtin(&assets, id)?,
             SceneSource::File(path) => {
                 let dir = path.parent().map(|p| p.to_path_buf()).unwrap_or_default();
-                let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string();
+                let name = path
+                    .file_name()
+                    .and_then(|n| n.to_str())
+                    .unwrap_or_default()
+                    .to_string();
                 Scene::load(&AssetSource::Dir(dir), &name)?
             }
             SceneSource::Procedural { kind, seed, half_m } => Scene::procedural(*kind, *seed, *half_m, 2.0)?,
@@ -141,7 +148,11 @@ impl Sim {
         let model = if cfg.vehicle.ends_with(".toml") {
             let path = PathBuf::from(&cfg.vehicle);
             let dir = path.parent().map(|p| p.to_path_buf()).unwrap_or_default();
-            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string();
+            let name = path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .unwrap_or_default()
+                .to_string();
             VehicleModel::load(&AssetSource::Dir(dir), &name)?
         } else {
             VehicleModel::builtin(&assets, &cfg.vehicle)?
@@ -149,14 +160,28 @@ impl Sim {
         let mut world = World::new(&scene, (cfg.control_period_s / cfg.substeps as f64) as f32);
         let d = model.spec.drive;
         let nominal = VehicleParams {
-            drive: DriveModel { c_t: d.c_t, c_d: d.c_d, c_r: d.c_r },
+            drive: DriveModel {
+                c_t: d.c_t,
+                c_d: d.c_d,
+                c_r: d.c_r,
+            },
             tyre_friction: model.spec.tyre_friction,
             mass_scale: 1.0,
             steering_offset_rad: 0.0,
         };
         let spawn = scene.file.spawn;
-        let pose2 = PlanarPose { x_m: spawn.x_m, y_m: spawn.y_m, yaw_rad: spawn.yaw_deg.to_radians() };
-        let body = Body::new(&mut world, &model, cfg.mode, spawn_pose(&model, pose2), body_params(&nominal))?;
+        let pose2 = PlanarPose {
+            x_m: spawn.x_m,
+            y_m: spawn.y_m,
+            yaw_rad: spawn.yaw_deg.to_radians(),
+        };
+        let body = Body::new(
+            &mut world,
+            &model,
+            cfg.mode,
+            spawn_pose(&model, pose2),
+            body_params(&nominal),
+        )?;
         let lidar = Lidar::new(cfg.lidar.clone());
         // One physics step first, so the snapshot holds a built broad phase: the wheel rays of
         // the first substep after every reset then see the ground.
@@ -217,7 +242,11 @@ impl Sim {
     /// AutoVRL's fixed spawn of this scene.
     pub fn default_spawn(&self) -> PlanarPose {
         let s = self.scene.file.spawn;
-        PlanarPose { x_m: s.x_m, y_m: s.y_m, yaw_rad: s.yaw_deg.to_radians() }
+        PlanarPose {
+            x_m: s.x_m,
+            y_m: s.y_m,
+            yaw_rad: s.yaw_deg.to_radians(),
+        }
     }
 
     /// Put the vehicle at `pose` on the ground, at rest, wheel speed 0 (no scene reload).
@@ -241,22 +270,39 @@ impl Sim {
     /// steering, and run the physics substeps.
     pub fn step(&mut self, control: Control) -> Result<(), SimError> {
         let c = Control {
-            throttle: if control.throttle.is_finite() { control.throttle.clamp(0.0, 1.0) } else { 0.0 },
-            steering_rad: if control.steering_rad.is_finite() { control.steering_rad } else { 0.0 },
+            throttle: if control.throttle.is_finite() {
+                control.throttle.clamp(0.0, 1.0)
+            } else {
+                0.0
+            },
+            steering_rad: if control.steering_rad.is_finite() {
+                control.steering_rad
+            } else {
+                0.0
+            },
         };
         let max = self.model.spec.steering.max_rad;
         let delta = (c.steering_rad + self.params.steering_offset_rad).clamp(-max, max);
         let t = self.cfg.control_period_s;
         self.wheel_speed = self.params.drive.advance(self.wheel_speed, c.throttle, t);
         let ack = self.cfg.ackermann.unwrap_or(self.model.spec.steering.ackermann);
-        self.wheel_angles = ackermann_split(delta, self.model.wheelbase_m as f64, self.model.front_track_m as f64, ack);
-        self.control = Control { throttle: c.throttle, steering_rad: delta };
+        self.wheel_angles = ackermann_split(
+            delta,
+            self.model.wheelbase_m as f64,
+            self.model.front_track_m as f64,
+            ack,
+        );
+        self.control = Control {
+            throttle: c.throttle,
+            steering_rad: delta,
+        };
         let bp = body_params(&self.params);
         let steer = (self.wheel_angles.0 as f32, self.wheel_angles.1 as f32);
         let mut before = self.base_pose();
         for _ in 0..self.cfg.substeps {
             before = self.base_pose();
-            self.body.substep(&mut self.world, &self.model, self.wheel_speed as f32, steer, bp);
+            self.body
+                .substep(&mut self.world, &self.model, self.wheel_speed as f32, steer, bp);
         }
         self.time_s += t;
         self.steps += 1;
@@ -267,7 +313,11 @@ impl Sim {
         let h = self.world.pw.integration_parameters.dt;
         let lin = (after.translation - before.translation) / h;
         let (axis, angle) = (after.rotation * before.rotation.inverse()).to_axis_angle();
-        let ang = if angle.is_finite() && axis.is_finite() { axis * (angle / h) } else { Vector::ZERO };
+        let ang = if angle.is_finite() && axis.is_finite() {
+            axis * (angle / h)
+        } else {
+            Vector::ZERO
+        };
         if !(after.is_finite() && lin.is_finite() && ang.is_finite()) {
             return Err(SimError::NotFinite(format!("vehicle state after step {}", self.steps)));
         }
@@ -310,7 +360,11 @@ impl Sim {
     pub fn pose2(&self) -> PlanarPose {
         let p = self.base_pose();
         let fwd = p.rotation * Vector::X;
-        PlanarPose { x_m: p.translation.x, y_m: p.translation.y, yaw_rad: fwd.y.atan2(fwd.x) }
+        PlanarPose {
+            x_m: p.translation.x,
+            y_m: p.translation.y,
+            yaw_rad: fwd.y.atan2(fwd.x),
+        }
     }
 
     /// Linear velocity of the base origin over the last physics substep, world frame, m/s.
@@ -353,7 +407,11 @@ impl Sim {
                 if !pair.has_any_active_contact() {
                     continue;
                 }
-                let other = if pair.collider1 == h { pair.collider2 } else { pair.collider1 };
+                let other = if pair.collider1 == h {
+                    pair.collider2
+                } else {
+                    pair.collider1
+                };
                 if let Some(id) = self.world.object_id(other) {
                     out.push(id);
                 }
@@ -400,12 +458,20 @@ impl Sim {
     /// the answer does not depend on the broad phase's state.
     pub fn free_at(&self, x: f32, y: f32, radius_m: f32) -> bool {
         let shape = Cylinder::new(0.45, radius_m);
-        let pose = Pose::from_parts(Vector::new(x, y, 0.55), Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2));
-        let aabb = Aabb::new(Vector::new(x - radius_m, y - radius_m, 0.1), Vector::new(x + radius_m, y + radius_m, 1.0));
+        let pose = Pose::from_parts(
+            Vector::new(x, y, 0.55),
+            Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2),
+        );
+        let aabb = Aabb::new(
+            Vector::new(x - radius_m, y - radius_m, 0.1),
+            Vector::new(x + radius_m, y + radius_m, 1.0),
+        );
         !self.world.statics.entries.iter().any(|e| {
             e.object_id.is_some()
                 && e.aabb.intersects(&aabb)
-                && rapier3d::parry::query::intersection_test(&pose, &shape, &e.pose, e.shape.as_ref()).map(|i| i.intersecting).unwrap_or(true)
+                && rapier3d::parry::query::intersection_test(&pose, &shape, &e.pose, e.shape.as_ref())
+                    .map(|i| i.intersecting)
+                    .unwrap_or(true)
         })
     }
 
@@ -416,10 +482,16 @@ impl Sim {
 }
 
 fn body_params(p: &VehicleParams) -> BodyParams {
-    BodyParams { tyre_friction: p.tyre_friction, mass_scale: p.mass_scale }
+    BodyParams {
+        tyre_friction: p.tyre_friction,
+        mass_scale: p.mass_scale,
+    }
 }
 
 fn spawn_pose(model: &VehicleModel, p: PlanarPose) -> Pose {
     // A hair above the ground so the first contact is not a penetration.
-    Pose::from_parts(Vector::new(p.x_m, p.y_m, model.rest_height_m() + 0.002), Rotation::from_rotation_z(p.yaw_rad))
+    Pose::from_parts(
+        Vector::new(p.x_m, p.y_m, model.rest_height_m() + 0.002),
+        Rotation::from_rotation_z(p.yaw_rad),
+    )
 }

@@ -2,8 +2,8 @@
 //! shapes (primitives, and meshes as convex hulls) and colours. Parsing goes through the urdf-rs
 //! that rapier3d-urdf re-exports; every error names the file.
 
-use crate::assets::{join_rel, AssetSource};
 use crate::SimError;
+use crate::assets::{AssetSource, join_rel};
 use rapier3d::prelude::*;
 use rapier3d_urdf::urdf_rs;
 use std::collections::HashMap;
@@ -38,7 +38,9 @@ pub struct ShapeSpec {
 pub fn pose_from_urdf(p: &urdf_rs::Pose) -> Pose {
     let [x, y, z] = p.xyz.0;
     let [r, pi, ya] = p.rpy.0;
-    let rot = Rotation::from_rotation_z(ya as f32) * Rotation::from_rotation_y(pi as f32) * Rotation::from_rotation_x(r as f32);
+    let rot = Rotation::from_rotation_z(ya as f32)
+        * Rotation::from_rotation_y(pi as f32)
+        * Rotation::from_rotation_x(r as f32);
     Pose::from_parts(Vector::new(x as f32, y as f32, z as f32), rot)
 }
 
@@ -51,13 +53,21 @@ impl UrdfModel {
 
     /// Parse URDF text that came from `rel`.
     pub fn parse(src: &AssetSource, rel: &str, text: &str) -> Result<Self, SimError> {
-        let err = |msg: String| SimError::Urdf { path: src.display_path(rel), msg };
+        let err = |msg: String| SimError::Urdf {
+            path: src.display_path(rel),
+            msg,
+        };
         let robot = urdf_rs::read_from_string(text).map_err(|e| err(e.to_string()))?;
         if robot.links.is_empty() {
             return Err(err("no <link> elements".into()));
         }
         let children: std::collections::HashSet<&str> = robot.joints.iter().map(|j| j.child.link.as_str()).collect();
-        let roots: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).filter(|n| !children.contains(n)).collect();
+        let roots: Vec<&str> = robot
+            .links
+            .iter()
+            .map(|l| l.name.as_str())
+            .filter(|n| !children.contains(n))
+            .collect();
         let root = match roots.as_slice() {
             [r] => r.to_string(),
             [] => return Err(err("no root link (every link is some joint's child: a cycle)".into())),
@@ -84,23 +94,36 @@ impl UrdfModel {
                 frontier.push(j.child.link.clone());
             }
         }
-        Ok(Self { rel_path: rel.to_string(), robot, root, link_pose })
+        Ok(Self {
+            rel_path: rel.to_string(),
+            robot,
+            root,
+            link_pose,
+        })
     }
 
     /// The link named `name`.
     pub fn link(&self, name: &str) -> Result<&urdf_rs::Link, SimError> {
-        self.robot.links.iter().find(|l| l.name == name).ok_or_else(|| SimError::Invalid {
-            context: self.rel_path.clone(),
-            msg: format!("no link named '{name}'"),
-        })
+        self.robot
+            .links
+            .iter()
+            .find(|l| l.name == name)
+            .ok_or_else(|| SimError::Invalid {
+                context: self.rel_path.clone(),
+                msg: format!("no link named '{name}'"),
+            })
     }
 
     /// The joint named `name`.
     pub fn joint(&self, name: &str) -> Result<&urdf_rs::Joint, SimError> {
-        self.robot.joints.iter().find(|j| j.name == name).ok_or_else(|| SimError::Invalid {
-            context: self.rel_path.clone(),
-            msg: format!("no joint named '{name}'"),
-        })
+        self.robot
+            .joints
+            .iter()
+            .find(|j| j.name == name)
+            .ok_or_else(|| SimError::Invalid {
+                context: self.rel_path.clone(),
+                msg: format!("no joint named '{name}'"),
+            })
     }
 
     /// RGB colour of a link: its first visual's material, looked up among the file's named
@@ -109,7 +132,11 @@ impl UrdfModel {
         for v in &link.visual {
             if let Some(m) = &v.material {
                 let c = m.color.clone().or_else(|| {
-                    self.robot.materials.iter().find(|n| n.name == m.name).and_then(|n| n.color.clone())
+                    self.robot
+                        .materials
+                        .iter()
+                        .find(|n| n.name == m.name)
+                        .and_then(|n| n.color.clone())
                 });
                 if let Some(c) = c {
                     let [r, g, b, _] = c.rgba.0;
@@ -135,7 +162,12 @@ impl UrdfModel {
             for c in &link.collision {
                 let local = link_pose * pose_from_urdf(&c.origin);
                 let (shape, pose) = self.shape(src, &c.geometry, local, scale)?;
-                out.push(ShapeSpec { shape, pose, link: link.name.clone(), color });
+                out.push(ShapeSpec {
+                    shape,
+                    pose,
+                    link: link.name.clone(),
+                    color,
+                });
             }
         }
         Ok(out)
@@ -148,7 +180,10 @@ impl UrdfModel {
         pose: Pose,
         scale: Vector,
     ) -> Result<(SharedShape, Pose), SimError> {
-        let bad = |msg: String| SimError::Urdf { path: src.display_path(&self.rel_path), msg };
+        let bad = |msg: String| SimError::Urdf {
+            path: src.display_path(&self.rel_path),
+            msg,
+        };
         // Scale factor along each of the shape's local axes.
         let axis_scale = |i: usize| -> f32 {
             let d = pose.rotation * Vector::ith(i, 1.0);
@@ -156,7 +191,11 @@ impl UrdfModel {
         };
         let scaled_pose = Pose::from_parts(pose.translation * scale, pose.rotation);
         let positive = |v: f64, what: &str| -> Result<f32, SimError> {
-            if v.is_finite() && v > 0.0 { Ok(v as f32) } else { Err(bad(format!("{what} must be positive, got {v}"))) }
+            if v.is_finite() && v > 0.0 {
+                Ok(v as f32)
+            } else {
+                Err(bad(format!("{what} must be positive, got {v}")))
+            }
         };
         Ok(match g {
             urdf_rs::Geometry::Box { size } => {
@@ -173,7 +212,10 @@ impl UrdfModel {
                 let hh = positive(*length, "cylinder length")? / 2.0 * axis_scale(2);
                 // URDF cylinders run along z, rapier's along y.
                 let rot = scaled_pose.rotation * Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2);
-                (SharedShape::cylinder(hh, r), Pose::from_parts(scaled_pose.translation, rot))
+                (
+                    SharedShape::cylinder(hh, r),
+                    Pose::from_parts(scaled_pose.translation, rot),
+                )
             }
             urdf_rs::Geometry::Capsule { radius, length } => {
                 let r = positive(*radius, "capsule radius")? * 0.5 * (axis_scale(0) + axis_scale(1));
@@ -184,14 +226,23 @@ impl UrdfModel {
                 let r = positive(*radius, "sphere radius")? * (axis_scale(0) + axis_scale(1) + axis_scale(2)) / 3.0;
                 (SharedShape::ball(r), scaled_pose)
             }
-            urdf_rs::Geometry::Mesh { filename, scale: mscale } => {
+            urdf_rs::Geometry::Mesh {
+                filename,
+                scale: mscale,
+            } => {
                 let rel = join_rel(&self.rel_path, filename.trim_start_matches("package://"));
-                let text = src.read(&rel).map_err(|e| SimError::Mesh { path: src.display_path(&rel), msg: e.to_string() })?;
+                let text = src.read(&rel).map_err(|e| SimError::Mesh {
+                    path: src.display_path(&rel),
+                    msg: e.to_string(),
+                })?;
                 let ms = mscale.map(|s| s.0).unwrap_or([1.0, 1.0, 1.0]);
                 let ms = Vector::new(ms[0] as f32, ms[1] as f32, ms[2] as f32);
                 // Hull in the model root frame so the per-axis scale is exact.
                 let pts: Vec<Vector> = parse_obj_vertices(&text)
-                    .map_err(|msg| SimError::Mesh { path: src.display_path(&rel), msg })?
+                    .map_err(|msg| SimError::Mesh {
+                        path: src.display_path(&rel),
+                        msg,
+                    })?
                     .into_iter()
                     .map(|v| (pose * (v * ms)) * scale)
                     .collect();
@@ -213,7 +264,11 @@ pub fn parse_obj_vertices(text: &str) -> Result<Vec<Vector>, String> {
         if it.next() != Some("v") {
             continue;
         }
-        let xyz: Vec<f32> = it.take(3).map(|s| s.parse::<f32>()).collect::<Result<_, _>>().map_err(|e| format!("line {}: {e}", i + 1))?;
+        let xyz: Vec<f32> = it
+            .take(3)
+            .map(|s| s.parse::<f32>())
+            .collect::<Result<_, _>>()
+            .map_err(|e| format!("line {}: {e}", i + 1))?;
         if xyz.len() != 3 || xyz.iter().any(|v| !v.is_finite()) {
             return Err(format!("line {}: a vertex needs three finite numbers", i + 1));
         }

@@ -79,7 +79,11 @@ impl World {
                 .translation(Vector::new(0.0, 0.0, -0.05))
                 .friction(scene.file.ground.friction)
                 .friction_combine_rule(CoefficientCombineRule::Multiply)
-                .collision_groups(InteractionGroups::new(groups::GROUND, Group::ALL, InteractionTestMode::And))
+                .collision_groups(InteractionGroups::new(
+                    groups::GROUND,
+                    Group::ALL,
+                    InteractionTestMode::And,
+                ))
                 .user_data(GROUND_USER_DATA),
             Some(ground_body),
         );
@@ -99,7 +103,11 @@ impl World {
                     ColliderBuilder::new(s.shape.clone())
                         .position(s.pose)
                         .friction(0.5)
-                        .collision_groups(InteractionGroups::new(groups::OBSTACLE, Group::ALL, InteractionTestMode::And))
+                        .collision_groups(InteractionGroups::new(
+                            groups::OBSTACLE,
+                            Group::ALL,
+                            InteractionTestMode::And,
+                        ))
                         .user_data(obj.id as u128 + 1),
                     Some(body),
                 );

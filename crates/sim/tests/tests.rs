@@ -33,7 +33,12 @@ fn room(half: f32, name: &str) -> SceneSource {
 }
 
 fn sim(scene: SceneSource, mode: DynamicsMode) -> Sim {
-    Sim::new(SimConfig { scene, mode, ..SimConfig::default() }).unwrap()
+    Sim::new(SimConfig {
+        scene,
+        mode,
+        ..SimConfig::default()
+    })
+    .unwrap()
 }
 
 fn run(s: &mut Sim, c: Control, steps: usize) {
@@ -49,8 +54,20 @@ mod issue_2_dynamics {
     fn full_throttle_reaches_model_steady_state_without_slip() {
         for mode in MODES {
             let mut s = sim(room(40.0, "ss"), mode);
-            s.reset(PlanarPose { x_m: -30.0, y_m: 0.0, yaw_rad: 0.0 }).unwrap();
-            run(&mut s, Control { throttle: 1.0, steering_rad: 0.0 }, 300);
+            s.reset(PlanarPose {
+                x_m: -30.0,
+                y_m: 0.0,
+                yaw_rad: 0.0,
+            })
+            .unwrap();
+            run(
+                &mut s,
+                Control {
+                    throttle: 1.0,
+                    steering_rad: 0.0,
+                },
+                300,
+            );
             let p = s.nominal_params().drive;
             let w_ss = p.steady_state(1.0);
             let w = s.wheel_speed_radps();
@@ -59,7 +76,11 @@ mod issue_2_dynamics {
             let wr = w * s.vehicle().drive_radius_m() as f64;
             assert!((v - wr).abs() / wr < 0.05, "{mode:?}: ground speed {v} vs w r {wr}");
             let imu = s.imu();
-            assert!(imu.lin_vel_b[1].abs() < 0.05 * v, "{mode:?}: sideways drift {}", imu.lin_vel_b[1]);
+            assert!(
+                imu.lin_vel_b[1].abs() < 0.05 * v,
+                "{mode:?}: sideways drift {}",
+                imu.lin_vel_b[1]
+            );
             assert!(s.pose2().y_m.abs() < 0.5, "{mode:?}: drifted to y = {}", s.pose2().y_m);
         }
     }
@@ -70,16 +91,30 @@ mod issue_2_dynamics {
             for delta in [0.2f64, -0.3] {
                 let mut s = sim(room(40.0, "turn"), mode);
                 // T = 0.15 gives w = 10 rad/s, 0.5 m/s.
-                run(&mut s, Control { throttle: 0.15, steering_rad: delta }, 240);
+                run(
+                    &mut s,
+                    Control {
+                        throttle: 0.15,
+                        steering_rad: delta,
+                    },
+                    240,
+                );
                 let (mut v_sum, mut w_sum) = (0.0, 0.0);
                 for _ in 0..60 {
-                    s.step(Control { throttle: 0.15, steering_rad: delta }).unwrap();
+                    s.step(Control {
+                        throttle: 0.15,
+                        steering_rad: delta,
+                    })
+                    .unwrap();
                     v_sum += s.forward_speed_mps() as f64;
                     w_sum += s.yaw_rate_radps() as f64;
                 }
                 let r = v_sum / w_sum;
                 let expect = L_XTENTH / delta.tan();
-                assert!((r - expect).abs() / expect.abs() < 0.10, "{mode:?} delta {delta}: radius {r} vs {expect}");
+                assert!(
+                    (r - expect).abs() / expect.abs() < 0.10,
+                    "{mode:?} delta {delta}: radius {r} vs {expect}"
+                );
             }
         }
     }
@@ -88,10 +123,19 @@ mod issue_2_dynamics {
     fn no_tunnelling_through_a_wall_at_top_speed() {
         for mode in MODES {
             let mut s = sim(room(6.0, "wall"), mode);
-            s.reset(PlanarPose { x_m: -5.0, y_m: 0.0, yaw_rad: 0.0 }).unwrap();
+            s.reset(PlanarPose {
+                x_m: -5.0,
+                y_m: 0.0,
+                yaw_rad: 0.0,
+            })
+            .unwrap();
             let mut touched = false;
             for _ in 0..400 {
-                s.step(Control { throttle: 1.0, steering_rad: 0.0 }).unwrap();
+                s.step(Control {
+                    throttle: 1.0,
+                    steering_rad: 0.0,
+                })
+                .unwrap();
                 touched |= !s.contacts().is_empty();
                 // Wall face at x = 6; the front of the car is ~0.42 m ahead of the base.
                 assert!(s.pose2().x_m < 6.0, "{mode:?}: passed the wall, x = {}", s.pose2().x_m);
@@ -110,7 +154,11 @@ mod issue_2_dynamics {
             let p1 = s.pose2();
             let moved = ((p1.x_m - p0.x_m).powi(2) + (p1.y_m - p0.y_m).powi(2)).sqrt();
             assert!(moved < 1e-3, "{mode:?}: moved {moved} m at rest");
-            assert!(s.linvel_w().length() < 1e-2, "{mode:?}: speed {} at rest", s.linvel_w().length());
+            assert!(
+                s.linvel_w().length() < 1e-2,
+                "{mode:?}: speed {} at rest",
+                s.linvel_w().length()
+            );
         }
     }
 
@@ -123,7 +171,11 @@ mod issue_2_dynamics {
                 let mut x = 0.3f64;
                 for _ in 0..150 {
                     x = (x * 3.7 * (1.0 - x)).clamp(0.0, 1.0);
-                    s.step(Control { throttle: x, steering_rad: 0.36 * (2.0 * x - 1.0) }).unwrap();
+                    s.step(Control {
+                        throttle: x,
+                        steering_rad: 0.36 * (2.0 * x - 1.0),
+                    })
+                    .unwrap();
                     let p = s.base_pose();
                     out.push((p.translation.to_array(), p.rotation.to_array(), s.lidar_scan().ranges));
                 }
@@ -133,12 +185,21 @@ mod issue_2_dynamics {
             // And within one simulator: a reset forgets the earlier episode entirely.
             let mut s = sim(SceneSource::Builtin("outdoor-20".into()), mode);
             let mut replay = || {
-                s.reset(PlanarPose { x_m: 1.0, y_m: -2.0, yaw_rad: 0.7 }).unwrap();
+                s.reset(PlanarPose {
+                    x_m: 1.0,
+                    y_m: -2.0,
+                    yaw_rad: 0.7,
+                })
+                .unwrap();
                 let mut out = Vec::new();
                 let mut x = 0.3f64;
                 for _ in 0..200 {
                     x = (x * 3.7 * (1.0 - x)).clamp(0.0, 1.0);
-                    s.step(Control { throttle: x, steering_rad: 0.36 * (2.0 * x - 1.0) }).unwrap();
+                    s.step(Control {
+                        throttle: x,
+                        steering_rad: 0.36 * (2.0 * x - 1.0),
+                    })
+                    .unwrap();
                     out.push(s.base_pose().translation.to_array());
                 }
                 out
@@ -150,20 +211,41 @@ mod issue_2_dynamics {
 
     #[test]
     fn ackermann_can_be_switched_to_autovrl_equal_angles() {
-        let mut s = Sim::new(SimConfig { ackermann: Some(false), ..SimConfig::default() }).unwrap();
-        s.step(Control { throttle: 0.0, steering_rad: 0.3 }).unwrap();
+        let mut s = Sim::new(SimConfig {
+            ackermann: Some(false),
+            ..SimConfig::default()
+        })
+        .unwrap();
+        s.step(Control {
+            throttle: 0.0,
+            steering_rad: 0.3,
+        })
+        .unwrap();
         assert_eq!(s.wheel_angles_rad(), (0.3, 0.3));
         let mut s = Sim::new(SimConfig::default()).unwrap();
-        s.step(Control { throttle: 0.0, steering_rad: 0.3 }).unwrap();
+        s.step(Control {
+            throttle: 0.0,
+            steering_rad: 0.3,
+        })
+        .unwrap();
         let (l, r) = s.wheel_angles_rad();
         assert!(l > 0.3 && r < 0.3, "inner (left) wheel steers more: {l} {r}");
-        s.step(Control { throttle: 0.0, steering_rad: 5.0 }).unwrap();
+        s.step(Control {
+            throttle: 0.0,
+            steering_rad: 5.0,
+        })
+        .unwrap();
         assert_eq!(s.control().steering_rad, 0.36, "steering limit from the vehicle file");
     }
 
     #[test]
     fn substeps_longer_than_a_sixtieth_are_rejected() {
-        let e = Sim::new(SimConfig { substeps: 1, ..SimConfig::default() }).err().expect("must fail");
+        let e = Sim::new(SimConfig {
+            substeps: 1,
+            ..SimConfig::default()
+        })
+        .err()
+        .expect("must fail");
         assert!(e.to_string().contains("1/60"), "{e}");
     }
 }
@@ -191,7 +273,12 @@ mod issue_2_sensors {
         for mode in MODES {
             for (x, y, yaw) in [(1.3f32, -0.7f32, 0.4f32), (-2.0, 1.5, 2.5), (0.5, 2.0, -1.2)] {
                 let mut s = sim(room(half, "lidar"), mode);
-                s.reset(PlanarPose { x_m: x, y_m: y, yaw_rad: yaw }).unwrap();
+                s.reset(PlanarPose {
+                    x_m: x,
+                    y_m: y,
+                    yaw_rad: yaw,
+                })
+                .unwrap();
                 run(&mut s, Control::default(), 30);
                 let g = s.gps();
                 let yaw_now = g.rpy_rad[2] as f32;
@@ -203,7 +290,10 @@ mod issue_2_sensors {
                 for (i, r) in scan.ranges.iter().enumerate() {
                     let a = yaw_now + scan.angle_min + i as f32 * scan.angle_increment;
                     let want = room_range(half, ox, oy, a);
-                    assert!((r - want).abs() < 0.01, "{mode:?} pose ({x},{y},{yaw}) ray {i}: {r} vs {want}");
+                    assert!(
+                        (r - want).abs() < 0.01,
+                        "{mode:?} pose ({x},{y},{yaw}) ray {i}: {r} vs {want}"
+                    );
                     assert!(scan.hit[i]);
                     assert_eq!(scan.object_id[i], Some(0), "the boundary is object 0");
                 }
@@ -221,14 +311,22 @@ mod issue_2_sensors {
             let cfg = SimConfig {
                 scene: room(20.0, "self"),
                 mode,
-                lidar: sensors::LidarConfig { n_rays: 720, fov_deg: 360.0, range_min_m: 0.0, range_max_m: 3.0 },
+                lidar: sensors::LidarConfig {
+                    n_rays: 720,
+                    fov_deg: 360.0,
+                    range_min_m: 0.0,
+                    range_max_m: 3.0,
+                },
                 ..SimConfig::default()
             };
             let mut s = Sim::new(cfg).unwrap();
             for _ in 0..90 {
                 s.step(Control::default()).unwrap();
                 let scan = s.lidar_scan();
-                assert!(scan.hit.iter().all(|h| !h), "{mode:?}: a ray hit something in an empty room");
+                assert!(
+                    scan.hit.iter().all(|h| !h),
+                    "{mode:?}: a ray hit something in an empty room"
+                );
                 assert!(scan.ranges.iter().all(|r| *r == 3.0));
             }
         }
@@ -240,7 +338,11 @@ mod issue_2_sensors {
         let mut x = 0.123f64;
         for _ in 0..200 {
             x = (x * 3.9 * (1.0 - x)).clamp(0.0, 1.0);
-            s.step(Control { throttle: x, steering_rad: 0.3 * (2.0 * x - 1.0) }).unwrap();
+            s.step(Control {
+                throttle: x,
+                steering_rad: 0.3 * (2.0 * x - 1.0),
+            })
+            .unwrap();
             let scan = s.lidar_scan();
             for (r, h) in scan.ranges.iter().zip(&scan.hit) {
                 assert!(*r >= scan.range_min && *r <= scan.range_max);
@@ -255,11 +357,20 @@ mod issue_2_sensors {
     fn imu_at_rest_reads_gravity_and_no_rates() {
         for mode in MODES {
             let mut s = sim(room(10.0, "imu"), mode);
-            s.reset(PlanarPose { x_m: 1.0, y_m: 2.0, yaw_rad: 1.0 }).unwrap();
+            s.reset(PlanarPose {
+                x_m: 1.0,
+                y_m: 2.0,
+                yaw_rad: 1.0,
+            })
+            .unwrap();
             run(&mut s, Control::default(), 90);
             let imu = s.imu();
             assert!((imu.lin_acc_b[2] - 9.81).abs() < 0.05, "{mode:?}: {:?}", imu.lin_acc_b);
-            assert!(imu.lin_acc_b[0].abs() < 0.05 && imu.lin_acc_b[1].abs() < 0.05, "{mode:?}: {:?}", imu.lin_acc_b);
+            assert!(
+                imu.lin_acc_b[0].abs() < 0.05 && imu.lin_acc_b[1].abs() < 0.05,
+                "{mode:?}: {:?}",
+                imu.lin_acc_b
+            );
             for w in imu.ang_vel_b {
                 assert!(w.abs() < 1e-2, "{mode:?}: rates {:?}", imu.ang_vel_b);
             }
@@ -270,13 +381,24 @@ mod issue_2_sensors {
     fn gps_displacement_equals_integrated_imu_velocity() {
         for mode in MODES {
             let mut s = sim(room(20.0, "gps"), mode);
-            run(&mut s, Control { throttle: 0.6, steering_rad: 0.0 }, 30);
+            run(
+                &mut s,
+                Control {
+                    throttle: 0.6,
+                    steering_rad: 0.0,
+                },
+                30,
+            );
             let g0 = s.gps().position_m;
             let dt = s.config().control_period_s;
             let mut v_prev = s.imu().lin_vel_w;
             let mut integ = [0.0f64; 3];
             for _ in 0..60 {
-                s.step(Control { throttle: 0.8, steering_rad: 0.25 }).unwrap();
+                s.step(Control {
+                    throttle: 0.8,
+                    steering_rad: 0.25,
+                })
+                .unwrap();
                 let v = s.imu().lin_vel_w;
                 for k in 0..3 {
                     integ[k] += 0.5 * (v[k] + v_prev[k]) * dt;
@@ -295,11 +417,22 @@ mod issue_2_sensors {
     fn gps_geodetic_fix_moves_north_with_y() {
         let cfg = SimConfig {
             scene: room(20.0, "geo"),
-            gps: sensors::GpsConfig { origin: Some(msg::Geodetic { latitude_deg: 35.0, longitude_deg: -85.0, altitude_m: 200.0 }) },
+            gps: sensors::GpsConfig {
+                origin: Some(msg::Geodetic {
+                    latitude_deg: 35.0,
+                    longitude_deg: -85.0,
+                    altitude_m: 200.0,
+                }),
+            },
             ..SimConfig::default()
         };
         let mut s = Sim::new(cfg).unwrap();
-        s.reset(PlanarPose { x_m: 0.0, y_m: 10.0, yaw_rad: 0.0 }).unwrap();
+        s.reset(PlanarPose {
+            x_m: 0.0,
+            y_m: 10.0,
+            yaw_rad: 0.0,
+        })
+        .unwrap();
         let g = s.gps().geodetic.unwrap();
         // 10 m north is 10 / 6378137 rad of latitude.
         assert!((g.latitude_deg - 35.0 - (10.0f64 / 6_378_137.0).to_degrees()).abs() < 1e-6);
@@ -316,11 +449,19 @@ mod issue_2_scenes {
             for id in SCENE_IDS {
                 let mut s = sim(SceneSource::Builtin(id.to_string()), mode);
                 s.step(Control::default()).unwrap();
-                assert!(s.contacts().is_empty(), "{mode:?} {id}: contact at spawn {:?}", s.contacts());
+                assert!(
+                    s.contacts().is_empty(),
+                    "{mode:?} {id}: contact at spawn {:?}",
+                    s.contacts()
+                );
                 let mut x = 0.77f64;
                 for _ in 0..150 {
                     x = (x * 3.8 * (1.0 - x)).clamp(0.0, 1.0);
-                    s.step(Control { throttle: x, steering_rad: 0.36 * (2.0 * x - 1.0) }).unwrap();
+                    s.step(Control {
+                        throttle: x,
+                        steering_rad: 0.36 * (2.0 * x - 1.0),
+                    })
+                    .unwrap();
                     let p = s.base_pose();
                     assert!(p.is_finite(), "{mode:?} {id}: non-finite pose");
                     assert!(!s.flipped(), "{mode:?} {id}: flipped");
@@ -333,7 +474,14 @@ mod issue_2_scenes {
     #[test]
     fn scenes_hold_autovrls_object_counts() {
         let src = AssetSource::builtin();
-        let count = |id: &str, class: &str| Scene::builtin(&src, id).unwrap().objects.iter().filter(|o| o.class == class).count();
+        let count = |id: &str, class: &str| {
+            Scene::builtin(&src, id)
+                .unwrap()
+                .objects
+                .iter()
+                .filter(|o| o.class == class)
+                .count()
+        };
         assert_eq!((count("outdoor-20", "rock"), count("outdoor-20", "tree")), (7, 4));
         assert_eq!((count("outdoor-50", "rock"), count("outdoor-50", "tree")), (48, 25));
         assert_eq!((count("urban-20", "building"), count("urban-20", "car")), (5, 2));
@@ -345,7 +493,10 @@ mod issue_2_scenes {
         let mut s = sim(SceneSource::Builtin("oval".into()), DynamicsMode::Raycast);
         // On the straights the walls sit 1 m to each side of the centre line, so the rays at
         // +-45 degrees off the heading meet them at sqrt(2) m.
-        for (x, y, yaw) in [(4.0f32, 0.0f32, -std::f32::consts::FRAC_PI_2), (-4.0, 2.0, std::f32::consts::FRAC_PI_2)] {
+        for (x, y, yaw) in [
+            (4.0f32, 0.0f32, -std::f32::consts::FRAC_PI_2),
+            (-4.0, 2.0, std::f32::consts::FRAC_PI_2),
+        ] {
             let pose = Pose::from_parts(Vector::new(x, y, 0.3), Rotation::from_rotation_z(yaw));
             let scan = s.lidar_scan_at(&pose);
             for r in [scan.ranges[0], scan.ranges[99]] {
@@ -366,7 +517,10 @@ mod issue_2_scenes {
             assert!(t.lateral_offset_m(x, y).abs() < 1e-4);
             // The direction points along increasing s.
             let ahead = t.centreline_s(x + 0.01 * dx, y + 0.01 * dy);
-            assert!((ahead - s - 0.01).abs() < 1e-3 || s > t.lap_length_m() - 0.02, "s {s}: ahead {ahead}");
+            assert!(
+                (ahead - s - 0.01).abs() < 1e-3 || s > t.lap_length_m() - 0.02,
+                "s {s}: ahead {ahead}"
+            );
         }
     }
 
@@ -379,7 +533,11 @@ mod issue_2_scenes {
             assert_eq!(a.file, b.file, "{kind:?}: same seed, same layout");
             assert_ne!(a.file, c.file, "{kind:?}: another seed, another layout");
             let mut s = Sim::new(SimConfig {
-                scene: SceneSource::Procedural { kind, seed: 7, half_m: 20.0 },
+                scene: SceneSource::Procedural {
+                    kind,
+                    seed: 7,
+                    half_m: 20.0,
+                },
                 ..SimConfig::default()
             })
             .unwrap();
@@ -404,7 +562,12 @@ mod issue_2_errors {
         let toml = AssetSource::builtin().read("vehicles/xtenth_car.toml").unwrap();
         write(&d, "car.toml", &toml.replace("xtenth_car.urdf", "car.urdf"));
         write(&d, "car.urdf", "<robot name=\"x\"><link name=\"a\"></robot>");
-        let e = Sim::new(SimConfig { vehicle: d.join("car.toml").display().to_string(), ..SimConfig::default() }).err().unwrap();
+        let e = Sim::new(SimConfig {
+            vehicle: d.join("car.toml").display().to_string(),
+            ..SimConfig::default()
+        })
+        .err()
+        .unwrap();
         let msg = e.to_string();
         assert!(msg.contains("car.urdf") && msg.contains("bad URDF"), "{msg}");
     }
@@ -413,16 +576,31 @@ mod issue_2_errors {
     fn vehicle_spec_naming_a_missing_joint_is_rejected() {
         let d = tmpdir("badjoint");
         let src = AssetSource::builtin();
-        write(&d, "car.toml", &src.read("vehicles/xtenth_car.toml").unwrap().replace("rear_left_wheel_joint", "no_such_joint"));
+        write(
+            &d,
+            "car.toml",
+            &src.read("vehicles/xtenth_car.toml")
+                .unwrap()
+                .replace("rear_left_wheel_joint", "no_such_joint"),
+        );
         write(&d, "xtenth_car.urdf", &src.read("vehicles/xtenth_car.urdf").unwrap());
-        let e = Sim::new(SimConfig { vehicle: d.join("car.toml").display().to_string(), ..SimConfig::default() }).err().unwrap();
+        let e = Sim::new(SimConfig {
+            vehicle: d.join("car.toml").display().to_string(),
+            ..SimConfig::default()
+        })
+        .err()
+        .unwrap();
         assert!(e.to_string().contains("no_such_joint"), "{e}");
     }
 
     #[test]
     fn missing_mesh_names_the_mesh_file() {
         let d = tmpdir("mesh");
-        write(&d, "m.urdf", "<robot name=\"m\"><link name=\"a\"><collision><geometry><mesh filename=\"gone.obj\"/></geometry></collision></link></robot>");
+        write(
+            &d,
+            "m.urdf",
+            "<robot name=\"m\"><link name=\"a\"><collision><geometry><mesh filename=\"gone.obj\"/></geometry></collision></link></robot>",
+        );
         let src = AssetSource::Dir(d.clone());
         let model = urdf::UrdfModel::read(&src, "m.urdf").unwrap();
         let e = model.collision_shapes(&src, Vector::ONE, |_| true).err().unwrap();
@@ -433,10 +611,20 @@ mod issue_2_errors {
     fn bad_scene_toml_names_the_file_and_key() {
         let d = tmpdir("scene");
         write(&d, "s.toml", "name = \"s\"\nkind = \"outdoor\"\nbogus_key = 1\n");
-        let e = Sim::new(SimConfig { scene: SceneSource::File(d.join("s.toml")), ..SimConfig::default() }).err().unwrap();
+        let e = Sim::new(SimConfig {
+            scene: SceneSource::File(d.join("s.toml")),
+            ..SimConfig::default()
+        })
+        .err()
+        .unwrap();
         let msg = e.to_string();
         assert!(msg.contains("s.toml") && msg.contains("bogus_key"), "{msg}");
-        let e = Sim::new(SimConfig { scene: SceneSource::Builtin("moon".into()), ..SimConfig::default() }).err().unwrap();
+        let e = Sim::new(SimConfig {
+            scene: SceneSource::Builtin("moon".into()),
+            ..SimConfig::default()
+        })
+        .err()
+        .unwrap();
         assert!(e.to_string().contains("oval"), "lists the built-in scenes: {e}");
     }
 
@@ -448,7 +636,12 @@ mod issue_2_errors {
             "s.toml",
             "name = \"s\"\nkind = \"outdoor\"\n[ground]\nsize_m = [10.0, 10.0]\nfriction = 1.0\ncolor = [0.5, 0.5, 0.5]\n[spawn]\nx_m = 0.0\ny_m = 0.0\nyaw_deg = 0.0\n[[object]]\nmodel = \"ufo\"\nx_m = 3.0\ny_m = 3.0\n",
         );
-        let e = Sim::new(SimConfig { scene: SceneSource::File(d.join("s.toml")), ..SimConfig::default() }).err().unwrap();
+        let e = Sim::new(SimConfig {
+            scene: SceneSource::File(d.join("s.toml")),
+            ..SimConfig::default()
+        })
+        .err()
+        .unwrap();
         let msg = e.to_string();
         assert!(msg.contains("ufo") && msg.contains("rock_1"), "{msg}");
     }
@@ -456,8 +649,18 @@ mod issue_2_errors {
     #[test]
     fn non_finite_controls_never_reach_physics() {
         let mut s = Sim::new(SimConfig::default()).unwrap();
-        s.step(Control { throttle: f64::NAN, steering_rad: f64::INFINITY }).unwrap();
-        assert_eq!(s.control(), Control { throttle: 0.0, steering_rad: 0.0 });
+        s.step(Control {
+            throttle: f64::NAN,
+            steering_rad: f64::INFINITY,
+        })
+        .unwrap();
+        assert_eq!(
+            s.control(),
+            Control {
+                throttle: 0.0,
+                steering_rad: 0.0
+            }
+        );
         assert!(s.base_pose().is_finite());
     }
 }

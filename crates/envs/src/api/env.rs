@@ -183,7 +183,10 @@ impl<E: Env + ?Sized> Env for Box<E> {
 /// Reject actions of the wrong length or with NaN/inf, the check every env runs first.
 pub fn validate_action(space: &BoxSpace, action: &[f32]) -> Result<(), EnvError> {
     if action.len() != space.dim() {
-        return Err(EnvError::ActionShape { expected: space.dim(), got: action.len() });
+        return Err(EnvError::ActionShape {
+            expected: space.dim(),
+            got: action.len(),
+        });
     }
     if let Some((index, &value)) = action.iter().enumerate().find(|(_, v)| !v.is_finite()) {
         return Err(EnvError::ActionNotFinite { index, value });

@@ -12,7 +12,10 @@ pub struct BoxSpace {
 impl BoxSpace {
     /// A box with the same bounds on every element.
     pub fn uniform(dim: usize, low: f32, high: f32) -> Self {
-        Self { low: vec![low; dim], high: vec![high; dim] }
+        Self {
+            low: vec![low; dim],
+            high: vec![high; dim],
+        }
     }
 
     /// Number of elements.
@@ -23,7 +26,10 @@ impl BoxSpace {
     /// Whether `x` has the right length and every element lies within bounds (NaN never does).
     pub fn contains(&self, x: &[f32]) -> bool {
         x.len() == self.dim()
-            && x.iter().zip(&self.low).zip(&self.high).all(|((v, lo), hi)| *v >= *lo && *v <= *hi)
+            && x.iter()
+                .zip(&self.low)
+                .zip(&self.high)
+                .all(|((v, lo), hi)| *v >= *lo && *v <= *hi)
     }
 
     /// Clamp `x` into the box in place (NaN stays NaN: callers reject it first).

@@ -1,6 +1,6 @@
 use super::env::EnvError;
-use agvrl_sim::msg::{CameraFrame, GpsReading, ImuReading, LaserScan, OvalTrack};
 pub use agvrl_sim::msg::Control;
+use agvrl_sim::msg::{CameraFrame, GpsReading, ImuReading, LaserScan, OvalTrack};
 
 /// Everything a vehicle's sensors delivered for one control tick. Sensors a real car may lack
 /// are optional; a task says which it needs.
@@ -45,7 +45,9 @@ impl SensorNeeds {
             (self.image && frame.image.is_none(), "camera image"),
         ];
         match missing.iter().find(|(m, _)| *m) {
-            Some((_, what)) => Err(EnvError::Vehicle(format!("the task needs a {what} and the vehicle delivered none"))),
+            Some((_, what)) => Err(EnvError::Vehicle(format!(
+                "the task needs a {what} and the vehicle delivered none"
+            ))),
             None => Ok(()),
         }
     }

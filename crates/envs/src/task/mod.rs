@@ -73,23 +73,43 @@ pub struct ObsConfig {
 impl Default for ObsConfig {
     /// Normalised ranges plus speed, yaw rate, steering and throttle.
     fn default() -> Self {
-        Self { ranges: RangeScale::Normalised, speed: true, yaw_rate: true, steering: true, throttle: true }
+        Self {
+            ranges: RangeScale::Normalised,
+            speed: true,
+            yaw_rate: true,
+            steering: true,
+            throttle: true,
+        }
     }
 }
 
 impl ObsConfig {
     /// AutoVRL's observation: the raw LiDAR ranges only.
     pub fn paper() -> Self {
-        Self { ranges: RangeScale::Raw, speed: false, yaw_rate: false, steering: false, throttle: false }
+        Self {
+            ranges: RangeScale::Raw,
+            speed: false,
+            yaw_rate: false,
+            steering: false,
+            throttle: false,
+        }
     }
 
     fn n_extra(&self) -> usize {
-        [self.speed, self.yaw_rate, self.steering, self.throttle].iter().filter(|b| **b).count()
+        [self.speed, self.yaw_rate, self.steering, self.throttle]
+            .iter()
+            .filter(|b| **b)
+            .count()
     }
 
     /// Needs of this composition.
     pub fn needs(&self) -> SensorNeeds {
-        SensorNeeds { scan: true, imu: self.speed || self.yaw_rate, gps: false, image: false }
+        SensorNeeds {
+            scan: true,
+            imu: self.speed || self.yaw_rate,
+            gps: false,
+            image: false,
+        }
     }
 
     /// The space for `n_rays` rays of range `range_max_m`.
@@ -99,7 +119,12 @@ impl ObsConfig {
             RangeScale::Normalised => 1.0,
         };
         let mut s = BoxSpace::uniform(n_rays, 0.0, hi);
-        for (on, lo, hi) in [(self.speed, -5.0, 5.0), (self.yaw_rate, -5.0, 5.0), (self.steering, -1.0, 1.0), (self.throttle, 0.0, 1.0)] {
+        for (on, lo, hi) in [
+            (self.speed, -5.0, 5.0),
+            (self.yaw_rate, -5.0, 5.0),
+            (self.steering, -1.0, 1.0),
+            (self.throttle, 0.0, 1.0),
+        ] {
             if on {
                 s.low.push(lo);
                 s.high.push(hi);
@@ -151,7 +176,12 @@ pub struct CommonConfig {
 
 impl Default for CommonConfig {
     fn default() -> Self {
-        Self { observation: ObsConfig::default(), action_mapping: ActionMapping::Scaled, n_rays: 100, range_max_m: 12.0 }
+        Self {
+            observation: ObsConfig::default(),
+            action_mapping: ActionMapping::Scaled,
+            n_rays: 100,
+            range_max_m: 12.0,
+        }
     }
 }
 

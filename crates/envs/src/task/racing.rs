@@ -2,7 +2,7 @@
 //! 0.8 m). Reports laps, lap times and progress along the centre line.
 
 use super::reward::{self, PENALTY};
-use super::{common_termination, map_control, CommonConfig, Outcome, Task};
+use super::{CommonConfig, Outcome, Task, common_termination, map_control};
 use crate::api::{BoxSpace, Control, MapInfo, RacingInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -19,7 +19,10 @@ pub struct RacingConfig {
 
 impl Default for RacingConfig {
     fn default() -> Self {
-        Self { common: CommonConfig::default(), terminate_below_m: 0.8 }
+        Self {
+            common: CommonConfig::default(),
+            terminate_below_m: 0.8,
+        }
     }
 }
 
@@ -36,7 +39,14 @@ pub struct Racing {
 impl Racing {
     /// A racing task.
     pub fn new(cfg: RacingConfig, steering_limit_rad: f64) -> Self {
-        Self { cfg, steering_limit: steering_limit_rad, last_s: None, progress_m: 0.0, info: RacingInfo::default(), lap_start_s: 0.0 }
+        Self {
+            cfg,
+            steering_limit: steering_limit_rad,
+            last_s: None,
+            progress_m: 0.0,
+            info: RacingInfo::default(),
+            lap_start_s: 0.0,
+        }
     }
 }
 
@@ -46,7 +56,10 @@ impl Task for Racing {
     }
 
     fn observation_space(&self) -> BoxSpace {
-        self.cfg.common.observation.space(self.cfg.common.n_rays, self.cfg.common.range_max_m)
+        self.cfg
+            .common
+            .observation
+            .space(self.cfg.common.n_rays, self.cfg.common.range_max_m)
     }
 
     fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
@@ -100,6 +113,11 @@ impl Task for Racing {
             self.info.progress_laps = self.progress_m / lap;
             racing = Some(self.info.clone());
         }
-        Outcome { terms, termination, racing, search: None }
+        Outcome {
+            terms,
+            termination,
+            racing,
+            search: None,
+        }
     }
 }

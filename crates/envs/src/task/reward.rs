@@ -57,9 +57,16 @@ pub fn search(form: SearchReward, d: f64, t: f64, delta: f64, slow_penalty: bool
 /// R_racing: 5 T^2 - 2 delta^2, or -50 (and the episode ends) when `d < 0.8`.
 pub fn racing(d: f64, t: f64, delta: f64) -> RewardTerms {
     if d < 0.8 {
-        RewardTerms { collision: PENALTY, ..RewardTerms::default() }
+        RewardTerms {
+            collision: PENALTY,
+            ..RewardTerms::default()
+        }
     } else {
-        RewardTerms { throttle: 5.0 * t * t, steering: -2.0 * delta * delta, ..RewardTerms::default() }
+        RewardTerms {
+            throttle: 5.0 * t * t,
+            steering: -2.0 * delta * delta,
+            ..RewardTerms::default()
+        }
     }
 }
 

@@ -1,8 +1,8 @@
 //! Search / exploration (the paper's R_search): drive fast, keep a clearance band, avoid
 //! obstacles. Reports coverage of the free map and the distance travelled.
 
-use super::reward::{self, SearchReward, PENALTY};
-use super::{common_termination, map_control, CommonConfig, Outcome, Task};
+use super::reward::{self, PENALTY, SearchReward};
+use super::{CommonConfig, Outcome, Task, common_termination, map_control};
 use crate::api::{BoxSpace, Control, MapInfo, SearchInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -59,7 +59,15 @@ struct Grid {
 impl Search {
     /// A search task.
     pub fn new(cfg: SearchConfig, steering_limit_rad: f64) -> Self {
-        Self { cfg, steering_limit: steering_limit_rad, grid: Grid::default(), covered: vec![], n_covered: 0, distance_m: 0.0, last_xy: None }
+        Self {
+            cfg,
+            steering_limit: steering_limit_rad,
+            grid: Grid::default(),
+            covered: vec![],
+            n_covered: 0,
+            distance_m: 0.0,
+            last_xy: None,
+        }
     }
 
     fn cover(&mut self, x: f32, y: f32) {
@@ -68,8 +76,14 @@ impl Search {
             return;
         }
         let r = self.cfg.coverage_radius_m;
-        let (i0, i1) = (((x - r - g.origin[0]) / g.cell).floor() as i32, ((x + r - g.origin[0]) / g.cell).ceil() as i32);
-        let (j0, j1) = (((y - r - g.origin[1]) / g.cell).floor() as i32, ((y + r - g.origin[1]) / g.cell).ceil() as i32);
+        let (i0, i1) = (
+            ((x - r - g.origin[0]) / g.cell).floor() as i32,
+            ((x + r - g.origin[0]) / g.cell).ceil() as i32,
+        );
+        let (j0, j1) = (
+            ((y - r - g.origin[1]) / g.cell).floor() as i32,
+            ((y + r - g.origin[1]) / g.cell).ceil() as i32,
+        );
         for i in i0.max(0)..i1.min(g.nx) {
             for j in j0.max(0)..j1.min(g.ny) {
                 let k = g.index[(i * g.ny + j) as usize];
@@ -87,8 +101,15 @@ impl Search {
     }
 
     fn info(&self) -> SearchInfo {
-        let coverage = if self.grid.n_free > 0 { self.n_covered as f64 / self.grid.n_free as f64 } else { 0.0 };
-        SearchInfo { coverage, distance_m: self.distance_m }
+        let coverage = if self.grid.n_free > 0 {
+            self.n_covered as f64 / self.grid.n_free as f64
+        } else {
+            0.0
+        };
+        SearchInfo {
+            coverage,
+            distance_m: self.distance_m,
+        }
     }
 }
 
@@ -98,7 +119,10 @@ impl Task for Search {
     }
 
     fn observation_space(&self) -> BoxSpace {
-        self.cfg.common.observation.space(self.cfg.common.n_rays, self.cfg.common.range_max_m)
+        self.cfg
+            .common
+            .observation
+            .space(self.cfg.common.n_rays, self.cfg.common.range_max_m)
     }
 
     fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
@@ -122,7 +146,14 @@ impl Task for Search {
                     n_free += 1;
                 }
             }
-            self.grid = Grid { origin, cell, nx, ny, index, n_free };
+            self.grid = Grid {
+                origin,
+                cell,
+                nx,
+                ny,
+                index,
+                n_free,
+            };
         }
         self.covered = vec![false; self.grid.n_free];
         self.n_covered = 0;
@@ -140,7 +171,13 @@ impl Task for Search {
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
         let d = frame.scan.as_ref().map(|s| s.min_range()).unwrap_or(f32::INFINITY) as f64;
         let c = frame.applied;
-        let mut terms = reward::search(self.cfg.reward, d.min(1e6), c.throttle, c.steering_rad, self.cfg.slow_penalty);
+        let mut terms = reward::search(
+            self.cfg.reward,
+            d.min(1e6),
+            c.throttle,
+            c.steering_rad,
+            self.cfg.slow_penalty,
+        );
         let termination = common_termination(frame, map, self.cfg.terminate_below_m);
         if termination.is_some() && terms.collision == 0.0 {
             terms.collision = PENALTY;
@@ -153,6 +190,11 @@ impl Task for Search {
             self.last_xy = Some(xy);
             self.cover(xy[0] as f32, xy[1] as f32);
         }
-        Outcome { terms, termination, racing: None, search: Some(self.info()) }
+        Outcome {
+            terms,
+            termination,
+            racing: None,
+            search: Some(self.info()),
+        }
     }
 }

@@ -66,7 +66,14 @@ pub struct Noisy<V> {
 impl<V: Vehicle> Noisy<V> {
     /// Wrap `inner`.
     pub fn new(inner: V, cfg: NoiseConfig) -> Self {
-        Self { inner, cfg, rng: StdRng::seed_from_u64(0), queue: VecDeque::new(), gyro_bias: [0.0; 3], accel_bias: [0.0; 3] }
+        Self {
+            inner,
+            cfg,
+            rng: StdRng::seed_from_u64(0),
+            queue: VecDeque::new(),
+            gyro_bias: [0.0; 3],
+            accel_bias: [0.0; 3],
+        }
     }
 
     /// The wrapped vehicle.
@@ -126,7 +133,11 @@ impl<V: Vehicle> Vehicle for Noisy<V> {
 
     fn actuate(&mut self, control: Control) -> Result<(), EnvError> {
         self.queue.push_back(control);
-        let applied = if self.queue.len() > self.cfg.latency_steps { self.queue.pop_front().unwrap_or_default() } else { Control::default() };
+        let applied = if self.queue.len() > self.cfg.latency_steps {
+            self.queue.pop_front().unwrap_or_default()
+        } else {
+            Control::default()
+        };
         self.inner.actuate(applied)
     }
 

@@ -11,7 +11,11 @@ pub struct TimeLimit<E> {
 impl<E: Env> TimeLimit<E> {
     /// Wrap `inner`, cutting episodes at `max_steps` steps.
     pub fn new(inner: E, max_steps: u64) -> Self {
-        Self { inner, max_steps, elapsed: 0 }
+        Self {
+            inner,
+            max_steps,
+            elapsed: 0,
+        }
     }
 
     /// The wrapped env.

@@ -53,7 +53,12 @@ impl FastRay {
             return FastRay::Planes(planes);
         }
         if let Some(c) = shape.as_cylinder() {
-            return FastRay::Cylinder { c: pose.translation, a: pose.rotation * Vector::Y, r: c.radius, h: c.half_height };
+            return FastRay::Cylinder {
+                c: pose.translation,
+                a: pose.rotation * Vector::Y,
+                r: c.radius,
+                h: c.half_height,
+            };
         }
         FastRay::Parry(shape.clone(), *pose)
     }
@@ -133,8 +138,14 @@ mod tests {
     #[test]
     fn closed_forms_agree_with_parry() {
         let shapes = [
-            (SharedShape::cuboid(0.5, 1.0, 0.3), Pose::from_parts(Vector::new(2.0, 1.0, 0.2), Rotation::from_rotation_z(0.7))),
-            (SharedShape::cylinder(0.8, 0.3), Pose::from_parts(Vector::new(-1.0, 2.0, 0.5), Rotation::from_rotation_x(1.5707964))),
+            (
+                SharedShape::cuboid(0.5, 1.0, 0.3),
+                Pose::from_parts(Vector::new(2.0, 1.0, 0.2), Rotation::from_rotation_z(0.7)),
+            ),
+            (
+                SharedShape::cylinder(0.8, 0.3),
+                Pose::from_parts(Vector::new(-1.0, 2.0, 0.5), Rotation::from_rotation_x(1.5707964)),
+            ),
             (
                 SharedShape::convex_hull(&[
                     Vector::new(0.0, 0.0, 0.0),

@@ -28,7 +28,12 @@ pub fn read(cfg: &GpsConfig, pose_w: &Pose) -> GpsReading {
             altitude_m: o.altitude_m + t.z,
         }
     });
-    GpsReading { position_m: t.to_array(), orientation_xyzw: q.to_array(), rpy_rad: [roll, pitch, yaw], geodetic }
+    GpsReading {
+        position_m: t.to_array(),
+        orientation_xyzw: q.to_array(),
+        rpy_rad: [roll, pitch, yaw],
+        geodetic,
+    }
 }
 
 fn glam_euler() -> rapier3d::glamx::EulerRot {

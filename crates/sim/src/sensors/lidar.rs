@@ -29,7 +29,12 @@ pub struct LidarConfig {
 impl Default for LidarConfig {
     /// AutoVRL's LiDAR: 100 rays over 90 degrees, 12 m.
     fn default() -> Self {
-        Self { n_rays: 100, fov_deg: 90.0, range_min_m: 0.05, range_max_m: 12.0 }
+        Self {
+            n_rays: 100,
+            fov_deg: 90.0,
+            range_min_m: 0.05,
+            range_max_m: 12.0,
+        }
     }
 }
 
@@ -80,7 +85,11 @@ impl Lidar {
                 Vector::new(a.cos(), a.sin(), 0.0)
             })
             .collect();
-        Self { cfg, dirs_s, candidates: Vec::new() }
+        Self {
+            cfg,
+            dirs_s,
+            candidates: Vec::new(),
+        }
     }
 
     /// Settings.
@@ -111,10 +120,21 @@ impl Lidar {
         let mut best = vec![rmax; n];
         let mut best_id: Vec<Option<Option<u32>>> = vec![None; n];
         self.candidates.clear();
-        self.candidates.extend(scene.entries.iter().enumerate().filter(|(_, e)| e.aabb.intersects(&reach)).map(|(i, _)| i));
+        self.candidates.extend(
+            scene
+                .entries
+                .iter()
+                .enumerate()
+                .filter(|(_, e)| e.aabb.intersects(&reach))
+                .map(|(i, _)| i),
+        );
         for &ci in &self.candidates {
             let e = &scene.entries[ci];
-            let (lo, hi) = if level && angle_increment > 0.0 { ray_span(&e.aabb, origin, yaw, angle_min, angle_increment, n, full) } else { (0, n as i64 - 1) };
+            let (lo, hi) = if level && angle_increment > 0.0 {
+                ray_span(&e.aabb, origin, yaw, angle_min, angle_increment, n, full)
+            } else {
+                (0, n as i64 - 1)
+            };
             if lo > hi {
                 continue;
             }
@@ -163,7 +183,12 @@ fn ray_span(aabb: &Aabb, o: Vector, yaw: f32, a0: f32, da: f32, n: usize, full: 
     let phi_c = (c.y - o.y).atan2(c.x - o.x);
     let wrap = |a: f32| (a + PI).rem_euclid(TAU) - PI;
     let (mut dmin, mut dmax) = (f32::MAX, f32::MIN);
-    for (x, y) in [(aabb.mins.x, aabb.mins.y), (aabb.mins.x, aabb.maxs.y), (aabb.maxs.x, aabb.mins.y), (aabb.maxs.x, aabb.maxs.y)] {
+    for (x, y) in [
+        (aabb.mins.x, aabb.mins.y),
+        (aabb.mins.x, aabb.maxs.y),
+        (aabb.maxs.x, aabb.mins.y),
+        (aabb.maxs.x, aabb.maxs.y),
+    ] {
         let d = wrap((y - o.y).atan2(x - o.x) - phi_c);
         dmin = dmin.min(d);
         dmax = dmax.max(d);

@@ -24,9 +24,10 @@ impl ActionMapping {
             return Control::default();
         }
         match self {
-            ActionMapping::Paper => {
-                Control { throttle: a0.clamp(0.0, 1.0), steering_rad: a1.clamp(-delta_max_rad, delta_max_rad) }
-            }
+            ActionMapping::Paper => Control {
+                throttle: a0.clamp(0.0, 1.0),
+                steering_rad: a1.clamp(-delta_max_rad, delta_max_rad),
+            },
             ActionMapping::Scaled => Control {
                 throttle: ((a0.clamp(-1.0, 1.0) + 1.0) / 2.0),
                 steering_rad: a1.clamp(-1.0, 1.0) * delta_max_rad,
@@ -85,23 +86,51 @@ mod tests {
     #[test]
     fn paper_mapping_clips_like_autovrl() {
         let c = ActionMapping::Paper.control(-0.5, 0.9, 0.36);
-        assert_eq!(c, Control { throttle: 0.0, steering_rad: 0.36 });
+        assert_eq!(
+            c,
+            Control {
+                throttle: 0.0,
+                steering_rad: 0.36
+            }
+        );
         let c = ActionMapping::Paper.control(0.25, -0.1, 0.36);
-        assert_eq!(c, Control { throttle: 0.25, steering_rad: -0.1 });
+        assert_eq!(
+            c,
+            Control {
+                throttle: 0.25,
+                steering_rad: -0.1
+            }
+        );
     }
 
     #[test]
     fn scaled_mapping_uses_the_whole_range() {
         let c = ActionMapping::Scaled.control(-1.0, -1.0, 0.36);
-        assert_eq!(c, Control { throttle: 0.0, steering_rad: -0.36 });
+        assert_eq!(
+            c,
+            Control {
+                throttle: 0.0,
+                steering_rad: -0.36
+            }
+        );
         let c = ActionMapping::Scaled.control(0.0, 0.5, 0.36);
-        assert_eq!(c, Control { throttle: 0.5, steering_rad: 0.18 });
+        assert_eq!(
+            c,
+            Control {
+                throttle: 0.5,
+                steering_rad: 0.18
+            }
+        );
         assert_eq!(ActionMapping::Scaled.control(f64::NAN, 0.0, 0.36), Control::default());
     }
 
     #[test]
     fn drive_model_converges_to_autovrl_terminal_speed() {
-        let m = DriveModel { c_t: 20.0, c_d: 0.01, c_r: 0.2 };
+        let m = DriveModel {
+            c_t: 20.0,
+            c_d: 0.01,
+            c_r: 0.2,
+        };
         let mut w = 0.0;
         for _ in 0..600 {
             w = m.advance(w, 1.0, 1.0 / 30.0);
@@ -117,7 +146,10 @@ mod tests {
         for delta in [0.05, 0.2, 0.36, -0.05, -0.36] {
             let (l, r) = ackermann_split(delta, 0.33, 0.314, true);
             let (inner, outer) = if delta > 0.0 { (l, r) } else { (r, l) };
-            assert!(inner.abs() > delta.abs() && outer.abs() < delta.abs(), "delta {delta}: {l} {r}");
+            assert!(
+                inner.abs() > delta.abs() && outer.abs() < delta.abs(),
+                "delta {delta}: {l} {r}"
+            );
             // Both wheels' normals meet at the same turning centre on the rear axle line.
             let centre_l = 0.33 / l.tan() + 0.157;
             let centre_r = 0.33 / r.tan() - 0.157;

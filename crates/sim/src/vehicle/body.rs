@@ -11,8 +11,8 @@
 //! front-wheel steering angles.
 
 use super::spec::VehicleModel;
-use crate::world::{groups, World};
 use crate::SimError;
+use crate::world::{World, groups};
 use rapier3d::control::{DynamicRayCastVehicleController, WheelTuning};
 use rapier3d::prelude::*;
 use rapier3d_urdf::{UrdfLoaderOptions, UrdfMultibodyOptions, UrdfRobot};
@@ -43,7 +43,11 @@ const SUSPENSION_REST_M: f32 = 0.03;
 
 #[derive(Clone)]
 pub(crate) enum Body {
-    Raycast { chassis: RigidBodyHandle, controller: DynamicRayCastVehicleController, colliders: Vec<ColliderHandle> },
+    Raycast {
+        chassis: RigidBodyHandle,
+        controller: DynamicRayCastVehicleController,
+        colliders: Vec<ColliderHandle>,
+    },
     Multibody(Box<MultibodyCar>),
 }
 
@@ -70,7 +74,13 @@ pub struct BodyParams {
 }
 
 impl Body {
-    pub(crate) fn new(world: &mut World, model: &VehicleModel, mode: DynamicsMode, pose: Pose, p: BodyParams) -> Result<Self, SimError> {
+    pub(crate) fn new(
+        world: &mut World,
+        model: &VehicleModel,
+        mode: DynamicsMode,
+        pose: Pose,
+        p: BodyParams,
+    ) -> Result<Self, SimError> {
         match mode {
             DynamicsMode::Raycast => Ok(Self::new_raycast(world, model, pose, p)),
             DynamicsMode::Multibody => Self::new_multibody(world, model, pose, p),
@@ -80,29 +90,36 @@ impl Body {
     fn new_raycast(world: &mut World, model: &VehicleModel, pose: Pose, p: BodyParams) -> Self {
         let mp = scale_mass(model.mass_props, p.mass_scale);
         let chassis = world.pw.insert_body(
-            RigidBodyBuilder::dynamic().pose(pose).additional_mass_properties(mp).can_sleep(false),
+            RigidBodyBuilder::dynamic()
+                .pose(pose)
+                .additional_mass_properties(mp)
+                .can_sleep(false),
         );
         let mut colliders = Vec::new();
         for s in &model.body_shapes {
-            colliders.push(world.pw.insert_collider(
-                ColliderBuilder::new(s.shape.clone())
-                    .position(s.pose)
-                    .density(0.0)
-                    .friction(0.5)
-                    .collision_groups(groups::vehicle()),
-                Some(chassis),
-            ));
+            colliders.push(
+                world.pw.insert_collider(
+                    ColliderBuilder::new(s.shape.clone())
+                        .position(s.pose)
+                        .density(0.0)
+                        .friction(0.5)
+                        .collision_groups(groups::vehicle()),
+                    Some(chassis),
+                ),
+            );
         }
         for w in &model.wheels {
             let rot = Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2);
-            colliders.push(world.pw.insert_collider(
-                ColliderBuilder::cylinder(w.width_m / 2.0, w.radius_m)
-                    .position(Pose::from_parts(w.center_b, rot))
-                    .density(0.0)
-                    .friction(0.5)
-                    .collision_groups(groups::vehicle_no_ground()),
-                Some(chassis),
-            ));
+            colliders.push(
+                world.pw.insert_collider(
+                    ColliderBuilder::cylinder(w.width_m / 2.0, w.radius_m)
+                        .position(Pose::from_parts(w.center_b, rot))
+                        .density(0.0)
+                        .friction(0.5)
+                        .collision_groups(groups::vehicle_no_ground()),
+                    Some(chassis),
+                ),
+            );
         }
         let mut controller = DynamicRayCastVehicleController::new(chassis);
         controller.index_up_axis = 2;
@@ -123,9 +140,20 @@ impl Body {
         let sag = crate::world::GRAVITY_MPS2 / (n * SUSPENSION_STIFFNESS);
         for w in &model.wheels {
             let hard_point = w.center_b + Vector::Z * (SUSPENSION_REST_M - sag);
-            controller.add_wheel(hard_point, -Vector::Z, -Vector::Y, SUSPENSION_REST_M, w.radius_m, &tuning);
+            controller.add_wheel(
+                hard_point,
+                -Vector::Z,
+                -Vector::Y,
+                SUSPENSION_REST_M,
+                w.radius_m,
+                &tuning,
+            );
         }
-        Body::Raycast { chassis, controller, colliders }
+        Body::Raycast {
+            chassis,
+            controller,
+            colliders,
+        }
     }
 
     fn new_multibody(world: &mut World, model: &VehicleModel, pose: Pose, p: BodyParams) -> Result<Self, SimError> {
@@ -147,19 +175,31 @@ impl Body {
             let name = &robot.links[link.urdf_link_index].name;
             if let Some(w) = model.wheels.iter().find(|w| &w.link == name) {
                 for c in &mut link.colliders {
-                    let local = c.collider.position_wrt_parent().copied().unwrap_or(*c.collider.position());
+                    let local = c
+                        .collider
+                        .position_wrt_parent()
+                        .copied()
+                        .unwrap_or(*c.collider.position());
                     c.collider.set_shape(SharedShape::ball(w.radius_m));
-                    c.collider.set_position_wrt_parent(Pose::from_translation(local.translation));
+                    c.collider
+                        .set_position_wrt_parent(Pose::from_translation(local.translation));
                     c.collider.set_friction(p.tyre_friction);
                 }
             }
         }
-        let joint_names: Vec<String> = template.joints.iter().map(|j| robot.joints[j.urdf_joint_index].name.clone()).collect();
+        let joint_names: Vec<String> = template
+            .joints
+            .iter()
+            .map(|j| robot.joints[j.urdf_joint_index].name.clone())
+            .collect();
         let base_idx = template
             .links
             .iter()
             .position(|l| robot.links[l.urdf_link_index].name == model.urdf.root)
-            .ok_or_else(|| SimError::Invalid { context: model.urdf.rel_path.clone(), msg: "root link has no body".into() })?;
+            .ok_or_else(|| SimError::Invalid {
+                context: model.urdf.rel_path.clone(),
+                msg: "root link has no body".into(),
+            })?;
         let mut car = MultibodyCar {
             template,
             joint_names,
@@ -191,9 +231,17 @@ impl Body {
     }
 
     /// Put the car at `pose`, at rest, with parameters `p` (no bodies are rebuilt).
-    pub(crate) fn reset(&mut self, world: &mut World, model: &VehicleModel, pose: Pose, p: BodyParams) -> Result<(), SimError> {
+    pub(crate) fn reset(
+        &mut self,
+        world: &mut World,
+        model: &VehicleModel,
+        pose: Pose,
+        p: BodyParams,
+    ) -> Result<(), SimError> {
         match self {
-            Body::Raycast { chassis, controller, .. } => {
+            Body::Raycast {
+                chassis, controller, ..
+            } => {
                 let rb = &mut world.pw.bodies[*chassis];
                 rb.set_additional_mass_properties(scale_mass(model.mass_props, p.mass_scale), true);
                 rb.set_position(pose, true);
@@ -210,9 +258,18 @@ impl Body {
     }
 
     /// Apply the command for one physics substep and advance rapier by one step.
-    pub(crate) fn substep(&mut self, world: &mut World, model: &VehicleModel, w_radps: f32, steer: (f32, f32), p: BodyParams) {
+    pub(crate) fn substep(
+        &mut self,
+        world: &mut World,
+        model: &VehicleModel,
+        w_radps: f32,
+        steer: (f32, f32),
+        p: BodyParams,
+    ) {
         match self {
-            Body::Raycast { chassis, controller, .. } => {
+            Body::Raycast {
+                chassis, controller, ..
+            } => {
                 let rb = &world.pw.bodies[*chassis];
                 let fwd = rb.position().rotation * Vector::X;
                 let v = rb.linvel().dot(fwd);
@@ -233,7 +290,12 @@ impl Body {
                 let dt = world.pw.integration_parameters.dt;
                 let filter = QueryFilter::default().groups(groups::sensors());
                 let pw = &mut world.pw;
-                let q = pw.broad_phase.as_query_pipeline_mut(pw.narrow_phase.query_dispatcher(), &mut pw.bodies, &mut pw.colliders, filter);
+                let q = pw.broad_phase.as_query_pipeline_mut(
+                    pw.narrow_phase.query_dispatcher(),
+                    &mut pw.bodies,
+                    &mut pw.colliders,
+                    filter,
+                );
                 controller.update_vehicle(dt, q);
                 world.pw.step();
             }
@@ -242,7 +304,9 @@ impl Body {
                 for &h in &car.drive {
                     if let Some((mb, link)) = world.pw.multibody_joints.get_mut(h) {
                         if let Some(l) = mb.link_mut(link) {
-                            l.joint.data.set_motor_velocity(JointAxis::AngX, w_radps, DRIVE_MOTOR_DAMPING);
+                            l.joint
+                                .data
+                                .set_motor_velocity(JointAxis::AngX, w_radps, DRIVE_MOTOR_DAMPING);
                             l.joint.data.set_motor_max_force(JointAxis::AngX, max_t);
                         }
                     }
@@ -251,7 +315,9 @@ impl Body {
                     if let Some((mb, link)) = world.pw.multibody_joints.get_mut(h) {
                         if let Some(l) = mb.link_mut(link) {
                             let target = if side > 0 { steer.0 } else { steer.1 };
-                            l.joint.data.set_motor_position(JointAxis::AngX, target, STEER_STIFFNESS, STEER_DAMPING);
+                            l.joint
+                                .data
+                                .set_motor_position(JointAxis::AngX, target, STEER_STIFFNESS, STEER_DAMPING);
                         }
                     }
                 }
@@ -278,26 +344,52 @@ impl MultibodyCar {
             .template
             .links
             .iter()
-            .map(|l| model.link_mprops.get(&robot.links[l.urdf_link_index].name).copied().unwrap_or_default())
+            .map(|l| {
+                model
+                    .link_mprops
+                    .get(&robot.links[l.urdf_link_index].name)
+                    .copied()
+                    .unwrap_or_default()
+            })
             .collect();
         let wheel_links: Vec<usize> = self
             .template
             .links
             .iter()
             .enumerate()
-            .filter(|(_, l)| model.wheels.iter().any(|w| w.link == model.urdf.robot.links[l.urdf_link_index].name))
+            .filter(|(_, l)| {
+                model
+                    .wheels
+                    .iter()
+                    .any(|w| w.link == model.urdf.robot.links[l.urdf_link_index].name)
+            })
             .map(|(i, _)| i)
             .collect();
-        self.wheel_colliders = wheel_links.iter().flat_map(|&i| handles.links[i].colliders.iter().map(|c| c.handle)).collect();
-        self.colliders = handles.links.iter().flat_map(|l| l.colliders.iter().map(|c| c.handle)).collect();
+        self.wheel_colliders = wheel_links
+            .iter()
+            .flat_map(|&i| handles.links[i].colliders.iter().map(|c| c.handle))
+            .collect();
+        self.colliders = handles
+            .links
+            .iter()
+            .flat_map(|l| l.colliders.iter().map(|c| c.handle))
+            .collect();
         let find = |name: &str| -> Result<MultibodyJointHandle, SimError> {
             self.joint_names
                 .iter()
                 .position(|n| n == name)
                 .and_then(|i| handles.joints[i].joint)
-                .ok_or_else(|| SimError::Invalid { context: model.urdf.rel_path.clone(), msg: format!("joint '{name}' did not become a multibody joint") })
+                .ok_or_else(|| SimError::Invalid {
+                    context: model.urdf.rel_path.clone(),
+                    msg: format!("joint '{name}' did not become a multibody joint"),
+                })
         };
-        self.drive = model.wheels.iter().filter(|w| w.driven).map(|w| find(&w.joint)).collect::<Result<_, _>>()?;
+        self.drive = model
+            .wheels
+            .iter()
+            .filter(|w| w.driven)
+            .map(|w| find(&w.joint))
+            .collect::<Result<_, _>>()?;
         self.steer = model
             .wheels
             .iter()
@@ -339,8 +431,14 @@ impl MultibodyCar {
         }
         let root = self.bodies[self.base_idx];
         pw.bodies[root].set_position(pose, true);
-        let h = *self.drive.first().ok_or_else(|| SimError::Invalid { context: model.urdf.rel_path.clone(), msg: "no driven wheel".into() })?;
-        let (mb, _) = pw.multibody_joints.get_mut(h).ok_or_else(|| SimError::Invalid { context: model.urdf.rel_path.clone(), msg: "multibody lost".into() })?;
+        let h = *self.drive.first().ok_or_else(|| SimError::Invalid {
+            context: model.urdf.rel_path.clone(),
+            msg: "no driven wheel".into(),
+        })?;
+        let (mb, _) = pw.multibody_joints.get_mut(h).ok_or_else(|| SimError::Invalid {
+            context: model.urdf.rel_path.clone(),
+            msg: "multibody lost".into(),
+        })?;
         let mut disp = vec![0.0; mb.ndofs()];
         for link in mb.links().filter(|l| !l.is_root()) {
             let n = link.joint().ndofs();
@@ -358,7 +456,10 @@ impl MultibodyCar {
         mb.apply_displacements(&disp);
         mb.generalized_velocity_mut().fill(0.0);
         mb.forward_kinematics(&pw.bodies, true);
-        let poses: Vec<(RigidBodyHandle, Pose)> = mb.links().map(|l| (l.rigid_body_handle(), *l.local_to_world())).collect();
+        let poses: Vec<(RigidBodyHandle, Pose)> = mb
+            .links()
+            .map(|l| (l.rigid_body_handle(), *l.local_to_world()))
+            .collect();
         for (b, pose) in poses {
             pw.bodies[b].set_position(pose, true);
             pw.wake_up(b, true);
@@ -371,5 +472,10 @@ fn scale_mass(mp: MassProperties, s: f32) -> MassProperties {
     if s == 1.0 {
         return mp;
     }
-    MassProperties::with_principal_inertia_frame(mp.local_com, mp.mass() * s, mp.principal_inertia() * s, mp.principal_inertia_local_frame)
+    MassProperties::with_principal_inertia_frame(
+        mp.local_com,
+        mp.mass() * s,
+        mp.principal_inertia() * s,
+        mp.principal_inertia_local_frame,
+    )
 }

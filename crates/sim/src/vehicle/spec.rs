@@ -2,9 +2,9 @@
 //! sensor links and the actuation constants. `VehicleModel::load` turns both into geometry the
 //! dynamics modes share.
 
-use crate::assets::{join_rel, AssetSource};
-use crate::urdf::{ShapeSpec, UrdfModel};
 use crate::SimError;
+use crate::assets::{AssetSource, join_rel};
+use crate::urdf::{ShapeSpec, UrdfModel};
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -127,7 +127,10 @@ impl VehicleModel {
         if src.read(&rel).is_err() {
             return Err(SimError::Invalid {
                 context: "vehicle".into(),
-                msg: format!("unknown vehicle '{name}'; built-in vehicles: {}", src.list("vehicles", "toml").join(", ")),
+                msg: format!(
+                    "unknown vehicle '{name}'; built-in vehicles: {}",
+                    src.list("vehicles", "toml").join(", ")
+                ),
             });
         }
         Self::load(src, &rel)
@@ -136,20 +139,38 @@ impl VehicleModel {
     /// Load the vehicle TOML at `rel` in `src`.
     pub fn load(src: &AssetSource, rel: &str) -> Result<Self, SimError> {
         let text = src.read(rel)?;
-        let spec: VehicleSpec =
-            toml::from_str(&text).map_err(|e| SimError::Toml { path: src.display_path(rel), msg: e.to_string() })?;
+        let spec: VehicleSpec = toml::from_str(&text).map_err(|e| SimError::Toml {
+            path: src.display_path(rel),
+            msg: e.to_string(),
+        })?;
         let urdf = UrdfModel::read(src, &join_rel(rel, &spec.urdf))?;
-        let name = rel.rsplit('/').next().unwrap_or(rel).trim_end_matches(".toml").to_string();
-        let invalid = |msg: String| SimError::Invalid { context: src.display_path(rel).display().to_string(), msg };
+        let name = rel
+            .rsplit('/')
+            .next()
+            .unwrap_or(rel)
+            .trim_end_matches(".toml")
+            .to_string();
+        let invalid = |msg: String| SimError::Invalid {
+            context: src.display_path(rel).display().to_string(),
+            msg,
+        };
         if spec.wheels.len() < 3 {
-            return Err(invalid(format!("a car needs at least 3 wheels, the spec lists {}", spec.wheels.len())));
+            return Err(invalid(format!(
+                "a car needs at least 3 wheels, the spec lists {}",
+                spec.wheels.len()
+            )));
         }
         let d = spec.drive;
         if !(d.c_t > 0.0 && d.c_d >= 0.0 && d.c_r >= 0.0 && d.max_torque_nm > 0.0) {
-            return Err(invalid("drive constants must be c_t > 0, c_d >= 0, c_r >= 0, max_torque_nm > 0".into()));
+            return Err(invalid(
+                "drive constants must be c_t > 0, c_d >= 0, c_r >= 0, max_torque_nm > 0".into(),
+            ));
         }
         if !(spec.steering.max_rad > 0.0 && spec.steering.max_rad < 1.5) {
-            return Err(invalid(format!("steering.max_rad must be in (0, 1.5), got {}", spec.steering.max_rad)));
+            return Err(invalid(format!(
+                "steering.max_rad must be in (0, 1.5), got {}",
+                spec.steering.max_rad
+            )));
         }
         let mut wheels = Vec::new();
         for w in &spec.wheels {
@@ -159,9 +180,11 @@ impl VehicleModel {
                 .collision
                 .iter()
                 .find_map(|c| match c.geometry {
-                    rapier3d_urdf::urdf_rs::Geometry::Cylinder { radius, length } => {
-                        Some((radius as f32, length as f32, crate::urdf::pose_from_urdf(&c.origin).translation))
-                    }
+                    rapier3d_urdf::urdf_rs::Geometry::Cylinder { radius, length } => Some((
+                        radius as f32,
+                        length as f32,
+                        crate::urdf::pose_from_urdf(&c.origin).translation,
+                    )),
                     _ => None,
                 })
                 .ok_or_else(|| invalid(format!("wheel link '{}' needs a cylinder collision shape", link.name)))?;
@@ -194,7 +217,9 @@ impl VehicleModel {
         let ys: Vec<f32> = steered.iter().map(|w| w.center_b.y).collect();
         let front_track_m = ys.iter().cloned().fold(f32::MIN, f32::max) - ys.iter().cloned().fold(f32::MAX, f32::min);
         if wheelbase_m < 0.05 {
-            return Err(invalid(format!("wheelbase {wheelbase_m} m: steered and fixed wheels share an axle")));
+            return Err(invalid(format!(
+                "wheelbase {wheelbase_m} m: steered and fixed wheels share an axle"
+            )));
         }
 
         let mut mass_props = MassProperties::default();
@@ -220,9 +245,17 @@ impl VehicleModel {
         if mass_props.mass() <= 0.0 {
             return Err(invalid("the URDF has no mass (add <inertial> elements)".into()));
         }
-        let lidar_b = *urdf.link_pose.get(&spec.lidar_link).ok_or_else(|| invalid(format!("no lidar link '{}'", spec.lidar_link)))?;
+        let lidar_b = *urdf
+            .link_pose
+            .get(&spec.lidar_link)
+            .ok_or_else(|| invalid(format!("no lidar link '{}'", spec.lidar_link)))?;
         let camera_b = match &spec.camera_link {
-            Some(c) => Some(*urdf.link_pose.get(c).ok_or_else(|| invalid(format!("no camera link '{c}'")))?),
+            Some(c) => Some(
+                *urdf
+                    .link_pose
+                    .get(c)
+                    .ok_or_else(|| invalid(format!("no camera link '{c}'")))?,
+            ),
             None => None,
         };
         let wheel_links: Vec<String> = wheels.iter().map(|w| w.link.clone()).collect();
@@ -246,11 +279,18 @@ impl VehicleModel {
     /// Wheel radius of the driven wheels, metres (the radius the drive model's w refers to).
     pub fn drive_radius_m(&self) -> f32 {
         let d: Vec<f32> = self.wheels.iter().filter(|w| w.driven).map(|w| w.radius_m).collect();
-        if d.is_empty() { self.wheels[0].radius_m } else { d.iter().sum::<f32>() / d.len() as f32 }
+        if d.is_empty() {
+            self.wheels[0].radius_m
+        } else {
+            d.iter().sum::<f32>() / d.len() as f32
+        }
     }
 
     /// Height of the base frame above flat ground when the car rests on its wheels, metres.
     pub fn rest_height_m(&self) -> f32 {
-        self.wheels.iter().map(|w| w.radius_m - w.center_b.z).fold(0.0, f32::max)
+        self.wheels
+            .iter()
+            .map(|w| w.radius_m - w.center_b.z)
+            .fold(0.0, f32::max)
     }
 }
