@@ -21,10 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             rets.push(r);
         }
         rets.sort_by(f64::total_cmp);
-        println!(
-            "algo=sac median_eval_return={:.1} target>=-170",
-            rets[rets.len() / 2]
-        );
+        println!("algo=sac median_eval_return={:.1} target>=-170", rets[rets.len() / 2]);
     }
     if which == "ppo" || which == "all" {
         let steps = steps.unwrap_or(100_000);
@@ -39,10 +36,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             rets.push(r);
         }
         rets.sort_by(f64::total_cmp);
-        println!(
-            "algo=ppo median_eval_return={:.1} target>=-250",
-            rets[rets.len() / 2]
-        );
+        println!("algo=ppo median_eval_return={:.1} target>=-250", rets[rets.len() / 2]);
     }
     Ok(())
 }

@@ -5,6 +5,14 @@
 //! `sac_gflops` counts the matrix-product FLOPs one update of `sac/update.rs` performs
 //! ([`sac_update_flops`]); `sgemm_gflops` is a plain 256x256x256 product on the same device,
 //! the ceiling those figures are bounded by.
+//!
+//! What profiling showed (perf, 2-core AVX-512 machine): SAC's update is ~70 % GEMM, so the
+//! backend's GEMM kernel decides it; Burn's `x86-v4` feature (AVX-512 kernels, picked at run
+//! time) doubled flex's 256^3 product (74 -> 148 GFLOP/s, one thread). ndarray's GEMM is fast
+//! too but its per-op overhead makes SAC ~2x and inference ~4x slower, so flex is the default.
+//! PPO's small tanh nets spent 2/3 of the update in libm's scalar `tanhf`; tanh is now
+//! `2 sigmoid(2x) - 1`, and PPO's loss head is fused on the host (see `ppo/update.rs`).
+//! Burn's `rayon`/`simd` options gave no measurable gain on this busy machine and are off.
 
 use crate::device::CpuBackend;
 use crate::error::Result;
@@ -43,9 +51,7 @@ impl RandomEnv {
     }
 
     fn obs(&mut self) -> Vec<f32> {
-        (0..self.obs_dim)
-            .map(|_| self.rng.normal() as f32)
-            .collect()
+        (0..self.obs_dim).map(|_| self.rng.normal() as f32).collect()
     }
 }
 
@@ -121,21 +127,14 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
     let sgemm = |threads: usize, rng: &mut Rng| -> Result<f64> {
         let mats: Vec<(Tensor<2>, Tensor<2>)> = (0..threads)
             .map(|_| {
-                let mut m = || {
-                    Tensor::<2>::from_data(
-                        TensorData::new(rng.normals(256 * 256), [256, 256]),
-                        &device,
-                    )
-                };
+                let mut m = || Tensor::<2>::from_data(TensorData::new(rng.normals(256 * 256), [256, 256]), &device);
                 (m(), m())
             })
             .collect();
         let run = |(x, y): &(Tensor<2>, Tensor<2>)| -> Result<f32> {
             let mut acc = 0.0f32;
             for _ in 0..inner {
-                acc += crate::nets::to_vec(
-                    x.clone().matmul(y.clone()).narrow(0, 0, 1).narrow(1, 0, 1),
-                )?[0];
+                acc += crate::nets::to_vec(x.clone().matmul(y.clone()).narrow(0, 0, 1).narrow(1, 0, 1))?[0];
             }
             Ok(acc)
         };
@@ -144,9 +143,7 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
             let t = Instant::now();
             let accs: Vec<Result<f32>> = std::thread::scope(|s| {
                 let hs: Vec<_> = mats.iter().map(|m| s.spawn(move || run(m))).collect();
-                hs.into_iter()
-                    .map(|h| h.join().unwrap_or(Ok(0.0)))
-                    .collect()
+                hs.into_iter().map(|h| h.join().unwrap_or(Ok(0.0))).collect()
             });
             let s = t.elapsed().as_secs_f64();
             for a in accs {
@@ -162,10 +159,7 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         "sgemm_gflops={:.1} threads=1 size=256x256x256 reps={reps}",
         sgemm(1, &mut rng)?
     ));
-    lines.push(format!(
-        "sgemm_gflops_2threads={:.1} reps={reps}",
-        sgemm(2, &mut rng)?
-    ));
+    lines.push(format!("sgemm_gflops_2threads={:.1} reps={reps}", sgemm(2, &mut rng)?));
 
     // SAC updates (one update per env step, buffer pre-filled), on 1 and 2 threads.
     let (o, a) = (BENCH_OBS_DIM, BENCH_ACT_DIM);

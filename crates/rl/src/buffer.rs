@@ -62,14 +62,7 @@ impl ReplayBuffer {
     }
 
     /// Store one transition, overwriting the oldest once full.
-    pub fn push(
-        &mut self,
-        obs: &[f32],
-        action: &[f32],
-        reward: f32,
-        next_obs: &[f32],
-        terminated: bool,
-    ) {
+    pub fn push(&mut self, obs: &[f32], action: &[f32], reward: f32, next_obs: &[f32], terminated: bool) {
         let done = if terminated { 1.0 } else { 0.0 };
         if self.len() < self.capacity {
             self.obs.extend_from_slice(obs);
@@ -101,10 +94,8 @@ impl ReplayBuffer {
         for _ in 0..batch {
             let i = rng.below(n);
             b.obs.extend_from_slice(&self.obs[i * o..(i + 1) * o]);
-            b.next_obs
-                .extend_from_slice(&self.next_obs[i * o..(i + 1) * o]);
-            b.actions
-                .extend_from_slice(&self.actions[i * a..(i + 1) * a]);
+            b.next_obs.extend_from_slice(&self.next_obs[i * o..(i + 1) * o]);
+            b.actions.extend_from_slice(&self.actions[i * a..(i + 1) * a]);
             b.rewards.push(self.rewards[i]);
             b.dones.push(self.dones[i]);
         }

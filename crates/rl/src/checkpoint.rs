@@ -111,26 +111,14 @@ impl ArrayReader<'_> {
 
 /// Write a checkpoint: `header` as JSON plus `arrays`, atomically.
 pub(crate) fn write<H: Serialize>(path: &Path, header: &H, arrays: &ArrayWriter<'_>) -> Result<()> {
-    let bytes = file::encode(
-        CHECKPOINT_MAGIC,
-        CHECKPOINT_FORMAT_VERSION,
-        header,
-        &arrays.arrays,
-    )?;
+    let bytes = file::encode(CHECKPOINT_MAGIC, CHECKPOINT_FORMAT_VERSION, header, &arrays.arrays)?;
     file::write_atomic(path, &bytes)
 }
 
 /// Read a checkpoint written by `algorithm`: its header and a reader over its arrays.
-pub(crate) fn read<'p, H: DeserializeOwned>(
-    path: &'p Path,
-    algorithm: Algorithm,
-) -> Result<(H, ArrayReader<'p>)> {
-    let (h, arrays): (serde_json::Value, _) = file::read(
-        path,
-        CHECKPOINT_MAGIC,
-        CHECKPOINT_FORMAT_VERSION,
-        "checkpoint",
-    )?;
+pub(crate) fn read<'p, H: DeserializeOwned>(path: &'p Path, algorithm: Algorithm) -> Result<(H, ArrayReader<'p>)> {
+    let (h, arrays): (serde_json::Value, _) =
+        file::read(path, CHECKPOINT_MAGIC, CHECKPOINT_FORMAT_VERSION, "checkpoint")?;
     let found = h
         .get("algorithm")
         .and_then(|a| a.as_str())

@@ -20,9 +20,7 @@ impl CpuBackend {
         match s {
             "flex" => Ok(Self::Flex),
             "ndarray" => Ok(Self::NdArray),
-            _ => Err(RlError::Config(format!(
-                "unknown CPU backend '{s}' (flex, ndarray)"
-            ))),
+            _ => Err(RlError::Config(format!("unknown CPU backend '{s}' (flex, ndarray)"))),
         }
     }
 

@@ -6,12 +6,7 @@ use agvrl_envs::Env;
 
 /// Mean return of `n_episodes` episodes with deterministic actions; episode `k` resets with
 /// seed `seed + k`. The env must end its episodes (a `TimeLimit` does).
-pub fn evaluate<E: Env + ?Sized>(
-    policy: &mut Policy,
-    env: &mut E,
-    n_episodes: usize,
-    seed: u64,
-) -> Result<f64> {
+pub fn evaluate<E: Env + ?Sized>(policy: &mut Policy, env: &mut E, n_episodes: usize, seed: u64) -> Result<f64> {
     policy.check_spaces(&env.observation_space(), &env.action_space())?;
     let mut total = 0.0;
     for k in 0..n_episodes {

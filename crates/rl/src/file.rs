@@ -20,11 +20,7 @@ const CRC_TABLE: [u32; 256] = {
         let mut c = i as u32;
         let mut k = 0;
         while k < 8 {
-            c = if c & 1 != 0 {
-                0xEDB8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
+            c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
             k += 1;
         }
         t[i] = c;
@@ -57,12 +53,7 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> RlError + '_ {
 }
 
 /// Encode a container in memory.
-pub fn encode(
-    magic: &[u8; 8],
-    version: u32,
-    header: &impl Serialize,
-    arrays: &[&[f32]],
-) -> Result<Vec<u8>> {
+pub fn encode(magic: &[u8; 8], version: u32, header: &impl Serialize, arrays: &[&[f32]]) -> Result<Vec<u8>> {
     let header = serde_json::to_vec(header).map_err(|e| RlError::Config(format!("header: {e}")))?;
     let n_floats: usize = arrays.iter().map(|a| a.len()).sum();
     let mut buf = Vec::with_capacity(32 + header.len() + 8 * arrays.len() + 4 * n_floats);
@@ -126,9 +117,7 @@ impl Reader<'_> {
     }
     fn u64(&mut self) -> Result<u64> {
         let b = self.take(8)?;
-        Ok(u64::from_le_bytes([
-            b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7],
-        ]))
+        Ok(u64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
     }
 }
 
@@ -142,16 +131,10 @@ pub fn decode<H: DeserializeOwned>(
     kind: &str,
 ) -> Result<(H, Vec<Vec<f32>>)> {
     if bytes.len() < 8 || &bytes[..8] != magic {
-        return Err(bad(
-            path,
-            format!("not an agvrl {kind} file (wrong magic bytes)"),
-        ));
+        return Err(bad(path, format!("not an agvrl {kind} file (wrong magic bytes)")));
     }
     if bytes.len() < 8 + 4 + 8 + 8 + 4 {
-        return Err(bad(
-            path,
-            format!("truncated {kind} file ({} bytes)", bytes.len()),
-        ));
+        return Err(bad(path, format!("truncated {kind} file ({} bytes)", bytes.len())));
     }
     let (body, tail) = bytes.split_at(bytes.len() - 4);
     let stored = u32::from_le_bytes([tail[0], tail[1], tail[2], tail[3]]);
@@ -174,16 +157,12 @@ pub fn decode<H: DeserializeOwned>(
         path,
     };
     let hlen = r.u64()? as usize;
-    let header: H =
-        serde_json::from_slice(r.take(hlen)?).map_err(|e| bad(path, format!("header: {e}")))?;
+    let header: H = serde_json::from_slice(r.take(hlen)?).map_err(|e| bad(path, format!("header: {e}")))?;
     let n = r.u64()? as usize;
     let mut arrays = Vec::with_capacity(n.min(1 << 16));
     for _ in 0..n {
         let len = r.u64()? as usize;
-        let raw = r.take(
-            len.checked_mul(4)
-                .ok_or_else(|| bad(path, "array length overflows"))?,
-        )?;
+        let raw = r.take(len.checked_mul(4).ok_or_else(|| bad(path, "array length overflows"))?)?;
         arrays.push(
             raw.chunks_exact(4)
                 .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
@@ -197,12 +176,7 @@ pub fn decode<H: DeserializeOwned>(
 }
 
 /// Read and decode the container at `path`.
-pub fn read<H: DeserializeOwned>(
-    path: &Path,
-    magic: &[u8; 8],
-    version: u32,
-    kind: &str,
-) -> Result<(H, Vec<Vec<f32>>)> {
+pub fn read<H: DeserializeOwned>(path: &Path, magic: &[u8; 8], version: u32, kind: &str) -> Result<(H, Vec<Vec<f32>>)> {
     let bytes = std::fs::read(path).map_err(io(path))?;
     decode(path, &bytes, magic, version, kind)
 }
@@ -225,10 +199,7 @@ mod tests {
         assert_eq!(h, "hello");
         assert_eq!(arrays, vec![a.to_vec(), vec![]]);
         for n in 0..bytes.len() {
-            assert!(
-                decode::<String>(p, &bytes[..n], b"AGVRLTST", 3, "test").is_err(),
-                "{n}"
-            );
+            assert!(decode::<String>(p, &bytes[..n], b"AGVRLTST", 3, "test").is_err(), "{n}");
         }
         let mut flipped = bytes.clone();
         flipped[30] ^= 1;

@@ -73,10 +73,7 @@ impl HostParams {
 
     /// Leaf tensors that record gradients (`device` must have autodiff on).
     pub fn to_tracked(&self, device: &Device) -> Vec<Tensor<3>> {
-        self.to_device(device)
-            .into_iter()
-            .map(|t| t.require_grad())
-            .collect()
+        self.to_device(device).into_iter().map(|t| t.require_grad()).collect()
     }
 
     /// `self = (1 - tau) self + tau other` (Polyak averaging of target networks).
@@ -145,22 +142,14 @@ impl MlpSpec {
 }
 
 /// One layer's weights `[n, fan_in, fan_out]` and biases `[n, 1, fan_out]`.
-pub fn init_layer(
-    init: Init,
-    n: usize,
-    fan_in: usize,
-    fan_out: usize,
-    rng: &mut Rng,
-) -> (Vec<f32>, Vec<f32>) {
+pub fn init_layer(init: Init, n: usize, fan_in: usize, fan_out: usize, rng: &mut Rng) -> (Vec<f32>, Vec<f32>) {
     let mut w = Vec::with_capacity(n * fan_in * fan_out);
     let mut b = Vec::with_capacity(n * fan_out);
     for _ in 0..n {
         match init {
             Init::TorchDefault => {
                 let bound = 1.0 / (fan_in as f64).sqrt();
-                w.extend(
-                    (0..fan_in * fan_out).map(|_| ((rng.uniform() * 2.0 - 1.0) * bound) as f32),
-                );
+                w.extend((0..fan_in * fan_out).map(|_| ((rng.uniform() * 2.0 - 1.0) * bound) as f32));
                 b.extend((0..fan_out).map(|_| ((rng.uniform() * 2.0 - 1.0) * bound) as f32));
             }
             Init::Orthogonal(gain) => {
@@ -177,9 +166,7 @@ pub fn init_layer(
 fn orthogonal(rows: usize, cols: usize, gain: f64, rng: &mut Rng) -> Vec<f32> {
     let (long, short) = (rows.max(cols), rows.min(cols));
     // `short` vectors of length `long`, made orthonormal.
-    let mut q: Vec<Vec<f64>> = (0..short)
-        .map(|_| (0..long).map(|_| rng.normal()).collect())
-        .collect();
+    let mut q: Vec<Vec<f64>> = (0..short).map(|_| (0..long).map(|_| rng.normal()).collect()).collect();
     for i in 0..short {
         for j in 0..i {
             let d: f64 = q[i].iter().zip(&q[j]).map(|(a, b)| a * b).sum();
@@ -201,12 +188,7 @@ fn orthogonal(rows: usize, cols: usize, gain: f64, rng: &mut Rng) -> Vec<f32> {
 
 /// `x [n_members or 1, batch, in] -> [n_members, batch, out]` through the layers in `params`
 /// (`[w0, b0, w1, b1, ...]`).
-pub fn mlp_forward(
-    params: &[Tensor<3>],
-    x: Tensor<3>,
-    activation: Activation,
-    activate_last: bool,
-) -> Tensor<3> {
+pub fn mlp_forward(params: &[Tensor<3>], x: Tensor<3>, activation: Activation, activate_last: bool) -> Tensor<3> {
     let n_layers = params.len() / 2;
     let mut h = x;
     for l in 0..n_layers {
@@ -320,13 +302,7 @@ impl Adam {
         let step_size = (self.lr / bc1) as f32;
         let inv_sqrt_bc2 = (1.0 / bc2.sqrt()) as f32;
         let eps = self.eps as f32;
-        for (((p, g), m), v) in params
-            .data
-            .iter_mut()
-            .zip(grads)
-            .zip(&mut self.m)
-            .zip(&mut self.v)
-        {
+        for (((p, g), m), v) in params.data.iter_mut().zip(grads).zip(&mut self.m).zip(&mut self.v) {
             for (((p, g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
                 *m = b1 * *m + (1.0 - b1) * g;
                 *v = b2 * *v + (1.0 - b2) * g * g;

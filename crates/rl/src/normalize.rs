@@ -85,9 +85,7 @@ mod tests {
     #[test]
     fn matches_batch_statistics() {
         let mut n = ObsNormalizer::new(2);
-        let data: Vec<f32> = (0..1000)
-            .flat_map(|i| [i as f32, 5.0 - 0.5 * i as f32])
-            .collect();
+        let data: Vec<f32> = (0..1000).flat_map(|i| [i as f32, 5.0 - 0.5 * i as f32]).collect();
         for chunk in data.chunks(20) {
             n.update(chunk);
         }

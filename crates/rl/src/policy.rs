@@ -107,8 +107,7 @@ impl PolicyData {
 
     /// Read a policy file; rejects other formats, versions, truncation and corruption.
     pub fn load(path: &Path) -> Result<Self> {
-        let (h, arrays): (Header, _) =
-            file::read(path, POLICY_MAGIC, POLICY_FORMAT_VERSION, "policy")?;
+        let (h, arrays): (Header, _) = file::read(path, POLICY_MAGIC, POLICY_FORMAT_VERSION, "policy")?;
         Self::from_parts(path, h, arrays)
     }
 
@@ -145,9 +144,7 @@ impl PolicyData {
             return Err(bad("network widths do not match the spaces".into()));
         }
         if h.normalizer.as_ref().is_some_and(|n| n.dim() != o) {
-            return Err(bad(
-                "normaliser width differs from the observation space".into()
-            ));
+            return Err(bad("normaliser width differs from the observation space".into()));
         }
         Ok(Self {
             algorithm: h.algorithm,
@@ -166,12 +163,7 @@ impl PolicyData {
 
     /// Map network outputs (`n` rows) to actions in the action box. `deterministic` uses the
     /// mean; otherwise noise comes from `rng`.
-    pub(crate) fn actions_from_outputs(
-        &self,
-        out: &[f32],
-        deterministic: bool,
-        rng: &mut Rng,
-    ) -> Vec<f32> {
+    pub(crate) fn actions_from_outputs(&self, out: &[f32], deterministic: bool, rng: &mut Rng) -> Vec<f32> {
         let a_dim = self.action_space.dim();
         let (low, high) = (&self.action_space.low, &self.action_space.high);
         match &self.head {
@@ -181,8 +173,7 @@ impl PolicyData {
                     for i in 0..a_dim {
                         let mut u = row[i];
                         if !deterministic {
-                            u += row[a_dim + i].clamp(LOG_STD_MIN, LOG_STD_MAX).exp()
-                                * rng.normal() as f32;
+                            u += row[a_dim + i].clamp(LOG_STD_MIN, LOG_STD_MAX).exp() * rng.normal() as f32;
                         }
                         acts.push(unsquash(u.tanh(), low[i], high[i]));
                     }
@@ -295,16 +286,8 @@ impl Policy {
     }
 
     /// Error unless the env's spaces equal the policy's.
-    pub fn check_spaces(
-        &self,
-        observation_space: &BoxSpace,
-        action_space: &BoxSpace,
-    ) -> Result<()> {
-        check_space(
-            "observation space",
-            &self.data.observation_space,
-            observation_space,
-        )?;
+    pub fn check_spaces(&self, observation_space: &BoxSpace, action_space: &BoxSpace) -> Result<()> {
+        check_space("observation space", &self.data.observation_space, observation_space)?;
         check_space("action space", &self.data.action_space, action_space)
     }
 
@@ -331,18 +314,13 @@ impl Policy {
         if let Some(norm) = &self.data.normalizer {
             norm.normalize(&mut self.scratch);
         }
-        let x = Tensor::<3>::from_data(
-            TensorData::new(self.scratch.clone(), [1, n, o]),
-            &self.device,
-        );
+        let x = Tensor::<3>::from_data(TensorData::new(self.scratch.clone(), [1, n, o]), &self.device);
         let out = to_vec(mlp_forward(
             &self.weights,
             x,
             self.data.net.activation,
             self.data.net.activate_last,
         ))?;
-        Ok(self
-            .data
-            .actions_from_outputs(&out, deterministic, &mut self.rng))
+        Ok(self.data.actions_from_outputs(&out, deterministic, &mut self.rng))
     }
 }

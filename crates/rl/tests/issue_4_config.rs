@@ -70,8 +70,6 @@ fn toml_overrides_a_subset_and_round_trips() {
 fn unknown_keys_and_unsupported_options_are_rejected() {
     assert!(SacConfig::from_toml("learnign_rate = 1e-3").is_err());
     assert!(SacConfig::from_toml("ent_coef = \"sometimes\"").is_err());
-    let e = PpoConfig::from_toml("use_sde = true")
-        .unwrap_err()
-        .to_string();
+    let e = PpoConfig::from_toml("use_sde = true").unwrap_err().to_string();
     assert!(e.contains("gSDE"), "{e}");
 }

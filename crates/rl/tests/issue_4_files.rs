@@ -3,9 +3,7 @@
 
 use crate::reach::vec_env;
 use agvrl_envs::{Env, make};
-use agvrl_rl::{
-    Control, Policy, PolicyData, Ppo, PpoConfig, RlError, Sac, SacConfig, default_device,
-};
+use agvrl_rl::{Control, Policy, PolicyData, Ppo, PpoConfig, RlError, Sac, SacConfig, default_device};
 use std::path::PathBuf;
 
 fn tmp(name: &str) -> PathBuf {
@@ -22,10 +20,7 @@ fn same_bytes(a: &std::path::Path, b: &std::path::Path) {
         "lengths {} {}, first difference at {first:?}: {:?}",
         x.len(),
         y.len(),
-        first.map(
-            |i| String::from_utf8_lossy(&x[i.saturating_sub(60)..(i + 20).min(x.len())])
-                .into_owned()
-        )
+        first.map(|i| String::from_utf8_lossy(&x[i.saturating_sub(60)..(i + 20).min(x.len())]).into_owned())
     );
 }
 
@@ -59,10 +54,7 @@ fn policy_round_trip_gives_the_same_actions() {
     // The ndarray backend reads the same file and agrees to float tolerance.
     let mut c = Policy::load_on(&path, &agvrl_rl::CpuBackend::NdArray.device()).unwrap();
     let xc = c.act(&obs, true).unwrap();
-    assert!(
-        xa.iter().zip(&xc).all(|(p, q)| (p - q).abs() < 1e-4),
-        "{xa:?} {xc:?}"
-    );
+    assert!(xa.iter().zip(&xc).all(|(p, q)| (p - q).abs() < 1e-4), "{xa:?} {xc:?}");
 }
 
 #[test]
@@ -110,10 +102,7 @@ fn policy_for_another_env_is_rejected() {
     let mut env = make("pendulum").unwrap();
     assert!(agvrl_rl::evaluate(&mut sac.policy(&default_device()), &mut env, 1, 0).is_err());
     let mut p = sac.policy(&default_device());
-    assert!(matches!(
-        p.act(&[1.0, 2.0, 3.0], true),
-        Err(RlError::Shape { .. })
-    ));
+    assert!(matches!(p.act(&[1.0, 2.0, 3.0], true), Err(RlError::Shape { .. })));
 }
 
 #[test]
@@ -123,10 +112,7 @@ fn a_large_sac_policy_file_stays_under_10_mb() {
     let sac = Sac::new(SacConfig::default(), env, &default_device(), 0).unwrap();
     let bytes = sac.policy_data().to_bytes().unwrap();
     assert!(bytes.len() < 10 * 1024 * 1024, "{}", bytes.len());
-    assert!(
-        bytes.len() > 4 * (100 * 256 + 256 * 256),
-        "weights are in the file"
-    );
+    assert!(bytes.len() > 4 * (100 * 256 + 256 * 256), "weights are in the file");
 }
 
 #[test]

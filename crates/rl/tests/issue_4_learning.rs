@@ -7,10 +7,7 @@ use agvrl_rl::{Control, Ppo, PpoConfig, Sac, SacConfig, default_device, evaluate
 fn baselines() -> (f64, f64) {
     let still = rule_return(|_| 0.0);
     let greedy = rule_return(|o| 10.0 * o[1]); // steps straight at the target
-    assert!(
-        greedy > still + 5.0,
-        "the env rewards reaching: {greedy} vs {still}"
-    );
+    assert!(greedy > still + 5.0, "the env rewards reaching: {greedy} vs {still}");
     (still, greedy)
 }
 

@@ -93,9 +93,7 @@ impl PpoConfig {
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(RlError::Config(format!("PPO: {m}")));
         if self.use_sde {
-            return bad(
-                "use_sde (gSDE) is not implemented; use plain Gaussian exploration (use_sde = false)",
-            );
+            return bad("use_sde (gSDE) is not implemented; use plain Gaussian exploration (use_sde = false)");
         }
         if self.learning_rate.is_nan()
             || self.learning_rate <= 0.0

@@ -30,11 +30,7 @@ fn head_idx(cfg: &PpoConfig) -> usize {
 
 /// `(mean [1, b, a], value [1, b, 1])` for observations `x [1, b, o]`. `params` is
 /// `[trunk..., pi_w, pi_b, vf_w, vf_b, log_std]`.
-pub(crate) fn forward(
-    params: &[Tensor<3>],
-    x: Tensor<3>,
-    cfg: &PpoConfig,
-) -> (Tensor<3>, Tensor<3>) {
+pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (Tensor<3>, Tensor<3>) {
     let h0 = head_idx(cfg);
     let h = mlp_forward(&params[..h0], x, cfg.activation_fn, true);
     let mean = h.clone().narrow(0, 0, 1).matmul(params[h0].clone()) + params[h0 + 1].clone();
@@ -164,11 +160,7 @@ impl<E: Env> Ppo<E> {
 
     /// Run rollouts and updates until `steps` more env steps are taken (whole rollouts);
     /// `callback` sees progress after every rollout + update and can stop early.
-    pub fn learn(
-        &mut self,
-        steps: u64,
-        callback: &mut dyn FnMut(&Progress<'_>) -> Control,
-    ) -> Result<()> {
+    pub fn learn(&mut self, steps: u64, callback: &mut dyn FnMut(&Progress<'_>) -> Control) -> Result<()> {
         let target = self.num_timesteps + steps;
         while self.num_timesteps < target {
             let rollout = self.collect_rollout()?;
@@ -190,12 +182,7 @@ impl<E: Env> Ppo<E> {
     }
 
     fn collect_rollout(&mut self) -> Result<Rollout> {
-        let (n_envs, o, a, n_steps) = (
-            self.env.n_envs(),
-            self.obs_dim,
-            self.act_dim,
-            self.cfg.n_steps,
-        );
+        let (n_envs, o, a, n_steps) = (self.env.n_envs(), self.obs_dim, self.act_dim, self.cfg.n_steps);
         let total = n_steps * n_envs;
         let dev = self.device.clone();
         let params = self.params.to_device(&dev);
@@ -206,9 +193,7 @@ impl<E: Env> Ppo<E> {
         let (mut obs, mut starts) = match self.last.take() {
             Some(l) => l,
             None => {
-                let seed = self
-                    .seed
-                    .wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
+                let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
                 let (o0, _) = self.env.reset(Some(seed))?;
                 if let Some(n) = &mut self.normalizer {
                     n.update(&o0);
@@ -227,11 +212,7 @@ impl<E: Env> Ppo<E> {
         let mut values = Vec::with_capacity(total);
         let mut episode_starts = Vec::with_capacity(total);
         let space = self.env.action_space().clone();
-        let value_of = |params: &[Tensor<3>],
-                        x: Vec<f32>,
-                        n: usize,
-                        cfg: &PpoConfig|
-         -> Result<(Vec<f32>, Vec<f32>)> {
+        let value_of = |params: &[Tensor<3>], x: Vec<f32>, n: usize, cfg: &PpoConfig| -> Result<(Vec<f32>, Vec<f32>)> {
             let t = Tensor::<3>::from_data(TensorData::new(x, [1, n, o]), &dev);
             let (mean, value) = forward(params, t, cfg);
             Ok((to_vec(mean)?, to_vec(value)?))
@@ -255,16 +236,11 @@ impl<E: Env> Ppo<E> {
             let st = self.env.step(&clipped)?;
             let mut rew: Vec<f32> = st.rewards.iter().map(|v| *v as f32).collect();
             // Truncated episodes bootstrap: r += gamma V(final_obs).
-            let trunc: Vec<usize> = (0..n_envs)
-                .filter(|&e| st.truncated[e] && !st.terminated[e])
-                .collect();
+            let trunc: Vec<usize> = (0..n_envs).filter(|&e| st.truncated[e] && !st.terminated[e]).collect();
             if !trunc.is_empty() {
                 let mut fx = Vec::with_capacity(trunc.len() * o);
                 for &e in &trunc {
-                    let f = st.infos[e]
-                        .final_obs
-                        .as_deref()
-                        .unwrap_or(&st.obs[e * o..(e + 1) * o]);
+                    let f = st.infos[e].final_obs.as_deref().unwrap_or(&st.obs[e * o..(e + 1) * o]);
                     fx.extend_from_slice(f);
                 }
                 let fx = self.normalized(&fx);
@@ -283,9 +259,7 @@ impl<E: Env> Ppo<E> {
             }
             self.episodes.record(&st.infos);
             self.num_timesteps += n_envs as u64;
-            starts = (0..n_envs)
-                .map(|e| st.terminated[e] || st.truncated[e])
-                .collect();
+            starts = (0..n_envs).map(|e| st.terminated[e] || st.truncated[e]).collect();
             obs = st.obs;
         }
         let (_, last_values) = value_of(&params, self.normalized(&obs), n_envs, &self.cfg)?;
@@ -381,11 +355,7 @@ impl<E: Env> Ppo<E> {
     /// Resume from a checkpoint with `env` (whose spaces must match); episodes restart.
     pub fn load_checkpoint(path: &Path, env: VecEnv<E>, device: &Device) -> Result<Self> {
         let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Ppo)?;
-        check_space(
-            "observation space",
-            &h.observation_space,
-            env.observation_space(),
-        )?;
+        check_space("observation space", &h.observation_space, env.observation_space())?;
         check_space("action space", &h.action_space, env.action_space())?;
         let mut s = Self::new(h.config.clone(), env, device, h.seed)?;
         let shapes = s.params.shapes.clone();

@@ -105,8 +105,7 @@ impl<E: Env> Ppo<E> {
         let ad = dev.clone().autodiff();
         let log_std_idx = head_idx(&self.cfg) + 4;
         let mut idx: Vec<usize> = (0..total).collect();
-        let (mut pg_sum, mut vf_sum, mut kl_sum, mut clip_sum, mut n_mb) =
-            (0.0, 0.0, 0.0, 0.0, 0usize);
+        let (mut pg_sum, mut vf_sum, mut kl_sum, mut clip_sum, mut n_mb) = (0.0, 0.0, 0.0, 0.0, 0usize);
         'epochs: for _ in 0..self.cfg.n_epochs {
             self.rng.shuffle(&mut idx);
             // SB3 yields whole minibatches and a smaller last one.
@@ -127,22 +126,16 @@ impl<E: Env> Ppo<E> {
                 if self.cfg.normalize_advantage && n > 1 {
                     let mean = adv.iter().map(|v| *v as f64).sum::<f64>() / n as f64;
                     // torch.std is unbiased.
-                    let var = adv.iter().map(|v| (*v as f64 - mean).powi(2)).sum::<f64>()
-                        / (n - 1) as f64;
+                    let var = adv.iter().map(|v| (*v as f64 - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
                     let sd = var.sqrt() + 1e-8;
-                    adv.iter_mut()
-                        .for_each(|v| *v = ((*v as f64 - mean) / sd) as f32);
+                    adv.iter_mut().for_each(|v| *v = ((*v as f64 - mean) / sd) as f32);
                 }
-                let t3 =
-                    |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
+                let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
                 // log_std's gradient comes from the host head; only the networks are tracked.
                 let mut params: Vec<Tensor<3>> = self.params.to_tracked(&ad);
                 params[log_std_idx] = params[log_std_idx].clone().detach();
                 let (mean, value) = forward(&params, t3(obs, [1, n, o]), &self.cfg);
-                let (mean_h, value_h) = (
-                    to_vec(mean.clone().inner())?,
-                    to_vec(value.clone().inner())?,
-                );
+                let (mean_h, value_h) = (to_vec(mean.clone().inner())?, to_vec(value.clone().inner())?);
                 let head = loss_head(
                     &HeadInput {
                         mean: &mean_h,
@@ -168,8 +161,7 @@ impl<E: Env> Ppo<E> {
                 if self.cfg.target_kl.is_some_and(|t| head.approx_kl > 1.5 * t) {
                     break 'epochs;
                 }
-                let surrogate = (mean * t3(head.d_mean, [1, n, a])).sum()
-                    + (value * t3(head.d_value, [1, n, 1])).sum();
+                let surrogate = (mean * t3(head.d_mean, [1, n, a])).sum() + (value * t3(head.d_value, [1, n, 1])).sum();
                 let mut grads = grads_of(&params, &surrogate.backward())?;
                 grads[log_std_idx] = head.d_log_std;
                 Adam::clip_grad_norm(&mut grads, self.cfg.max_grad_norm);
@@ -196,16 +188,10 @@ mod tests {
     use crate::rng::Rng;
 
     /// The loss written with autodiff tensor ops (the unfused formulation).
-    fn autodiff_loss(
-        x: &HeadInput<'_>,
-        clip: f64,
-        vf_coef: f64,
-        ent_coef: f64,
-    ) -> (f64, Vec<f32>, Vec<f32>, Vec<f32>) {
+    fn autodiff_loss(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f64) -> (f64, Vec<f32>, Vec<f32>, Vec<f32>) {
         let dev = crate::device::default_device().autodiff();
         let (n, a) = (x.value.len(), x.log_std.len());
-        let t =
-            |v: &[f32], s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v.to_vec(), s), &dev);
+        let t = |v: &[f32], s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v.to_vec(), s), &dev);
         let mean = t(x.mean, [1, n, a]).require_grad();
         let value = t(x.value, [1, n, 1]).require_grad();
         let log_std = t(x.log_std, [1, 1, a]).require_grad();
@@ -217,9 +203,7 @@ mod tests {
             .min_pair(ratio.clamp(1.0 - clip, 1.0 + clip) * adv)
             .mean()
             .neg();
-        let vf = (t(x.returns, [1, n, 1]) - value.clone())
-            .powi_scalar(2)
-            .mean();
+        let vf = (t(x.returns, [1, n, 1]) - value.clone()).powi_scalar(2).mean();
         let ent = (log_std.clone() + (0.5 + HALF_LN_2PI)).sum();
         let loss = pg + vf * vf_coef - ent * ent_coef;
         let g = loss.backward();
@@ -252,33 +236,16 @@ mod tests {
         };
         let h = loss_head(&x, 0.2, 0.5, 0.01);
         let (loss, d_mean, d_value, d_log_std) = autodiff_loss(&x, 0.2, 0.5, 0.01);
-        let ent = log_std
-            .iter()
-            .map(|l| *l as f64 + 0.5 + HALF_LN_2PI)
-            .sum::<f64>();
+        let ent = log_std.iter().map(|l| *l as f64 + 0.5 + HALF_LN_2PI).sum::<f64>();
         assert!(
             (h.pg_loss + 0.5 * h.vf_loss - 0.01 * ent - loss).abs() < 1e-4,
             "{} vs {loss}",
             h.pg_loss
         );
         assert!(h.clip_fraction > 0.0 && h.clip_fraction < 1.0);
-        let close = |p: &[f32], q: &[f32]| {
-            p.iter()
-                .zip(q)
-                .all(|(p, q)| (p - q).abs() < 1e-5 + 1e-3 * q.abs())
-        };
-        assert!(
-            close(&h.d_mean, &d_mean),
-            "{:?}\n{:?}",
-            &h.d_mean[..6],
-            &d_mean[..6]
-        );
+        let close = |p: &[f32], q: &[f32]| p.iter().zip(q).all(|(p, q)| (p - q).abs() < 1e-5 + 1e-3 * q.abs());
+        assert!(close(&h.d_mean, &d_mean), "{:?}\n{:?}", &h.d_mean[..6], &d_mean[..6]);
         assert!(close(&h.d_value, &d_value));
-        assert!(
-            close(&h.d_log_std, &d_log_std),
-            "{:?} {:?}",
-            h.d_log_std,
-            d_log_std
-        );
+        assert!(close(&h.d_log_std, &d_log_std), "{:?} {:?}", h.d_log_std, d_log_std);
     }
 }

@@ -84,9 +84,7 @@ fn finite_box(space: &BoxSpace) -> Result<()> {
     {
         Ok(())
     } else {
-        Err(RlError::Config(
-            "SAC needs a finite action box with low < high".into(),
-        ))
+        Err(RlError::Config("SAC needs a finite action box with low < high".into()))
     }
 }
 
@@ -195,11 +193,7 @@ impl<E: Env> Sac<E> {
     /// Run `steps` more env steps (rounded up to whole vector steps), training as configured;
     /// `callback` sees progress after every vector step and can stop early. Calling `learn`
     /// again continues the same episodes.
-    pub fn learn(
-        &mut self,
-        steps: u64,
-        callback: &mut dyn FnMut(&Progress<'_>) -> Control,
-    ) -> Result<()> {
+    pub fn learn(&mut self, steps: u64, callback: &mut dyn FnMut(&Progress<'_>) -> Control) -> Result<()> {
         let target = self.num_timesteps + steps;
         let n_envs = self.env.n_envs();
         let mut vec_steps = 0u64;
@@ -208,9 +202,7 @@ impl<E: Env> Sac<E> {
                 Some(o) => o,
                 None => {
                     // First reset uses the run seed; after a resume, a seed derived from the step count.
-                    let seed = self
-                        .seed
-                        .wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
+                    let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
                     let (o, _) = self.env.reset(Some(seed))?;
                     if let Some(n) = &mut self.normalizer {
                         n.update(&o);
@@ -237,10 +229,7 @@ impl<E: Env> Sac<E> {
             let st = self.env.step(&env_actions)?;
             let o = self.obs_dim;
             for e in 0..n_envs {
-                let next = st.infos[e]
-                    .final_obs
-                    .as_deref()
-                    .unwrap_or(&st.obs[e * o..(e + 1) * o]);
+                let next = st.infos[e].final_obs.as_deref().unwrap_or(&st.obs[e * o..(e + 1) * o]);
                 self.buffer.push(
                     &obs[e * o..(e + 1) * o],
                     &scaled[e * self.act_dim..(e + 1) * self.act_dim],
@@ -256,9 +245,7 @@ impl<E: Env> Sac<E> {
             self.num_timesteps += n_envs as u64;
             self.last_obs = Some(st.obs);
             vec_steps += 1;
-            if self.num_timesteps > self.cfg.learning_starts
-                && vec_steps.is_multiple_of(self.cfg.train_freq)
-            {
+            if self.num_timesteps > self.cfg.learning_starts && vec_steps.is_multiple_of(self.cfg.train_freq) {
                 for _ in 0..self.cfg.gradient_steps {
                     self.update()?;
                 }
@@ -366,11 +353,7 @@ impl<E: Env> Sac<E> {
     /// the saved weights, optimisers, buffer, RNG and counters; episodes restart.
     pub fn load_checkpoint(path: &Path, env: VecEnv<E>, device: &Device) -> Result<Self> {
         let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Sac)?;
-        check_space(
-            "observation space",
-            &h.observation_space,
-            env.observation_space(),
-        )?;
+        check_space("observation space", &h.observation_space, env.observation_space())?;
         check_space("action space", &h.action_space, env.action_space())?;
         let mut s = Self::new(h.config.clone(), env, device, h.seed)?;
         s.actor = r.params(&s.actor.shapes)?;

@@ -29,9 +29,7 @@ pub(crate) fn squashed_sample(out: Tensor<3>, eps: Tensor<3>, a: usize) -> (Tens
     let y = u.tanh();
     // log N(u; mean, std) = -eps^2/2 - log std - ln(2 pi)/2, minus the tanh Jacobian.
     let gauss = (eps.powi_scalar(2) * -0.5 - log_std - HALF_LN_2PI).sum_dim(2);
-    let jac = (y.clone().powi_scalar(2).neg() + (1.0 + 1e-6))
-        .log()
-        .sum_dim(2);
+    let jac = (y.clone().powi_scalar(2).neg() + (1.0 + 1e-6)).log().sum_dim(2);
     (y, gauss - jac)
 }
 
@@ -84,18 +82,8 @@ impl Shared<'_> {
         let next_obs = self.t3(&b.next_obs, [1, n, o]);
         // One plain actor forward on [obs; next_obs].
         let both = Tensor::cat(vec![obs.clone(), next_obs.clone()], 1);
-        let eps = Tensor::cat(
-            vec![
-                self.t3(&b.eps_pi, [1, n, a]),
-                self.t3(&b.eps_next, [1, n, a]),
-            ],
-            1,
-        );
-        let (act, log_prob) = squashed_sample(
-            mlp_forward(self.actor, both, Activation::Relu, false),
-            eps,
-            a,
-        );
+        let eps = Tensor::cat(vec![self.t3(&b.eps_pi, [1, n, a]), self.t3(&b.eps_next, [1, n, a])], 1);
+        let (act, log_prob) = squashed_sample(mlp_forward(self.actor, both, Activation::Relu, false), eps, a);
         let log_prob_sum = to_vec(log_prob.clone().narrow(1, 0, n).sum())?[0] as f64;
         let (next_action, next_log_prob) = (act.narrow(1, n, n), log_prob.narrow(1, n, n));
         // Target: r + gamma (1 - terminated) (min Q_targ(s', a') - alpha log pi(a'|s')).
@@ -106,8 +94,7 @@ impl Shared<'_> {
             false,
         );
         let q_next = min_of_twins(q_next) - next_log_prob * self.ent_coef;
-        let target_q =
-            self.t3(&b.rewards, [1, n, 1]) + self.t3(&b.not_done, [1, n, 1]) * q_next * self.gamma;
+        let target_q = self.t3(&b.rewards, [1, n, 1]) + self.t3(&b.not_done, [1, n, 1]) * q_next * self.gamma;
         // 0.5 * sum over both critics of the MSE, one batched forward.
         let critic: Vec<Tensor<3>> = self
             .critic
@@ -130,14 +117,9 @@ impl Shared<'_> {
     fn actor_block(&self, b: &Block) -> Result<(Vec<Vec<f32>>, f64)> {
         let (n, o, a) = (b.rows, self.o, self.a);
         let obs = self.t3(&b.obs, [1, n, o]).autodiff();
-        let actor: Vec<Tensor<3>> = self
-            .actor
-            .iter()
-            .map(|t| t.clone().autodiff().require_grad())
-            .collect();
+        let actor: Vec<Tensor<3>> = self.actor.iter().map(|t| t.clone().autodiff().require_grad()).collect();
         let out = mlp_forward(&actor, obs.clone(), Activation::Relu, false);
-        let (pi_action, log_prob) =
-            squashed_sample(out, self.t3(&b.eps_pi, [1, n, a]).autodiff(), a);
+        let (pi_action, log_prob) = squashed_sample(out, self.t3(&b.eps_pi, [1, n, a]).autodiff(), a);
         let q_pi = mlp_forward(
             self.critic,
             Tensor::cat(vec![obs, pi_action], 2),
@@ -182,9 +164,7 @@ fn sum_grads(mut parts: impl Iterator<Item = Vec<Vec<f32>>>) -> Vec<Vec<f32>> {
 impl<E: Env> Sac<E> {
     pub(crate) fn update(&mut self) -> Result<()> {
         let (b, o, a) = (self.cfg.batch_size, self.obs_dim, self.act_dim);
-        let batch = self
-            .buffer
-            .sample(b, &mut self.rng, self.normalizer.as_ref());
+        let batch = self.buffer.sample(b, &mut self.rng, self.normalizer.as_ref());
         let eps_pi = self.rng.normals(b * a);
         let eps_next = self.rng.normals(b * a);
         let k = self.threads.clamp(1, b);
@@ -207,11 +187,8 @@ impl<E: Env> Sac<E> {
         let ent_coef = (self.log_ent_coef.data[0][0] as f64).exp();
         let device = self.device.clone();
         // Tensor clones are handles; the learner's copies are replaced as the step proceeds.
-        let (actor_dev, critic_dev, target_dev) = (
-            self.actor_dev.clone(),
-            self.critic_dev.clone(),
-            self.target_dev.clone(),
-        );
+        let (actor_dev, critic_dev, target_dev) =
+            (self.actor_dev.clone(), self.critic_dev.clone(), self.target_dev.clone());
         let shared = Shared {
             device: &device,
             actor: &actor_dev,
@@ -247,10 +224,7 @@ impl<E: Env> Sac<E> {
         self.actor_dev = self.actor.to_device(&device);
 
         self.n_updates += 1;
-        if self
-            .n_updates
-            .is_multiple_of(self.cfg.target_update_interval)
-        {
+        if self.n_updates.is_multiple_of(self.cfg.target_update_interval) {
             self.critic_target.polyak(&self.critic, self.cfg.tau as f32);
             self.target_dev = self.critic_target.to_device(&device);
         }
