@@ -21,7 +21,10 @@ fn check_space(name: &str, s: &BoxSpace, bounded: bool) -> Result<(), String> {
     Ok(())
 }
 
-fn rollout(env: &mut dyn Env, seed: u64, steps: usize) -> Result<Vec<(Vec<f32>, f64, bool, bool)>, String> {
+/// (observation, reward, terminated, truncated) per step.
+type Trajectory = Vec<(Vec<f32>, f64, bool, bool)>;
+
+fn rollout(env: &mut dyn Env, seed: u64, steps: usize) -> Result<Trajectory, String> {
     let obs_space = env.observation_space();
     let act_space = env.action_space();
     let mut rng = StdRng::seed_from_u64(seed.wrapping_mul(31).wrapping_add(7));
@@ -78,7 +81,7 @@ pub fn check_env(env: &mut dyn Env, steps: usize) -> Result<(), String> {
     if a != b {
         return Err("the same seed and actions gave different trajectories".into());
     }
-    if !(env.dt_s() > 0.0) {
+    if env.dt_s().is_nan() || env.dt_s() <= 0.0 {
         return Err(format!("dt_s = {}", env.dt_s()));
     }
     Ok(())

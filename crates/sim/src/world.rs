@@ -69,8 +69,10 @@ pub struct World {
 impl World {
     /// A world holding `scene`, stepping `substep_s` seconds per physics step.
     pub fn new(scene: &Scene, substep_s: f32) -> Self {
-        let mut pw = PhysicsWorld::default();
-        pw.gravity = Vector::new(0.0, 0.0, -GRAVITY_MPS2);
+        let mut pw = PhysicsWorld {
+            gravity: Vector::new(0.0, 0.0, -GRAVITY_MPS2),
+            ..PhysicsWorld::default()
+        };
         pw.integration_parameters.dt = substep_s;
         let [gx, gy] = scene.file.ground.size_m;
         let ground_body = pw.insert_body(RigidBodyBuilder::fixed());

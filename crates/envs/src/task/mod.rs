@@ -188,10 +188,10 @@ impl Default for CommonConfig {
 /// Termination shared by the tasks: too close (r_m below `threshold_m`), real contact,
 /// flipped, or out of the map. Returns the first that applies, in that order.
 pub fn common_termination(frame: &SensorFrame, map: Option<&MapInfo>, threshold_m: f32) -> Option<TerminationCause> {
-    if let Some(scan) = &frame.scan {
-        if scan.min_range() < threshold_m {
-            return Some(TerminationCause::TooClose);
-        }
+    if let Some(scan) = &frame.scan
+        && scan.min_range() < threshold_m
+    {
+        return Some(TerminationCause::TooClose);
     }
     if frame.contact == Some(true) {
         return Some(TerminationCause::Contact);

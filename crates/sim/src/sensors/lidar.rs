@@ -143,11 +143,11 @@ impl Lidar {
                 if !slab_hit(&e.aabb, origin, inv[i], best[i]) {
                     continue;
                 }
-                if let Some(t) = e.fast.cast(origin, dirs[i], best[i]) {
-                    if t < best[i] {
-                        best[i] = t;
-                        best_id[i] = Some(e.object_id);
-                    }
+                if let Some(t) = e.fast.cast(origin, dirs[i], best[i])
+                    && t < best[i]
+                {
+                    best[i] = t;
+                    best_id[i] = Some(e.object_id);
                 }
             }
         }

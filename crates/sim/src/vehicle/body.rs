@@ -302,23 +302,23 @@ impl Body {
             Body::Multibody(car) => {
                 let max_t = model.spec.drive.max_torque_nm as f32;
                 for &h in &car.drive {
-                    if let Some((mb, link)) = world.pw.multibody_joints.get_mut(h) {
-                        if let Some(l) = mb.link_mut(link) {
-                            l.joint
-                                .data
-                                .set_motor_velocity(JointAxis::AngX, w_radps, DRIVE_MOTOR_DAMPING);
-                            l.joint.data.set_motor_max_force(JointAxis::AngX, max_t);
-                        }
+                    if let Some((mb, link)) = world.pw.multibody_joints.get_mut(h)
+                        && let Some(l) = mb.link_mut(link)
+                    {
+                        l.joint
+                            .data
+                            .set_motor_velocity(JointAxis::AngX, w_radps, DRIVE_MOTOR_DAMPING);
+                        l.joint.data.set_motor_max_force(JointAxis::AngX, max_t);
                     }
                 }
                 for &(h, side) in &car.steer {
-                    if let Some((mb, link)) = world.pw.multibody_joints.get_mut(h) {
-                        if let Some(l) = mb.link_mut(link) {
-                            let target = if side > 0 { steer.0 } else { steer.1 };
-                            l.joint
-                                .data
-                                .set_motor_position(JointAxis::AngX, target, STEER_STIFFNESS, STEER_DAMPING);
-                        }
+                    if let Some((mb, link)) = world.pw.multibody_joints.get_mut(h)
+                        && let Some(l) = mb.link_mut(link)
+                    {
+                        let target = if side > 0 { steer.0 } else { steer.1 };
+                        l.joint
+                            .data
+                            .set_motor_position(JointAxis::AngX, target, STEER_STIFFNESS, STEER_DAMPING);
                     }
                 }
                 world.pw.step();
@@ -397,10 +397,10 @@ impl MultibodyCar {
             .map(|(s, side)| find(s).map(|h| (h, side)))
             .collect::<Result<_, _>>()?;
         // Multibodies add 0.1 of damping to free angular axes; a car must roll freely.
-        if let Some(&h) = self.drive.first() {
-            if let Some((mb, _)) = pw.multibody_joints.get_mut(h) {
-                mb.damping_mut().fill(0.0);
-            }
+        if let Some(&h) = self.drive.first()
+            && let Some((mb, _)) = pw.multibody_joints.get_mut(h)
+        {
+            mb.damping_mut().fill(0.0);
         }
         for &b in &self.bodies {
             if let Some(rb) = pw.bodies.get_mut(b) {
@@ -446,9 +446,9 @@ impl MultibodyCar {
             // Revolute joints keep their angle in the first angular slot of `coords`.
             let locked = link.joint().data.locked_axes.bits();
             let mut k = 0;
-            for axis in 0..6 {
+            for (axis, c) in coords.iter().enumerate() {
                 if locked & (1 << axis) == 0 && k < n {
-                    disp[link.assembly_id() + k] = -coords[axis];
+                    disp[link.assembly_id() + k] = -c;
                     k += 1;
                 }
             }
