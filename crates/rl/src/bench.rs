@@ -143,7 +143,12 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
             let t = Instant::now();
             let accs: Vec<Result<f32>> = std::thread::scope(|s| {
                 let hs: Vec<_> = mats.iter().map(|m| s.spawn(move || run(m))).collect();
-                hs.into_iter().map(|h| h.join().unwrap_or(Ok(0.0))).collect()
+                hs.into_iter()
+                    .map(|h| {
+                        h.join()
+                            .map_err(|_| crate::RlError::Tensor("bench thread panicked".into()))?
+                    })
+                    .collect()
             });
             let s = t.elapsed().as_secs_f64();
             for a in accs {
