@@ -27,6 +27,8 @@ pub struct RunConfig {
     pub threads: usize,
     /// Deterministic episodes evaluated after training.
     pub eval_episodes: usize,
+    /// Time limit of evaluation episodes, control steps (default: the training limit).
+    pub eval_max_steps: Option<u64>,
     /// Env settings.
     pub env_config: EnvConfig,
     /// PPO settings (used when algo = "ppo").
@@ -45,6 +47,7 @@ impl Default for RunConfig {
             n_envs: 8,
             threads: 2,
             eval_episodes: 3,
+            eval_max_steps: None,
             env_config: EnvConfig::default(),
             ppo: PpoConfig::default(),
             sac: SacConfig::default(),
@@ -87,5 +90,10 @@ impl RunConfig {
     /// The fully resolved TOML (every default written out).
     pub fn to_toml(&self) -> Result<String> {
         Ok(toml::to_string_pretty(self)?)
+    }
+
+    /// Env settings for evaluation episodes.
+    pub fn eval_env_config(&self) -> EnvConfig {
+        EnvConfig { max_steps: self.eval_max_steps.unwrap_or(self.env_config.max_steps), ..self.env_config.clone() }
     }
 }

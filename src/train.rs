@@ -162,7 +162,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
     let summary = evaluate(
         &mut policy,
         &cfg.env,
-        &cfg.env_config,
+        &cfg.eval_env_config(),
         cfg.eval_episodes,
         cfg.seed + 1_000_000,
     )?;
@@ -266,7 +266,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         .with_context(|| format!("{} is not a run directory", a.run.display()))?;
     let mut policy = Policy::load(&a.run.join(POLICY_FILE))
         .with_context(|| format!("loading {}", a.run.join(POLICY_FILE).display()))?;
-    let s = evaluate(&mut policy, &cfg.env, &cfg.env_config, a.episodes, cfg.seed + 2_000_000)?;
+    let s = evaluate(&mut policy, &cfg.env, &cfg.eval_env_config(), a.episodes, cfg.seed + 2_000_000)?;
     for l in s.lines() {
         println!("{l}");
     }
