@@ -190,13 +190,17 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         per_threads.push(median(ups));
     }
     let (one, two) = (per_threads[0], per_threads[1]);
+    // The headline figure is the faster setting: a second thread only helps when a core is free.
+    let (best, threads) = if two > one { (two, 2) } else { (one, 1) };
     lines.push(format!(
-        "sac_updates_per_s={two:.1} threads=2 obs={o} act={a} batch=256 net=256x256 reps={reps}"
+        "sac_updates_per_s={best:.1} threads={threads} obs={o} act={a} batch=256 net=256x256 reps={reps}"
     ));
-    lines.push(format!("sac_updates_per_s_1thread={one:.1} reps={reps}"));
     lines.push(format!(
-        "sac_gflops={:.1} threads=2 gflop_per_update={:.3} reps={reps}",
-        two * flops / 1e9,
+        "sac_updates_per_s_1thread={one:.1} sac_updates_per_s_2threads={two:.1} reps={reps}"
+    ));
+    lines.push(format!(
+        "sac_gflops={:.1} threads={threads} gflop_per_update={:.3} reps={reps}",
+        best * flops / 1e9,
         flops / 1e9
     ));
 
