@@ -1,4 +1,4 @@
-//! The learning checks: `cargo run --release -p agvrl-rl --example learning -- [sac|ppo|all] [steps]`.
+//! The learning checks: `cargo run --release -p agvrl-rl --example learning -- [sac|ppo|ppo-gsde|ppo-gaussian|all] [steps] [seeds, e.g. 0,1,2]`.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -23,20 +23,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         rets.sort_by(f64::total_cmp);
         println!("algo=sac median_eval_return={:.1} target>=-170", rets[rets.len() / 2]);
     }
-    if which == "ppo" || which == "all" {
+    type Check = fn(u64, u64) -> agvrl_rl::Result<f64>;
+    let ppo_checks: [(&str, Check); 2] = [
+        ("gsde", agvrl_rl::learning::pendulum_ppo),
+        ("gaussian", agvrl_rl::learning::pendulum_ppo_gaussian),
+    ];
+    for (name, run) in ppo_checks {
+        if which != "all" && which != "ppo" && which != format!("ppo-{name}") {
+            continue;
+        }
         let steps = steps.unwrap_or(100_000);
         let mut rets = vec![];
         for &seed in &seeds {
             let t = std::time::Instant::now();
-            let r = agvrl_rl::learning::pendulum_ppo(seed, steps)?;
+            let r = run(seed, steps)?;
             println!(
-                "algo=ppo exploration=gaussian env=pendulum steps={steps} seed={seed} eval_return={r:.1} wall_s={:.0}",
+                "algo=ppo exploration={name} env=pendulum steps={steps} seed={seed} eval_return={r:.1} wall_s={:.0}",
                 t.elapsed().as_secs_f64()
             );
             rets.push(r);
         }
         rets.sort_by(f64::total_cmp);
-        println!("algo=ppo median_eval_return={:.1} target>=-250", rets[rets.len() / 2]);
+        println!(
+            "algo=ppo exploration={name} median_eval_return={:.1} target>=-250",
+            rets[rets.len() / 2]
+        );
     }
     Ok(())
 }

@@ -29,7 +29,7 @@
 //! Features: none; both CPU backends (flex, the default, and ndarray) are always built and
 //! picked at run time with [`CpuBackend`].
 //!
-//! Limitations: no gSDE, no discrete actions, no learning-rate schedules; envs restart their
+//! Limitations: gSDE for PPO only (not SAC), no discrete actions, no learning-rate schedules; envs restart their
 //! episodes on resume (the `Env` trait has no state snapshot).
 
 #![warn(missing_docs)]

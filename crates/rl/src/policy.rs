@@ -48,6 +48,13 @@ pub enum ActionHead {
         /// Log standard deviation per action element.
         log_std: Vec<f32>,
     },
+    /// PPO with gSDE: the net outputs the mean; stochastic actions add `latent @ E` with
+    /// `E ~ N(0, exp(log_std)^2)` (`latent` the last hidden layer), drawn afresh per `act` call;
+    /// clipped to the action box.
+    StateDependent {
+        /// Log standard deviation, `latent_dim x act_dim` row-major.
+        log_std: Vec<f32>,
+    },
 }
 
 /// A policy's contents on the host: what a policy file stores.
@@ -139,6 +146,14 @@ impl PolicyData {
             ActionHead::Gaussian { .. } => {
                 return Err(bad("log_std length differs from the action space".into()));
             }
+            ActionHead::StateDependent { ref log_std }
+                if h.net.sizes.len() > 2 && log_std.len() == h.net.sizes[h.net.sizes.len() - 2] * a =>
+            {
+                a
+            }
+            ActionHead::StateDependent { .. } => {
+                return Err(bad("gSDE log_std shape differs from latent x action".into()));
+            }
         };
         if h.net.sizes.first() != Some(&o) || h.net.sizes.last() != Some(&out) {
             return Err(bad("network widths do not match the spaces".into()));
@@ -162,8 +177,14 @@ impl PolicyData {
     }
 
     /// Map network outputs (`n` rows) to actions in the action box. `deterministic` uses the
-    /// mean; otherwise noise comes from `rng`.
-    pub(crate) fn actions_from_outputs(&self, out: &[f32], deterministic: bool, rng: &mut Rng) -> Vec<f32> {
+    /// mean; otherwise noise comes from `rng` (gSDE also needs the last hidden layer, `latent`).
+    pub(crate) fn actions_from_outputs(
+        &self,
+        out: &[f32],
+        latent: &[f32],
+        deterministic: bool,
+        rng: &mut Rng,
+    ) -> Vec<f32> {
         let a_dim = self.action_space.dim();
         let (low, high) = (&self.action_space.low, &self.action_space.high);
         match &self.head {
@@ -189,6 +210,26 @@ impl PolicyData {
                             u += log_std[i].exp() * rng.normal() as f32;
                         }
                         acts.push(u.clamp(low[i], high[i]));
+                    }
+                }
+                acts
+            }
+            ActionHead::StateDependent { log_std } => {
+                let n = out.len() / a_dim;
+                let l = log_std.len() / a_dim;
+                let e: Vec<f32> = if deterministic {
+                    vec![]
+                } else {
+                    log_std.iter().map(|s| s.exp() * rng.normal() as f32).collect()
+                };
+                let mut acts = Vec::with_capacity(out.len());
+                for r in 0..n {
+                    for j in 0..a_dim {
+                        let mut u = out[r * a_dim + j];
+                        if !deterministic {
+                            u += (0..l).map(|k| latent[r * l + k] * e[k * a_dim + j]).sum::<f32>();
+                        }
+                        acts.push(u.clamp(low[j], high[j]));
                     }
                 }
                 acts
@@ -315,12 +356,21 @@ impl Policy {
             norm.normalize(&mut self.scratch);
         }
         let x = Tensor::<3>::from_data(TensorData::new(self.scratch.clone(), [1, n, o]), &self.device);
-        let out = to_vec(mlp_forward(
-            &self.weights,
-            x,
-            self.data.net.activation,
-            self.data.net.activate_last,
-        ))?;
-        Ok(self.data.actions_from_outputs(&out, deterministic, &mut self.rng))
+        let net = &self.data.net;
+        let (out, latent) = match self.data.head {
+            ActionHead::StateDependent { .. } if !deterministic => {
+                let k = self.weights.len() - 2;
+                let h = mlp_forward(&self.weights[..k], x, net.activation, true);
+                let out = mlp_forward(&self.weights[k..], h.clone(), net.activation, false);
+                (to_vec(out)?, to_vec(h)?)
+            }
+            _ => (
+                to_vec(mlp_forward(&self.weights, x, net.activation, net.activate_last))?,
+                vec![],
+            ),
+        };
+        Ok(self
+            .data
+            .actions_from_outputs(&out, &latent, deterministic, &mut self.rng))
     }
 }

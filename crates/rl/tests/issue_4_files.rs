@@ -164,3 +164,26 @@ fn ppo_checkpoint_resumes_the_same_state() {
         Err(RlError::BadFile { .. })
     ));
 }
+
+#[test]
+fn gsde_policy_round_trip_and_stochastic_actions() {
+    let cfg = PpoConfig {
+        n_steps: 64,
+        use_sde: true,
+        sde_sample_freq: 4,
+        ..PpoConfig::default()
+    };
+    let mut ppo = Ppo::new(cfg, vec_env(2), &default_device(), 6).unwrap();
+    ppo.learn(256, &mut |_| Control::Continue).unwrap();
+    let path = tmp("gsde.policy");
+    ppo.save_policy(&path).unwrap();
+    let mut a = Policy::load(&path).unwrap();
+    let mut b = ppo.policy(&default_device());
+    let obs = [0.5, -0.25];
+    assert_eq!(a.act(&obs, true).unwrap(), b.act(&obs, true).unwrap());
+    a.seed(1);
+    let samples: Vec<f32> = (0..50).map(|_| a.act(&obs, false).unwrap()[0]).collect();
+    assert!(samples.iter().all(|v| (-2.0..=2.0).contains(v)));
+    let spread = samples.iter().cloned().fold(f32::MIN, f32::max) - samples.iter().cloned().fold(f32::MAX, f32::min);
+    assert!(spread > 1e-3, "stochastic gSDE actions vary: {spread}");
+}

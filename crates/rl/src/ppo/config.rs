@@ -43,8 +43,12 @@ pub struct PpoConfig {
     pub ortho_init: bool,
     /// Initial log standard deviation of the action distribution (0.0).
     pub log_std_init: f64,
-    /// Generalised State-Dependent Exploration: not implemented, must stay false.
+    /// Generalised State-Dependent Exploration (Raffin et al. 2022, SB3's `use_sde` with
+    /// `full_std`, features not learned): exploration noise `latent @ E` with a matrix `E`
+    /// resampled every `sde_sample_freq` steps and at each rollout start (false).
     pub use_sde: bool,
+    /// Steps between gSDE noise-matrix resamples; -1 or 0: once per rollout (-1).
+    pub sde_sample_freq: i64,
     /// Running observation normalisation (off).
     pub normalize_obs: bool,
 }
@@ -70,6 +74,7 @@ impl Default for PpoConfig {
             ortho_init: true,
             log_std_init: 0.0,
             use_sde: false,
+            sde_sample_freq: -1,
             normalize_obs: false,
         }
     }
@@ -92,9 +97,6 @@ impl PpoConfig {
     /// Reject values the learner cannot run with.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(RlError::Config(format!("PPO: {m}")));
-        if self.use_sde {
-            return bad("use_sde (gSDE) is not implemented; use plain Gaussian exploration (use_sde = false)");
-        }
         if self.learning_rate.is_nan()
             || self.learning_rate <= 0.0
             || self.n_steps == 0

@@ -1,6 +1,7 @@
 //! Proximal Policy Optimisation (Schulman et al. 2017) as Stable-Baselines3 runs it: separate
 //! tanh MLPs for actor and critic (evaluated as one 2-member stack), state-independent log
-//! std, GAE, clipped surrogate, advantage normalisation, global gradient clipping.
+//! std (or gSDE with `use_sde`), GAE, clipped surrogate, advantage normalisation, global
+//! gradient clipping.
 //!
 //! Data flow per iteration: `n_steps` vector steps with the current policy on plain tensors
 //! (a truncated episode adds `gamma * V(final_obs)` to its last reward, as SB3) -> GAE ->
@@ -28,14 +29,28 @@ fn head_idx(cfg: &PpoConfig) -> usize {
     2 * cfg.net_arch.len()
 }
 
-/// `(mean [1, b, a], value [1, b, 1])` for observations `x [1, b, o]`. `params` is
-/// `[trunk..., pi_w, pi_b, vf_w, vf_b, log_std]`.
-pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (Tensor<3>, Tensor<3>) {
+/// `(mean [1, b, a], value [1, b, 1], actor latent [1, b, latent])` for observations
+/// `x [1, b, o]`. `params` is `[trunk..., pi_w, pi_b, vf_w, vf_b, log_std]`; `log_std` is
+/// `[1, 1, a]`, or `[1, latent, a]` with gSDE.
+pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (Tensor<3>, Tensor<3>, Tensor<3>) {
     let h0 = head_idx(cfg);
     let h = mlp_forward(&params[..h0], x, cfg.activation_fn, true);
-    let mean = h.clone().narrow(0, 0, 1).matmul(params[h0].clone()) + params[h0 + 1].clone();
+    let latent = h.clone().narrow(0, 0, 1);
+    let mean = latent.clone().matmul(params[h0].clone()) + params[h0 + 1].clone();
     let value = h.narrow(0, 1, 1).matmul(params[h0 + 2].clone()) + params[h0 + 3].clone();
-    (mean, value)
+    (mean, value, latent)
+}
+
+/// gSDE's per-element variance `sum_k latent_k^2 exp(log_std_kj)^2 + 1e-6` (SB3's
+/// `StateDependentNoiseDistribution` with `full_std`), for one sample's `latent`.
+pub(crate) fn sde_variance(latent: &[f32], sigma_sq: &[f64], a: usize, out: &mut [f64]) {
+    out.iter_mut().for_each(|v| *v = 1e-6);
+    for (k, h) in latent.iter().enumerate() {
+        let h2 = (*h as f64) * (*h as f64);
+        for j in 0..a {
+            out[j] += h2 * sigma_sq[k * a + j];
+        }
+    }
 }
 
 /// A PPO learner bound to a vector env.
@@ -115,7 +130,8 @@ impl<E: Env> Ppo<E> {
         let (w, b) = init_layer(vf_init, 1, last, 1, &mut rng);
         params.push([1, last, 1], w);
         params.push([1, 1, 1], b);
-        params.push([1, 1, act_dim], vec![cfg.log_std_init as f32; act_dim]);
+        let rows = if cfg.use_sde { last } else { 1 };
+        params.push([1, rows, act_dim], vec![cfg.log_std_init as f32; rows * act_dim]);
         Ok(Self {
             opt: Adam::new(&params, cfg.learning_rate, 1e-5),
             normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(obs_dim)),
@@ -190,6 +206,10 @@ impl<E: Env> Ppo<E> {
         let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
         // log N(x; m, s) summed over elements = sum(-z^2/2) - sum(log s) - a ln(2 pi)/2
         let lp_const = -log_std.iter().sum::<f32>() - a as f32 * 0.918_938_5;
+        let latent_dim = *self.cfg.net_arch.last().unwrap_or(&o);
+        let sigma_sq: Vec<f64> = log_std.iter().map(|l| (2.0 * *l as f64).exp()).collect();
+        let mut expl = vec![0.0f32; n_envs * latent_dim * a];
+        let mut var = vec![0.0f64; a];
         let (mut obs, mut starts) = match self.last.take() {
             Some(l) => l,
             None => {
@@ -212,24 +232,48 @@ impl<E: Env> Ppo<E> {
         let mut values = Vec::with_capacity(total);
         let mut episode_starts = Vec::with_capacity(total);
         let space = self.env.action_space().clone();
-        let value_of = |params: &[Tensor<3>], x: Vec<f32>, n: usize, cfg: &PpoConfig| -> Result<(Vec<f32>, Vec<f32>)> {
-            let t = Tensor::<3>::from_data(TensorData::new(x, [1, n, o]), &dev);
-            let (mean, value) = forward(params, t, cfg);
-            Ok((to_vec(mean)?, to_vec(value)?))
-        };
-        for _ in 0..n_steps {
+        let sde = self.cfg.use_sde;
+        let value_of =
+            |params: &[Tensor<3>], x: Vec<f32>, n: usize, cfg: &PpoConfig| -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
+                let t = Tensor::<3>::from_data(TensorData::new(x, [1, n, o]), &dev);
+                let (mean, value, latent) = forward(params, t, cfg);
+                let latent = if sde { to_vec(latent)? } else { vec![] };
+                Ok((to_vec(mean)?, to_vec(value)?, latent))
+            };
+        for step in 0..n_steps {
+            let freq = self.cfg.sde_sample_freq;
+            if sde && (step == 0 || (freq > 0 && step as i64 % freq == 0)) {
+                // One exploration matrix per env, E ~ N(0, exp(log_std)^2).
+                for (k, e) in expl.iter_mut().enumerate() {
+                    *e = std[k % (latent_dim * a)] * self.rng.normal() as f32;
+                }
+            }
             let x = self.normalized(&obs);
-            let (mean, value) = value_of(&params, x.clone(), n_envs, &self.cfg)?;
+            let (mean, value, latent) = value_of(&params, x.clone(), n_envs, &self.cfg)?;
             let mut actions = Vec::with_capacity(n_envs * a);
             let mut clipped = Vec::with_capacity(n_envs * a);
             for e in 0..n_envs {
                 let mut lp = lp_const;
-                for i in 0..a {
-                    let z = self.rng.normal() as f32;
-                    let act = mean[e * a + i] + std[i] * z;
-                    lp -= 0.5 * z * z;
-                    actions.push(act);
-                    clipped.push(act.clamp(space.low[i], space.high[i]));
+                if sde {
+                    let h = &latent[e * latent_dim..(e + 1) * latent_dim];
+                    sde_variance(h, &sigma_sq, a, &mut var);
+                    lp = -(a as f32) * 0.918_938_5;
+                    for j in 0..a {
+                        let m = &expl[e * latent_dim * a..(e + 1) * latent_dim * a];
+                        let noise: f32 = h.iter().enumerate().map(|(k, hk)| hk * m[k * a + j]).sum();
+                        let act = mean[e * a + j] + noise;
+                        lp -= (0.5 * (noise as f64).powi(2) / var[j] + 0.5 * var[j].ln()) as f32;
+                        actions.push(act);
+                        clipped.push(act.clamp(space.low[j], space.high[j]));
+                    }
+                } else {
+                    for i in 0..a {
+                        let z = self.rng.normal() as f32;
+                        let act = mean[e * a + i] + std[i] * z;
+                        lp -= 0.5 * z * z;
+                        actions.push(act);
+                        clipped.push(act.clamp(space.low[i], space.high[i]));
+                    }
                 }
                 r.log_probs.push(lp);
             }
@@ -244,7 +288,7 @@ impl<E: Env> Ppo<E> {
                     fx.extend_from_slice(f);
                 }
                 let fx = self.normalized(&fx);
-                let (_, fv) = value_of(&params, fx, trunc.len(), &self.cfg)?;
+                let (_, fv, _) = value_of(&params, fx, trunc.len(), &self.cfg)?;
                 for (k, &e) in trunc.iter().enumerate() {
                     rew[e] += (self.cfg.gamma as f32) * fv[k];
                 }
@@ -262,7 +306,7 @@ impl<E: Env> Ppo<E> {
             starts = (0..n_envs).map(|e| st.terminated[e] || st.truncated[e]).collect();
             obs = st.obs;
         }
-        let (_, last_values) = value_of(&params, self.normalized(&obs), n_envs, &self.cfg)?;
+        let (_, last_values, _) = value_of(&params, self.normalized(&obs), n_envs, &self.cfg)?;
         // GAE (SB3's RolloutBuffer.compute_returns_and_advantage).
         let (g, lam) = (self.cfg.gamma as f32, self.cfg.gae_lambda as f32);
         let mut last_gae = vec![0.0f32; n_envs];
@@ -312,8 +356,14 @@ impl<E: Env> Ppo<E> {
                 activate_last: false,
             },
             params,
-            head: ActionHead::Gaussian {
-                log_std: self.params.data[h0 + 4].clone(),
+            head: if self.cfg.use_sde {
+                ActionHead::StateDependent {
+                    log_std: self.params.data[h0 + 4].clone(),
+                }
+            } else {
+                ActionHead::Gaussian {
+                    log_std: self.params.data[h0 + 4].clone(),
+                }
             },
             normalizer: self.normalizer.clone(),
             config_toml: self.cfg.to_toml(),

@@ -23,11 +23,13 @@ pub(crate) struct Head {
     pub(crate) vf_loss: f64,
     pub(crate) approx_kl: f64,
     pub(crate) clip_fraction: f64,
+    /// Mean entropy of the action distribution, nats.
+    pub(crate) entropy: f64,
     /// dL/dmean, `n * a`.
     pub(crate) d_mean: Vec<f32>,
     /// dL/dvalue, `n`.
     pub(crate) d_value: Vec<f32>,
-    /// dL/dlog_std, `a`.
+    /// dL/dlog_std, the shape of `log_std`.
     pub(crate) d_log_std: Vec<f32>,
 }
 
@@ -35,7 +37,11 @@ pub(crate) struct Head {
 pub(crate) struct HeadInput<'a> {
     pub(crate) mean: &'a [f32],
     pub(crate) value: &'a [f32],
+    /// `a` values, or `latent_dim * a` with gSDE.
     pub(crate) log_std: &'a [f32],
+    /// gSDE only: the actor's last hidden layer, `n * latent_dim` (held constant, as SB3's
+    /// `learn_features = False`).
+    pub(crate) latent: Option<&'a [f32]>,
     pub(crate) actions: &'a [f32],
     pub(crate) old_log_prob: &'a [f32],
     /// Already normalised if configured.
@@ -44,30 +50,37 @@ pub(crate) struct HeadInput<'a> {
 }
 
 /// PPO's loss and its gradient w.r.t. the network outputs and `log_std`:
-/// `L = -mean(min(r A, clip(r, 1-c, 1+c) A)) + vf_coef mean((R - v)^2) - ent_coef H`, with
-/// `r = exp(log_prob - old_log_prob)`, `H = sum(log_std + (1 + ln 2 pi) / 2)`.
+/// `L = -mean(min(r A, clip(r, 1-c, 1+c) A)) + vf_coef mean((R - v)^2) - ent_coef mean(H)`,
+/// `r = exp(log_prob - old_log_prob)`, for a diagonal Gaussian with variance `var_ij`:
+/// `exp(2 log_std_j)`, or with gSDE `sum_k latent_ik^2 exp(2 log_std_kj) + 1e-6`.
 pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f64) -> Head {
-    let a = x.log_std.len();
     let n = x.value.len();
+    let a = x.mean.len() / n.max(1);
+    let latent_dim = x.latent.map_or(0, |l| l.len() / n.max(1));
     let inv_n = 1.0 / n as f64;
-    let inv_std: Vec<f64> = x.log_std.iter().map(|l| (-*l as f64).exp()).collect();
-    let lp_const = -x.log_std.iter().map(|l| *l as f64).sum::<f64>() - a as f64 * HALF_LN_2PI;
+    let sigma_sq: Vec<f64> = x.log_std.iter().map(|l| (2.0 * *l as f64).exp()).collect();
     let mut h = Head {
         pg_loss: 0.0,
         vf_loss: 0.0,
         approx_kl: 0.0,
         clip_fraction: 0.0,
+        entropy: 0.0,
         d_mean: vec![0.0; n * a],
         d_value: vec![0.0; n],
-        d_log_std: vec![-ent_coef as f32; a],
+        d_log_std: vec![],
     };
-    let mut d_log_std = vec![-ent_coef; a];
-    let mut z = vec![0.0f64; a];
+    let mut d_log_std = vec![0.0f64; x.log_std.len()];
+    let (mut var, mut diff) = (vec![0.0f64; a], vec![0.0f64; a]);
     for i in 0..n {
-        let mut lp = lp_const;
+        match x.latent {
+            Some(l) => super::sde_variance(&l[i * latent_dim..(i + 1) * latent_dim], &sigma_sq, a, &mut var),
+            None => var.copy_from_slice(&sigma_sq),
+        }
+        let mut lp = -(a as f64) * HALF_LN_2PI;
         for j in 0..a {
-            z[j] = (x.actions[i * a + j] - x.mean[i * a + j]) as f64 * inv_std[j];
-            lp -= 0.5 * z[j] * z[j];
+            diff[j] = (x.actions[i * a + j] - x.mean[i * a + j]) as f64;
+            lp -= 0.5 * diff[j] * diff[j] / var[j] + 0.5 * var[j].ln();
+            h.entropy += (0.5 + HALF_LN_2PI + 0.5 * var[j].ln()) * inv_n;
         }
         let log_ratio = lp - x.old_log_prob[i] as f64;
         let ratio = log_ratio.exp();
@@ -83,8 +96,21 @@ pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f6
             0.0
         };
         for j in 0..a {
-            h.d_mean[i * a + j] = (d_lp * z[j] * inv_std[j]) as f32; // d lp / d mean = z / std
-            d_log_std[j] += d_lp * (z[j] * z[j] - 1.0); // d lp / d log_std = z^2 - 1
+            h.d_mean[i * a + j] = (d_lp * diff[j] / var[j]) as f32;
+            // dL/dvar from the log-prob and from the entropy bonus.
+            let d_var =
+                d_lp * (0.5 * diff[j] * diff[j] / (var[j] * var[j]) - 0.5 / var[j]) - ent_coef * inv_n * 0.5 / var[j];
+            match x.latent {
+                // var_ij = sum_k latent_ik^2 sigma_kj^2 + eps: d var / d log_std_kj = 2 latent_ik^2 sigma_kj^2
+                Some(l) => {
+                    for k in 0..latent_dim {
+                        let hk = l[i * latent_dim + k] as f64;
+                        d_log_std[k * a + j] += d_var * 2.0 * hk * hk * sigma_sq[k * a + j];
+                    }
+                }
+                // var_j = sigma_j^2: d var / d log_std_j = 2 var_j
+                None => d_log_std[j] += d_var * 2.0 * var[j],
+            }
         }
         let err = x.returns[i] as f64 - x.value[i] as f64;
         h.vf_loss += err * err * inv_n;
@@ -105,7 +131,8 @@ impl<E: Env> Ppo<E> {
         let ad = dev.clone().autodiff();
         let log_std_idx = head_idx(&self.cfg) + 4;
         let mut idx: Vec<usize> = (0..total).collect();
-        let (mut pg_sum, mut vf_sum, mut kl_sum, mut clip_sum, mut n_mb) = (0.0, 0.0, 0.0, 0.0, 0usize);
+        let (mut pg_sum, mut vf_sum, mut kl_sum, mut clip_sum, mut ent_sum, mut n_mb) =
+            (0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
         'epochs: for _ in 0..self.cfg.n_epochs {
             self.rng.shuffle(&mut idx);
             // SB3 yields whole minibatches and a smaller last one.
@@ -134,13 +161,19 @@ impl<E: Env> Ppo<E> {
                 // log_std's gradient comes from the host head; only the networks are tracked.
                 let mut params: Vec<Tensor<3>> = self.params.to_tracked(&ad);
                 params[log_std_idx] = params[log_std_idx].clone().detach();
-                let (mean, value) = forward(&params, t3(obs, [1, n, o]), &self.cfg);
+                let (mean, value, latent) = forward(&params, t3(obs, [1, n, o]), &self.cfg);
                 let (mean_h, value_h) = (to_vec(mean.clone().inner())?, to_vec(value.clone().inner())?);
+                let latent_h = if self.cfg.use_sde {
+                    Some(to_vec(latent.inner())?)
+                } else {
+                    None
+                };
                 let head = loss_head(
                     &HeadInput {
                         mean: &mean_h,
                         value: &value_h,
                         log_std: &self.params.data[log_std_idx],
+                        latent: latent_h.as_deref(),
                         actions: &act,
                         old_log_prob: &old_lp,
                         advantages: &adv,
@@ -157,6 +190,7 @@ impl<E: Env> Ppo<E> {
                 vf_sum += head.vf_loss;
                 kl_sum += head.approx_kl;
                 clip_sum += head.clip_fraction;
+                ent_sum += head.entropy;
                 n_mb += 1;
                 if self.cfg.target_kl.is_some_and(|t| head.approx_kl > 1.5 * t) {
                     break 'epochs;
@@ -174,10 +208,7 @@ impl<E: Env> Ppo<E> {
         self.losses.value = vf_sum / m;
         self.losses.approx_kl = kl_sum / m;
         self.losses.clip_fraction = clip_sum / m;
-        self.losses.entropy = self.params.data[log_std_idx]
-            .iter()
-            .map(|l| *l as f64 + 0.5 + HALF_LN_2PI)
-            .sum();
+        self.losses.entropy = ent_sum / m;
         Ok(())
     }
 }
@@ -187,16 +218,28 @@ mod tests {
     use super::*;
     use crate::rng::Rng;
 
-    /// The loss written with autodiff tensor ops (the unfused formulation).
+    /// The loss written with autodiff tensor ops (the unfused formulation, SB3's).
     fn autodiff_loss(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f64) -> (f64, Vec<f32>, Vec<f32>, Vec<f32>) {
         let dev = crate::device::default_device().autodiff();
-        let (n, a) = (x.value.len(), x.log_std.len());
+        let n = x.value.len();
+        let a = x.mean.len() / n;
         let t = |v: &[f32], s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v.to_vec(), s), &dev);
         let mean = t(x.mean, [1, n, a]).require_grad();
         let value = t(x.value, [1, n, 1]).require_grad();
-        let log_std = t(x.log_std, [1, 1, a]).require_grad();
-        let z = (t(x.actions, [1, n, a]) - mean.clone()) * log_std.clone().neg().exp();
-        let lp = (z.powi_scalar(2) * -0.5 - log_std.clone() - HALF_LN_2PI).sum_dim(2);
+        let (log_std, var) = match x.latent {
+            None => {
+                let log_std = t(x.log_std, [1, 1, a]).require_grad();
+                (log_std.clone(), (log_std * 2.0).exp())
+            }
+            Some(l) => {
+                let k = l.len() / n;
+                let log_std = t(x.log_std, [1, k, a]).require_grad();
+                let h = t(l, [1, n, k]);
+                (log_std.clone(), (h.clone() * h).matmul((log_std * 2.0).exp()) + 1e-6)
+            }
+        };
+        let diff = t(x.actions, [1, n, a]) - mean.clone();
+        let lp = (diff.powi_scalar(2) / var.clone() * -0.5 - var.clone().log() * 0.5 - HALF_LN_2PI).sum_dim(2);
         let ratio = (lp - t(x.old_log_prob, [1, n, 1])).exp();
         let adv = t(x.advantages, [1, n, 1]);
         let pg = (ratio.clone() * adv.clone())
@@ -204,7 +247,7 @@ mod tests {
             .mean()
             .neg();
         let vf = (t(x.returns, [1, n, 1]) - value.clone()).powi_scalar(2).mean();
-        let ent = (log_std.clone() + (0.5 + HALF_LN_2PI)).sum();
+        let ent = (var.log() * 0.5 + (0.5 + HALF_LN_2PI)).sum_dim(2).mean();
         let loss = pg + vf * vf_coef - ent * ent_coef;
         let g = loss.backward();
         let v = |x: &Tensor<3>| to_vec(x.grad(&g).unwrap()).unwrap();
@@ -216,19 +259,22 @@ mod tests {
         )
     }
 
-    #[test]
-    fn fused_head_matches_autodiff() {
+    fn check(latent_dim: Option<usize>) {
         let mut rng = Rng::new(9);
         let (n, a) = (64, 2);
         let mean = rng.normals(n * a);
         let actions: Vec<f32> = mean.iter().map(|m| m + 0.7 * rng.normal() as f32).collect();
-        let log_std = vec![-0.3, 0.2];
+        let latent = latent_dim.map(|k| rng.normals(n * k).iter().map(|v| v.tanh()).collect::<Vec<f32>>());
+        let log_std: Vec<f32> = (0..latent_dim.unwrap_or(1) * a)
+            .map(|_| -0.5 + 0.3 * rng.normal() as f32)
+            .collect();
         // Old log-probs near the current ones, so some ratios fall outside the clip range.
         let old: Vec<f32> = (0..n).map(|_| -2.0 + 0.4 * rng.normal() as f32).collect();
         let x = HeadInput {
             mean: &mean,
             value: &rng.normals(n),
             log_std: &log_std,
+            latent: latent.as_deref(),
             actions: &actions,
             old_log_prob: &old,
             advantages: &rng.normals(n),
@@ -236,16 +282,22 @@ mod tests {
         };
         let h = loss_head(&x, 0.2, 0.5, 0.01);
         let (loss, d_mean, d_value, d_log_std) = autodiff_loss(&x, 0.2, 0.5, 0.01);
-        let ent = log_std.iter().map(|l| *l as f64 + 0.5 + HALF_LN_2PI).sum::<f64>();
-        assert!(
-            (h.pg_loss + 0.5 * h.vf_loss - 0.01 * ent - loss).abs() < 1e-4,
-            "{} vs {loss}",
-            h.pg_loss
-        );
+        let fused = h.pg_loss + 0.5 * h.vf_loss - 0.01 * h.entropy;
+        assert!((fused - loss).abs() < 1e-4, "{fused} vs {loss}");
         assert!(h.clip_fraction > 0.0 && h.clip_fraction < 1.0);
         let close = |p: &[f32], q: &[f32]| p.iter().zip(q).all(|(p, q)| (p - q).abs() < 1e-5 + 1e-3 * q.abs());
         assert!(close(&h.d_mean, &d_mean), "{:?}\n{:?}", &h.d_mean[..6], &d_mean[..6]);
         assert!(close(&h.d_value, &d_value));
         assert!(close(&h.d_log_std, &d_log_std), "{:?} {:?}", h.d_log_std, d_log_std);
+    }
+
+    #[test]
+    fn fused_head_matches_autodiff() {
+        check(None);
+    }
+
+    #[test]
+    fn fused_gsde_head_matches_autodiff() {
+        check(Some(8));
     }
 }
