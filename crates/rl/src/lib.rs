@@ -29,8 +29,10 @@
 //! Features: none; both CPU backends (flex, the default, and ndarray) are always built and
 //! picked at run time with [`CpuBackend`].
 //!
-//! Limitations: gSDE for PPO only (not SAC), no discrete actions, no learning-rate schedules; envs restart their
-//! episodes on resume (the `Env` trait has no state snapshot).
+//! Limitations: gSDE for PPO only (not SAC), no discrete actions, no learning-rate
+//! schedules; envs restart their episodes on resume (the `Env` trait has no state snapshot);
+//! policy files use agvrl's own container (see `file.rs`), not burn-store, because the
+//! weights are plain stacked tensors rather than `Module`s.
 
 #![warn(missing_docs)]
 
