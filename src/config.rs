@@ -94,6 +94,9 @@ impl RunConfig {
 
     /// Env settings for evaluation episodes.
     pub fn eval_env_config(&self) -> EnvConfig {
-        EnvConfig { max_steps: self.eval_max_steps.unwrap_or(self.env_config.max_steps), ..self.env_config.clone() }
+        EnvConfig {
+            max_steps: self.eval_max_steps.unwrap_or(self.env_config.max_steps),
+            ..self.env_config.clone()
+        }
     }
 }

@@ -87,7 +87,10 @@ fn bench(quick: bool, learning: bool, only: Option<&str>) -> Result<()> {
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );
     if want("sim") {
-        for l in agvrl_sim::bench::run(quick) {
+        for l in agvrl_sim::bench::run(quick)
+            .into_iter()
+            .chain(agvrl_sim::bench::camera(quick))
+        {
             println!("{l}");
         }
     }

@@ -266,7 +266,13 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         .with_context(|| format!("{} is not a run directory", a.run.display()))?;
     let mut policy = Policy::load(&a.run.join(POLICY_FILE))
         .with_context(|| format!("loading {}", a.run.join(POLICY_FILE).display()))?;
-    let s = evaluate(&mut policy, &cfg.env, &cfg.eval_env_config(), a.episodes, cfg.seed + 2_000_000)?;
+    let s = evaluate(
+        &mut policy,
+        &cfg.env,
+        &cfg.eval_env_config(),
+        a.episodes,
+        cfg.seed + 2_000_000,
+    )?;
     for l in s.lines() {
         println!("{l}");
     }

@@ -87,6 +87,37 @@ pub fn run(quick: bool) -> Vec<String> {
     out
 }
 
+/// Camera figures: RGB + depth + segmentation per frame, milliseconds, at two resolutions.
+pub fn camera(quick: bool) -> Vec<String> {
+    let reps = if quick { 3 } else { 9 };
+    let mut out = Vec::new();
+    for id in ["oval", "outdoor-50", "urban-50"] {
+        for (w, h) in [(160u32, 120u32), (400, 400)] {
+            let camera = Some(crate::sensors::CameraConfig {
+                width: w,
+                height: h,
+                ..Default::default()
+            });
+            let cfg = SimConfig {
+                scene: SceneSource::Builtin(id.to_string()),
+                camera,
+                ..SimConfig::default()
+            };
+            let Ok(sim) = Sim::new(cfg) else { continue };
+            black_box(sim.camera_frame());
+            let s = median_s(reps, || {
+                black_box(sim.camera_frame());
+            });
+            out.push(format!(
+                "scene={id} camera_ms={:.2} res={w}x{h} threads={} reps={reps}",
+                s * 1e3,
+                rayon::current_num_threads()
+            ));
+        }
+    }
+    out
+}
+
 fn mode_name(m: DynamicsMode) -> &'static str {
     match m {
         DynamicsMode::Raycast => "raycast",

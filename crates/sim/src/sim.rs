@@ -50,6 +50,8 @@ pub struct SimConfig {
     pub lidar: LidarConfig,
     /// GPS settings.
     pub gps: GpsConfig,
+    /// The vehicle's camera (on its camera link), when set.
+    pub camera: Option<crate::sensors::CameraConfig>,
     /// Split steering between the front wheels by Ackermann geometry (`None`: the vehicle's
     /// own setting; `Some(false)`: AutoVRL's equal angles).
     pub ackermann: Option<bool>,
@@ -65,6 +67,7 @@ impl Default for SimConfig {
             substeps: 4,
             lidar: LidarConfig::default(),
             gps: GpsConfig::default(),
+            camera: None,
             ackermann: None,
         }
     }
@@ -104,6 +107,7 @@ pub struct Sim {
     nominal: VehicleParams,
     params: VehicleParams,
     lidar: Lidar,
+    camera: crate::sensors::Camera,
     imu: ImuState,
     wheel_speed: f64,
     control: Control,
@@ -131,6 +135,9 @@ impl Sim {
             )));
         }
         cfg.lidar.validate().map_err(invalid)?;
+        if let Some(c) = &cfg.camera {
+            c.validate().map_err(invalid)?;
+        }
         let assets = AssetSource::builtin();
         let scene = match &cfg.scene {
             SceneSource::Builtin(id) => Scene::builtin(&assets, id)?,
@@ -183,6 +190,7 @@ impl Sim {
             body_params(&nominal),
         )?;
         let lidar = Lidar::new(cfg.lidar.clone());
+        let camera = crate::sensors::Camera::new(cfg.camera.clone().unwrap_or_default(), &scene, &world.statics);
         // One physics step first, so the snapshot holds a built broad phase: the wheel rays of
         // the first substep after every reset then see the ground.
         world.pw.step();
@@ -196,6 +204,7 @@ impl Sim {
             nominal,
             params: nominal,
             lidar,
+            camera,
             imu: ImuState::default(),
             wheel_speed: 0.0,
             control: Control::default(),
@@ -441,6 +450,20 @@ impl Sim {
     /// A LiDAR scan as if the LiDAR link were at `pose_w` (probing; the car does not move).
     pub fn lidar_scan_at(&mut self, pose_w: &Pose) -> LaserScan {
         self.lidar.scan(&self.world.statics, pose_w)
+    }
+
+    /// The camera frame from the vehicle's camera link, when a camera is configured and the
+    /// vehicle has a camera link.
+    pub fn camera_frame(&self) -> Option<crate::sensors::camera::RenderedFrame> {
+        self.cfg.camera.as_ref()?;
+        let pose = self.camera_pose()?;
+        Some(self.camera.render(&self.world.statics, &pose))
+    }
+
+    /// Render the camera (configured, or the default 160x120) as if it stood at `pose_w`
+    /// (looking along its x axis, z up).
+    pub fn render_at(&self, pose_w: &Pose) -> crate::sensors::camera::RenderedFrame {
+        self.camera.render(&self.world.statics, pose_w)
     }
 
     /// The GPS reading.

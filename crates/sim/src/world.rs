@@ -45,6 +45,8 @@ pub struct StaticEntry {
     pub pose: Pose,
     /// Scene object id (`None`: the ground).
     pub object_id: Option<u32>,
+    /// RGB in [0, 1].
+    pub color: [f32; 3],
     /// The shape prepared for closed-form ray casts.
     pub fast: crate::sensors::fast_ray::FastRay,
 }
@@ -96,6 +98,7 @@ impl World {
             shape: gco.shared_shape().clone(),
             pose: *gco.position(),
             object_id: None,
+            color: scene.file.ground.color,
             fast: crate::sensors::fast_ray::FastRay::new(gco.shared_shape(), gco.position()),
         });
         for obj in &scene.objects {
@@ -119,6 +122,7 @@ impl World {
                     shape: co.shared_shape().clone(),
                     pose: *co.position(),
                     object_id: Some(obj.id),
+                    color: s.color,
                     fast: crate::sensors::fast_ray::FastRay::new(co.shared_shape(), co.position()),
                 });
             }

@@ -664,3 +664,105 @@ mod issue_2_errors {
         assert!(s.base_pose().is_finite());
     }
 }
+
+mod issue_6_camera {
+    use super::*;
+    use agvrl_sim::sensors::CameraConfig;
+    use agvrl_sim::sensors::camera::{class, compute_projection_matrix_fov, compute_view_matrix};
+
+    fn cam_sim(scene: SceneSource, w: u32, h: u32, fov: f32) -> Sim {
+        let camera = Some(CameraConfig {
+            width: w,
+            height: h,
+            fov_deg: fov,
+            near_m: 0.01,
+            far_m: 100.0,
+        });
+        Sim::new(SimConfig {
+            scene,
+            camera,
+            ..SimConfig::default()
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn depth_of_a_wall_facing_the_camera_is_exact_at_every_pixel() {
+        let s = cam_sim(room(5.0, "cam-depth"), 64, 48, 10.0);
+        let pose = Pose::from_parts(Vector::new(1.0, 0.3, 0.5), Rotation::IDENTITY);
+        let f = s.render_at(&pose);
+        assert_eq!(f.frame.depth_m.len(), 64 * 48);
+        for (i, z) in f.frame.depth_m.iter().enumerate() {
+            assert!((z - 4.0).abs() < 0.01, "pixel {i}: depth {z}");
+            assert_eq!(f.frame.segmentation[i], 1, "the boundary is object 0 (id + 1 = 1)");
+            assert_eq!(f.classes[i], class::WALL);
+        }
+    }
+
+    #[test]
+    fn objects_at_the_edge_of_the_field_of_view_land_on_the_edge_columns() {
+        let d = tmpdir("cam-edge");
+        let (w, h, fov) = (64u32, 48u32, 30.0f32);
+        let tan_x = (fov.to_radians() / 2.0).tan() * w as f32 / h as f32;
+        // Bearing of the centre of the first and last columns.
+        let edge = tan_x * (1.0 - 1.0 / w as f32);
+        let dist = 4.0;
+        std::fs::write(
+            d.join("edge.toml"),
+            format!(
+                "name = \"edge\"\nkind = \"outdoor\"\n[ground]\nsize_m = [30.0, 30.0]\nfriction = 1.0\ncolor = [0.5, 0.5, 0.5]\n\
+                 [spawn]\nx_m = -5.0\ny_m = 0.0\nyaw_deg = 0.0\n\
+                 [[object]]\nmodel = \"building\"\nx_m = {dist}\ny_m = {l}\nscale = [0.04, 0.04, 3.0]\n\
+                 [[object]]\nmodel = \"building\"\nx_m = {dist}\ny_m = {r}\nscale = [0.04, 0.04, 3.0]\n",
+                l = edge * dist,
+                r = -edge * dist
+            ),
+        )
+        .unwrap();
+        let s = cam_sim(SceneSource::File(d.join("edge.toml")), w, h, fov);
+        let f = s.render_at(&Pose::from_parts(Vector::new(0.0, 0.0, 1.0), Rotation::IDENTITY));
+        let at = |u: usize, v: usize| f.frame.segmentation[v * w as usize + u];
+        let v = h as usize / 2;
+        // Left edge (+y) shows object 0, right edge object 1; the middle sees past both.
+        assert_eq!(at(0, v), 1);
+        assert_eq!(at(w as usize - 1, v), 2);
+        assert_eq!(at(w as usize / 2, v), 0);
+        assert_eq!(at(3, v), 0, "the poles are thin: three columns in they are gone");
+        assert_eq!(f.classes[v * w as usize], class::BUILDING);
+        // Upper rows see sky, lower rows ground.
+        assert_eq!(f.classes[w as usize / 2], class::SKY);
+        assert_eq!(f.classes[(h as usize - 1) * w as usize + w as usize / 2], class::GROUND);
+    }
+
+    #[test]
+    fn the_camera_rides_on_the_vehicle_and_does_not_see_it() {
+        let s = cam_sim(SceneSource::Builtin("oval".into()), 80, 60, 80.0);
+        let f = s.camera_frame().expect("xtenth_car has a camera link");
+        assert_eq!((f.frame.width, f.frame.height), (80, 60));
+        // Looking down the straight from the centre line: walls left and right, track ahead,
+        // and no pixel closer than the ground in front of the bumper.
+        assert!(f.classes.contains(&class::WALL));
+        assert!(
+            f.frame.depth_m.iter().all(|z| *z > 0.1),
+            "the car's own body is not in view"
+        );
+        let same = cam_sim(SceneSource::Builtin("oval".into()), 80, 60, 80.0)
+            .camera_frame()
+            .unwrap();
+        assert_eq!(f, same, "rendering is deterministic");
+    }
+
+    #[test]
+    fn view_and_projection_matrices_match_pybullet() {
+        let v = compute_view_matrix([1.0, 2.0, 3.0], [1.0, 2.0, 0.0], [0.0, 1.0, 0.0]);
+        // Looking straight down with y up: camera x = world x, camera z = world z.
+        let p = [1.0f32, 2.0, 0.0, 1.0];
+        let cam: Vec<f32> = (0..4).map(|r| (0..4).map(|c| v[c * 4 + r] * p[c]).sum()).collect();
+        assert!(
+            (cam[2] + 3.0).abs() < 1e-5 && cam[0].abs() < 1e-5 && cam[1].abs() < 1e-5,
+            "{cam:?}"
+        );
+        let m = compute_projection_matrix_fov(90.0, 2.0, 0.1, 10.0);
+        assert!((m[5] - 1.0).abs() < 1e-6 && (m[0] - 0.5).abs() < 1e-6 && m[11] == -1.0);
+    }
+}

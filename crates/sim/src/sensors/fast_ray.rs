@@ -63,6 +63,51 @@ impl FastRay {
         FastRay::Parry(shape.clone(), *pose)
     }
 
+    /// Time of impact and outward surface normal (zero when the ray starts inside).
+    pub fn cast_normal(&self, o: Vector, d: Vector, max_t: f32) -> Option<(f32, Vector)> {
+        match self {
+            FastRay::Planes(planes) => {
+                let (mut t0, mut t1) = (0.0f32, max_t);
+                let mut n0 = Vector::ZERO;
+                for (n, off) in planes {
+                    let denom = n.dot(d);
+                    let dist = off - n.dot(o);
+                    if denom.abs() < 1e-12 {
+                        if dist < 0.0 {
+                            return None;
+                        }
+                    } else {
+                        let t = dist / denom;
+                        if denom > 0.0 {
+                            t1 = t1.min(t);
+                        } else if t > t0 {
+                            t0 = t;
+                            n0 = *n;
+                        }
+                        if t0 > t1 {
+                            return None;
+                        }
+                    }
+                }
+                Some((t0, n0))
+            }
+            FastRay::Cylinder { c, a, r, h } => {
+                let t = cast_cylinder(o - *c, d, *a, *r, *h, max_t)?;
+                let p = o + d * t - *c;
+                let along = p.dot(*a);
+                let n = if along.abs() >= *h - 1e-4 {
+                    *a * along.signum()
+                } else {
+                    (p - *a * along).normalize_or_zero()
+                };
+                Some((t, n))
+            }
+            FastRay::Parry(s, p) => s
+                .cast_ray_and_get_normal(p, &Ray::new(o, d), max_t, true)
+                .map(|h| (h.time_of_impact, h.normal)),
+        }
+    }
+
     /// Time of impact in [0, max_t] of the solid shape along `o + t d` (unit `d`), if any.
     #[inline]
     pub fn cast(&self, o: Vector, d: Vector, max_t: f32) -> Option<f32> {

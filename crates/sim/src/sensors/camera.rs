@@ -1,0 +1,443 @@
+//! A synthetic pinhole camera (the paper's camera section): view and projection matrices as
+//! PyBullet's computeViewMatrix / computeProjectionMatrixFOV build them, and an RGB image, a
+//! linear depth buffer (metres along the optical axis) and a segmentation mask (object ids and
+//! semantic classes) by ray casting the static scene on the CPU: no GPU, no display,
+//! deterministic, rows in parallel.
+//!
+//! Speed: rays walk a 2D grid of the scene's colliders (objects stand on the ground, so a ray's
+//! footprint crosses few cells) and stop at the first cell boundary beyond their nearest hit;
+//! the ground is the plane z = 0 inside the ground's extent, with the scene's decals on it.
+
+use crate::msg::CameraFrame;
+use crate::scene::Scene;
+use crate::world::StaticIndex;
+use rapier3d::prelude::*;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Camera settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraConfig {
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Vertical field of view, degrees.
+    pub fov_deg: f32,
+    /// Near clipping distance, metres.
+    pub near_m: f32,
+    /// Far clipping distance, metres (depth of sky pixels).
+    pub far_m: f32,
+}
+
+impl Default for CameraConfig {
+    /// 160x120, 80 degrees (AutoVRL's XTENTH-CAR camera), 0.01-100 m.
+    fn default() -> Self {
+        Self {
+            width: 160,
+            height: 120,
+            fov_deg: 80.0,
+            near_m: 0.01,
+            far_m: 100.0,
+        }
+    }
+}
+
+impl CameraConfig {
+    /// Check the settings.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.width == 0 || self.height == 0 || self.width > 8192 || self.height > 8192 {
+            return Err(format!(
+                "camera size {}x{} must be in 1..=8192",
+                self.width, self.height
+            ));
+        }
+        if !(self.fov_deg > 0.0 && self.fov_deg < 179.0) {
+            return Err(format!("camera fov_deg must be in (0, 179), got {}", self.fov_deg));
+        }
+        if !(self.near_m > 0.0 && self.far_m > self.near_m && self.far_m.is_finite()) {
+            return Err("camera needs 0 < near_m < far_m < inf".into());
+        }
+        Ok(())
+    }
+}
+
+/// Semantic classes of segmentation pixels.
+pub mod class {
+    /// Nothing hit.
+    pub const SKY: u8 = 0;
+    /// The ground.
+    pub const GROUND: u8 = 1;
+    /// A road decal.
+    pub const ROAD: u8 = 2;
+    /// A lane marking decal.
+    pub const LANE_MARKING: u8 = 3;
+    /// Walls (boundary, track).
+    pub const WALL: u8 = 4;
+    /// Trees.
+    pub const TREE: u8 = 5;
+    /// Rocks.
+    pub const ROCK: u8 = 6;
+    /// Buildings.
+    pub const BUILDING: u8 = 7;
+    /// Cars.
+    pub const CAR: u8 = 8;
+    /// People (search subjects).
+    pub const PERSON: u8 = 9;
+    /// Anything else.
+    pub const OTHER: u8 = 255;
+    /// Names, by class id (index), for annotation contexts.
+    pub const NAMES: [(u8, &str); 11] = [
+        (SKY, "sky"),
+        (GROUND, "ground"),
+        (ROAD, "road"),
+        (LANE_MARKING, "lane_marking"),
+        (WALL, "wall"),
+        (TREE, "tree"),
+        (ROCK, "rock"),
+        (BUILDING, "building"),
+        (CAR, "car"),
+        (PERSON, "person"),
+        (OTHER, "other"),
+    ];
+
+    /// The class id of a scene class name.
+    pub fn of(name: &str) -> u8 {
+        NAMES.iter().find(|(_, n)| *n == name).map(|(c, _)| *c).unwrap_or(OTHER)
+    }
+}
+
+/// PyBullet's computeViewMatrix: a column-major 4x4 world-to-camera matrix (OpenGL: the camera
+/// looks along its -z).
+pub fn compute_view_matrix(eye: [f32; 3], target: [f32; 3], up: [f32; 3]) -> [f32; 16] {
+    let (e, t, u) = (
+        Vector::from_array(eye),
+        Vector::from_array(target),
+        Vector::from_array(up),
+    );
+    let f = (t - e).normalize();
+    let s = f.cross(u).normalize();
+    let u = s.cross(f);
+    [
+        s.x,
+        u.x,
+        -f.x,
+        0.0,
+        s.y,
+        u.y,
+        -f.y,
+        0.0,
+        s.z,
+        u.z,
+        -f.z,
+        0.0,
+        -s.dot(e),
+        -u.dot(e),
+        f.dot(e),
+        1.0,
+    ]
+}
+
+/// PyBullet's computeProjectionMatrixFOV: a column-major OpenGL perspective matrix.
+pub fn compute_projection_matrix_fov(fov_deg: f32, aspect: f32, near: f32, far: f32) -> [f32; 16] {
+    let y = 1.0 / (fov_deg.to_radians() / 2.0).tan();
+    let mut m = [0.0; 16];
+    m[0] = y / aspect;
+    m[5] = y;
+    m[10] = (far + near) / (near - far);
+    m[11] = -1.0;
+    m[14] = 2.0 * far * near / (near - far);
+    m
+}
+
+/// A frame with the semantic class of every pixel alongside the object ids.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RenderedFrame {
+    /// RGB, depth and object ids.
+    pub frame: CameraFrame,
+    /// Semantic class per pixel (`class::*`).
+    pub classes: Vec<u8>,
+}
+
+struct Grid {
+    origin: [f32; 2],
+    cell: f32,
+    nx: i32,
+    ny: i32,
+    cells: Vec<Vec<u32>>,
+}
+
+struct Decal {
+    centre: [f32; 2],
+    axis: [f32; 2],
+    half: [f32; 2],
+    color: [f32; 3],
+    class: u8,
+}
+
+/// A renderer bound to one scene.
+pub struct Camera {
+    cfg: CameraConfig,
+    grid: Grid,
+    classes: Vec<u8>,
+    ground_half: [f32; 2],
+    ground_color: [f32; 3],
+    decals: Vec<Decal>,
+}
+
+const SKY_RGB: [f32; 3] = [0.62, 0.76, 0.92];
+/// Direction towards the sun (unit), for Lambert shading.
+const SUN: [f32; 3] = [0.35, 0.25, 0.90];
+
+impl Camera {
+    /// Prepare a camera for `scene` (whose colliders are `statics`).
+    pub fn new(cfg: CameraConfig, scene: &Scene, statics: &StaticIndex) -> Self {
+        let [gx, gy] = scene.file.ground.size_m;
+        let cell = 2.0f32;
+        let (half_x, half_y) = (gx / 2.0 + 1.0, gy / 2.0 + 1.0);
+        let mut lo = [-half_x, -half_y];
+        let mut hi = [half_x, half_y];
+        for e in statics.entries.iter().filter(|e| e.object_id.is_some()) {
+            lo = [lo[0].min(e.aabb.mins.x), lo[1].min(e.aabb.mins.y)];
+            hi = [hi[0].max(e.aabb.maxs.x), hi[1].max(e.aabb.maxs.y)];
+        }
+        let nx = ((hi[0] - lo[0]) / cell).ceil().max(1.0) as i32;
+        let ny = ((hi[1] - lo[1]) / cell).ceil().max(1.0) as i32;
+        let mut cells = vec![Vec::new(); (nx * ny) as usize];
+        for (k, e) in statics
+            .entries
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| e.object_id.is_some())
+        {
+            let i0 = ((e.aabb.mins.x - lo[0]) / cell).floor().max(0.0) as i32;
+            let i1 = (((e.aabb.maxs.x - lo[0]) / cell).floor() as i32).min(nx - 1);
+            let j0 = ((e.aabb.mins.y - lo[1]) / cell).floor().max(0.0) as i32;
+            let j1 = (((e.aabb.maxs.y - lo[1]) / cell).floor() as i32).min(ny - 1);
+            for i in i0..=i1 {
+                for j in j0..=j1 {
+                    cells[(i * ny + j) as usize].push(k as u32);
+                }
+            }
+        }
+        let classes = statics
+            .entries
+            .iter()
+            .map(|e| match e.object_id {
+                Some(id) => scene
+                    .objects
+                    .get(id as usize)
+                    .map(|o| class::of(&o.class))
+                    .unwrap_or(class::OTHER),
+                None => class::GROUND,
+            })
+            .collect();
+        let decals = scene
+            .file
+            .decals
+            .iter()
+            .map(|d| {
+                let (s, c) = d.yaw_deg.to_radians().sin_cos();
+                Decal {
+                    centre: [d.x_m, d.y_m],
+                    axis: [c, s],
+                    half: [d.size_m[0] / 2.0, d.size_m[1] / 2.0],
+                    color: d.color,
+                    class: class::of(&d.class),
+                }
+            })
+            .collect();
+        Self {
+            cfg,
+            grid: Grid {
+                origin: lo,
+                cell,
+                nx,
+                ny,
+                cells,
+            },
+            classes,
+            ground_half: [gx / 2.0, gy / 2.0],
+            ground_color: scene.file.ground.color,
+            decals,
+        }
+    }
+
+    /// Settings.
+    pub fn config(&self) -> &CameraConfig {
+        &self.cfg
+    }
+
+    /// Render from a camera at `pose_w` looking along its x axis with z up (the ROS link
+    /// convention of a camera mount).
+    pub fn render(&self, statics: &StaticIndex, pose_w: &Pose) -> RenderedFrame {
+        let eye = pose_w.translation;
+        let fwd = pose_w.rotation * Vector::X;
+        let up = pose_w.rotation * Vector::Z;
+        let right = fwd.cross(up).normalize();
+        let (w, h) = (self.cfg.width as usize, self.cfg.height as usize);
+        let tan_y = (self.cfg.fov_deg.to_radians() / 2.0).tan();
+        let tan_x = tan_y * w as f32 / h as f32;
+        let n = w * h;
+        let mut rgb = vec![0u8; 3 * n];
+        let mut depth = vec![0f32; n];
+        let mut seg = vec![0u32; n];
+        let mut cls = vec![0u8; n];
+        rgb.par_chunks_mut(3 * w)
+            .zip(depth.par_chunks_mut(w))
+            .zip(seg.par_chunks_mut(w))
+            .zip(cls.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(v, (((rgb_row, depth_row), seg_row), cls_row))| {
+                let y = 1.0 - 2.0 * (v as f32 + 0.5) / h as f32;
+                for u in 0..w {
+                    let x = 2.0 * (u as f32 + 0.5) / w as f32 - 1.0;
+                    // Unnormalised: its component along the optical axis is 1, so the ray
+                    // parameter at a hit is the depth.
+                    let dir = fwd + right * (x * tan_x) + up * (y * tan_y);
+                    let len = dir.length();
+                    let d = dir / len;
+                    let (t, color, id, c) = self.shade(statics, eye, d, self.cfg.far_m * len);
+                    let z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
+                    depth_row[u] = z;
+                    seg_row[u] = id;
+                    cls_row[u] = c;
+                    for k in 0..3 {
+                        rgb_row[3 * u + k] = (color[k].clamp(0.0, 1.0) * 255.0).round() as u8;
+                    }
+                }
+            });
+        RenderedFrame {
+            frame: CameraFrame {
+                width: self.cfg.width,
+                height: self.cfg.height,
+                rgb,
+                depth_m: depth,
+                segmentation: seg,
+            },
+            classes: cls,
+        }
+    }
+
+    /// (distance, colour, object id + 1, class) of the first surface along `o + t d`.
+    fn shade(&self, statics: &StaticIndex, o: Vector, d: Vector, max_t: f32) -> (f32, [f32; 3], u32, u8) {
+        let sun = Vector::from_array(SUN).normalize();
+        // The ground plane bounds the walk.
+        let mut best = max_t;
+        let mut hit: Option<(usize, Vector)> = None;
+        let mut ground = false;
+        if d.z < -1e-6 && o.z > 0.0 {
+            let t = -o.z / d.z;
+            let p = o + d * t;
+            if t < best && p.x.abs() <= self.ground_half[0] && p.y.abs() <= self.ground_half[1] {
+                best = t;
+                ground = true;
+            }
+        }
+        self.walk(
+            o,
+            d,
+            &mut best,
+            |k, t_max| {
+                let e = &statics.entries[k as usize];
+                e.fast.cast_normal(o, d, t_max).map(|(t, n)| (t, n, k as usize))
+            },
+            &mut hit,
+        );
+        if let Some((k, n)) = hit {
+            let e = &statics.entries[k];
+            let lambert = 0.35 + 0.65 * n.dot(sun).max(0.0);
+            let c = e.color.map(|v| v * lambert);
+            return (best, c, e.object_id.map(|i| i + 1).unwrap_or(0), self.classes[k]);
+        }
+        if ground {
+            let p = o + d * best;
+            let (mut color, mut c) = (self.ground_color, class::GROUND);
+            for dc in &self.decals {
+                let (dx, dy) = (p.x - dc.centre[0], p.y - dc.centre[1]);
+                let (a, b) = (dx * dc.axis[0] + dy * dc.axis[1], -dx * dc.axis[1] + dy * dc.axis[0]);
+                if a.abs() <= dc.half[0] && b.abs() <= dc.half[1] {
+                    color = dc.color;
+                    c = dc.class;
+                }
+            }
+            let lambert = 0.35 + 0.65 * sun.z;
+            return (best, color.map(|v| v * lambert), 0, c);
+        }
+        (max_t, SKY_RGB, 0, class::SKY)
+    }
+
+    /// Visit the grid cells along the ray's ground track, nearest first, testing their entries;
+    /// stops once the nearest hit lies before the next cell.
+    fn walk(
+        &self,
+        o: Vector,
+        d: Vector,
+        best: &mut f32,
+        test: impl Fn(u32, f32) -> Option<(f32, Vector, usize)>,
+        hit: &mut Option<(usize, Vector)>,
+    ) {
+        let g = &self.grid;
+        let (px, py) = ((o.x - g.origin[0]) / g.cell, (o.y - g.origin[1]) / g.cell);
+        let (mut i, mut j) = (px.floor() as i32, py.floor() as i32);
+        let step_i = if d.x > 0.0 { 1 } else { -1 };
+        let step_j = if d.y > 0.0 { 1 } else { -1 };
+        let inv_x = if d.x.abs() > 1e-9 {
+            g.cell / d.x.abs()
+        } else {
+            f32::INFINITY
+        };
+        let inv_y = if d.y.abs() > 1e-9 {
+            g.cell / d.y.abs()
+        } else {
+            f32::INFINITY
+        };
+        let frac = |p: f32, s: i32| if s > 0 { p.floor() + 1.0 - p } else { p - p.floor() };
+        let mut t_x = frac(px, step_i) * inv_x;
+        let mut t_y = frac(py, step_j) * inv_y;
+        // A camera outside the grid: jump to where the ray enters it.
+        if !(0..g.nx).contains(&i) || !(0..g.ny).contains(&j) {
+            let lo = Vector::new(g.origin[0], g.origin[1], f32::MIN);
+            let hi = Vector::new(
+                g.origin[0] + g.nx as f32 * g.cell,
+                g.origin[1] + g.ny as f32 * g.cell,
+                f32::MAX,
+            );
+            let inv = d.recip();
+            let (a, b) = ((lo - o) * inv, (hi - o) * inv);
+            let enter = a.min(b).max_element().max(0.0);
+            let exit = a.max(b).min_element();
+            if enter > exit || enter >= *best {
+                return;
+            }
+            let p = o + d * (enter + 1e-4);
+            let (qx, qy) = ((p.x - g.origin[0]) / g.cell, (p.y - g.origin[1]) / g.cell);
+            i = (qx.floor() as i32).clamp(0, g.nx - 1);
+            j = (qy.floor() as i32).clamp(0, g.ny - 1);
+            t_x = enter + frac(qx, step_i) * inv_x;
+            t_y = enter + frac(qy, step_j) * inv_y;
+        }
+        while (0..g.nx).contains(&i) && (0..g.ny).contains(&j) {
+            for &k in &g.cells[(i * g.ny + j) as usize] {
+                if let Some((t, n, idx)) = test(k, *best) {
+                    if t < *best {
+                        *best = t;
+                        *hit = Some((idx, n));
+                    }
+                }
+            }
+            let t_next = t_x.min(t_y);
+            if *best <= t_next {
+                return;
+            }
+            if t_x < t_y {
+                t_x += inv_x;
+                i += step_i;
+            } else {
+                t_y += inv_y;
+                j += step_j;
+            }
+        }
+    }
+}
