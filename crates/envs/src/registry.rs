@@ -35,6 +35,8 @@ pub struct EnvConfig {
     pub substeps: u32,
     /// LiDAR.
     pub lidar: LidarConfig,
+    /// The vehicle camera (frames appear in `SensorFrame::image`; off by default).
+    pub camera: Option<agvrl_sim::sensors::CameraConfig>,
     /// Observation composition.
     pub observation: ObsConfig,
     /// Action mapping.
@@ -58,6 +60,7 @@ impl Default for EnvConfig {
             dynamics: DynamicsMode::Raycast,
             substeps: 4,
             lidar: LidarConfig::default(),
+            camera: None,
             observation: ObsConfig::default(),
             action_mapping: ActionMapping::Scaled,
             search_reward: SearchReward::AutovrlCode,
@@ -134,6 +137,7 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
         mode: cfg.dynamics,
         substeps: cfg.substeps,
         lidar: cfg.lidar.clone(),
+        camera: cfg.camera.clone(),
         ..SimConfig::default()
     };
     let v = SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?;

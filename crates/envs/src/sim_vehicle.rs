@@ -174,7 +174,7 @@ impl SimVehicle {
             scan: Some(self.sim.lidar_scan()),
             imu: Some(self.sim.imu()),
             gps: Some(self.sim.gps()),
-            image: None,
+            image: self.sim.camera_frame().map(|f| f.frame),
             contact: Some(!self.sim.contacts().is_empty()),
             applied: self.sim.control(),
         }

@@ -379,3 +379,30 @@ mod issue_3_vec_and_noise {
         }
     }
 }
+
+mod issue_6_camera_frames {
+    use super::*;
+
+    #[test]
+    fn a_configured_camera_fills_the_sensor_frame() {
+        let camera = Some(agvrl_sim::sensors::CameraConfig {
+            width: 32,
+            height: 24,
+            ..Default::default()
+        });
+        let cfg = EnvConfig {
+            camera,
+            spawn: SpawnMode::Fixed,
+            ..EnvConfig::default()
+        };
+        let mut v = make_vehicle("racing-oval", &cfg).unwrap();
+        let f = v.reset(0).unwrap();
+        let img = f.image.expect("camera frame");
+        assert_eq!(
+            (img.width, img.height, img.rgb.len(), img.depth_m.len()),
+            (32, 24, 32 * 24 * 3, 32 * 24)
+        );
+        let mut plain = make_vehicle("racing-oval", &EnvConfig::default()).unwrap();
+        assert!(plain.reset(0).unwrap().image.is_none());
+    }
+}
