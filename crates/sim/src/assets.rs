@@ -27,6 +27,17 @@ impl AssetSource {
         }
     }
 
+    /// A file on disk as (its directory, its name), so files it names resolve beside it.
+    pub fn for_file(path: &Path) -> (Self, String) {
+        let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default()
+            .to_string();
+        (AssetSource::Dir(dir), name)
+    }
+
     /// Read `rel` (e.g. `vehicles/xtenth_car.urdf`) as text.
     pub fn read(&self, rel: &str) -> Result<String, SimError> {
         match self {

@@ -142,25 +142,14 @@ impl Sim {
         let scene = match &cfg.scene {
             SceneSource::Builtin(id) => Scene::builtin(&assets, id)?,
             SceneSource::File(path) => {
-                let dir = path.parent().map(|p| p.to_path_buf()).unwrap_or_default();
-                let name = path
-                    .file_name()
-                    .and_then(|n| n.to_str())
-                    .unwrap_or_default()
-                    .to_string();
-                Scene::load(&AssetSource::Dir(dir), &name)?
+                let (src, name) = AssetSource::for_file(path);
+                Scene::load(&src, &name)?
             }
             SceneSource::Procedural { kind, seed, half_m } => Scene::procedural(*kind, *seed, *half_m, 2.0)?,
         };
         let model = if cfg.vehicle.ends_with(".toml") {
-            let path = PathBuf::from(&cfg.vehicle);
-            let dir = path.parent().map(|p| p.to_path_buf()).unwrap_or_default();
-            let name = path
-                .file_name()
-                .and_then(|n| n.to_str())
-                .unwrap_or_default()
-                .to_string();
-            VehicleModel::load(&AssetSource::Dir(dir), &name)?
+            let (src, name) = AssetSource::for_file(std::path::Path::new(&cfg.vehicle));
+            VehicleModel::load(&src, &name)?
         } else {
             VehicleModel::builtin(&assets, &cfg.vehicle)?
         };

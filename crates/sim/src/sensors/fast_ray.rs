@@ -112,31 +112,8 @@ impl FastRay {
     #[inline]
     pub fn cast(&self, o: Vector, d: Vector, max_t: f32) -> Option<f32> {
         match self {
-            FastRay::Planes(planes) => {
-                let (mut t0, mut t1) = (0.0f32, max_t);
-                for (n, off) in planes {
-                    let denom = n.dot(d);
-                    let dist = off - n.dot(o);
-                    if denom.abs() < 1e-12 {
-                        if dist < 0.0 {
-                            return None;
-                        }
-                    } else {
-                        let t = dist / denom;
-                        if denom > 0.0 {
-                            t1 = t1.min(t);
-                        } else {
-                            t0 = t0.max(t);
-                        }
-                        if t0 > t1 {
-                            return None;
-                        }
-                    }
-                }
-                Some(t0)
-            }
-            FastRay::Cylinder { c, a, r, h } => cast_cylinder(o - *c, d, *a, *r, *h, max_t),
             FastRay::Parry(s, p) => s.cast_ray(p, &Ray::new(o, d), max_t, true),
+            _ => self.cast_normal(o, d, max_t).map(|(t, _)| t),
         }
     }
 }
