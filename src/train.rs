@@ -37,7 +37,42 @@ pub struct TrainArgs {
     /// Run directory to create (default: runs/<date-time>-<env>-<algo>).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Continue an interrupted (or finished) run directory up to its configured steps, or
+    /// --steps more.
+    #[arg(long, conflicts_with_all = ["env", "algo", "seed", "n_envs", "config", "out"])]
+    pub resume: Option<PathBuf>,
 }
+
+static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// The two learners, as the training loop sees them.
+trait Learner {
+    fn learn(&mut self, steps: u64, cb: &mut dyn FnMut(&Progress<'_>) -> Control) -> agvrl_rl::Result<()>;
+    fn num_timesteps(&self) -> u64;
+    fn save_checkpoint(&self, p: &std::path::Path) -> agvrl_rl::Result<()>;
+    fn save_policy(&self, p: &std::path::Path) -> agvrl_rl::Result<()>;
+}
+
+macro_rules! learner {
+    ($t:ty) => {
+        impl Learner for $t {
+            fn learn(&mut self, steps: u64, cb: &mut dyn FnMut(&Progress<'_>) -> Control) -> agvrl_rl::Result<()> {
+                <$t>::learn(self, steps, cb)
+            }
+            fn num_timesteps(&self) -> u64 {
+                <$t>::num_timesteps(self)
+            }
+            fn save_checkpoint(&self, p: &std::path::Path) -> agvrl_rl::Result<()> {
+                <$t>::save_checkpoint(self, p)
+            }
+            fn save_policy(&self, p: &std::path::Path) -> agvrl_rl::Result<()> {
+                <$t>::save_policy(self, p)
+            }
+        }
+    };
+}
+learner!(Ppo<Box<dyn Env>>);
+learner!(Sac<Box<dyn Env>>);
 
 #[derive(Args)]
 pub struct EvalArgs {
@@ -91,6 +126,41 @@ fn vec_env(cfg: &RunConfig) -> Result<VecEnv<Box<dyn Env>>> {
 }
 
 pub fn train(a: TrainArgs) -> Result<()> {
+    if STOP_HANDLER.set(()).is_ok() {
+        // A second Ctrl-C falls through to the default (kill) only after this one is handled.
+        let _ = ctrlc::set_handler(|| {
+            if STOP.swap(true, std::sync::atomic::Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            eprintln!("\ninterrupt: finishing the current update, then writing a checkpoint and the run directory");
+        });
+    }
+    let device = agvrl_rl::default_device();
+    if let Some(dir) = &a.resume {
+        let cfg = RunConfig::load(&dir.join("config.toml"))
+            .with_context(|| format!("{} is not a run directory", dir.display()))?;
+        let ckpt = dir.join("checkpoint.ckpt");
+        let mut learner: Box<dyn Learner> = if cfg.algo == "ppo" {
+            Box::new(Ppo::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?)
+        } else {
+            Box::new(Sac::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?)
+        };
+        let target = match a.steps {
+            Some(more) => learner.num_timesteps() + more,
+            None => cfg.steps,
+        };
+        let previous = std::fs::read_to_string(dir.join("metrics.csv")).unwrap_or_default();
+        eprintln!(
+            "resuming {} at step {} up to {target}",
+            dir.display(),
+            learner.num_timesteps()
+        );
+        let files = |name: &str| dir.join(name);
+        let text = run_learner(learner.as_mut(), &cfg, target, &files, &previous)?;
+        println!("run_dir={}", dir.display());
+        print!("{text}");
+        return Ok(());
+    }
     let cfg = resolve(&a)?;
     let out = a
         .out
@@ -98,21 +168,45 @@ pub fn train(a: TrainArgs) -> Result<()> {
         .unwrap_or_else(|| PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)));
     let run = RunDir::create(out)?;
     write_atomic(&run.file("config.toml"), cfg.to_toml()?.as_bytes())?;
-    let device = agvrl_rl::default_device();
-    let bar = ProgressBar::new(cfg.steps);
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
     eprintln!(
         "training {} on {} for {} steps (seed {}, {} envs)",
         cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs
     );
+    let mut learner: Box<dyn Learner> = if cfg.algo == "ppo" {
+        Box::new(Ppo::new(cfg.ppo.clone(), vec_env(&cfg)?, &device, cfg.seed)?)
+    } else {
+        Box::new(Sac::new(cfg.sac.clone(), vec_env(&cfg)?, &device, cfg.seed)?)
+    };
+    let files = |name: &str| run.file(name);
+    let text = run_learner(learner.as_mut(), &cfg, cfg.steps, &files, "")?;
+    let dir = run.finish()?;
+    println!("run_dir={}", dir.display());
+    print!("{text}");
+    Ok(())
+}
+
+static STOP_HANDLER: std::sync::OnceLock<()> = std::sync::OnceLock::new();
+
+/// Train `learner` up to `target` steps (or a Ctrl-C), checkpointing every tenth; write
+/// checkpoint, policy, metrics (after `previous_csv`) and the evaluation. Returns eval.txt.
+fn run_learner(
+    learner: &mut dyn Learner,
+    cfg: &RunConfig,
+    target: u64,
+    file: &dyn Fn(&str) -> PathBuf,
+    previous_csv: &str,
+) -> Result<String> {
+    let start = learner.num_timesteps();
+    let bar = ProgressBar::new(target);
+    bar.set_position(start.min(target));
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
     let t0 = Instant::now();
     let mut rows: Vec<Row> = Vec::new();
     let mut on_progress = |p: &Progress<'_>| {
-        let done = p.steps.min(cfg.steps);
-        bar.set_position(done);
+        bar.set_position(p.steps.min(target));
         let mean = p.mean_return();
         if let Some(m) = mean {
             bar.set_message(format!("mean return {m:.1}"));
@@ -124,31 +218,30 @@ pub fn train(a: TrainArgs) -> Result<()> {
             policy_loss: p.losses.policy,
             value_loss: p.losses.value,
             entropy: p.losses.entropy,
-            steps_per_s: p.steps as f64 / t0.elapsed().as_secs_f64().max(1e-9),
+            steps_per_s: (p.steps - start) as f64 / t0.elapsed().as_secs_f64().max(1e-9),
         });
-        Control::Continue
+        if STOP.load(std::sync::atomic::Ordering::SeqCst) {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
     };
-    let chunks = 10u64;
-    let per_chunk = cfg.steps.div_ceil(chunks);
-    let policy_path = run.file(POLICY_FILE);
-    if cfg.algo == "ppo" {
-        let mut learner = Ppo::new(cfg.ppo.clone(), vec_env(&cfg)?, &device, cfg.seed)?;
-        while learner.num_timesteps() < cfg.steps {
-            learner.learn(per_chunk.min(cfg.steps - learner.num_timesteps()), &mut on_progress)?;
-            learner.save_checkpoint(&run.file("checkpoint.ckpt"))?;
-        }
-        learner.save_policy(&policy_path)?;
-    } else {
-        let mut learner = Sac::new(cfg.sac.clone(), vec_env(&cfg)?, &device, cfg.seed)?;
-        while learner.num_timesteps() < cfg.steps {
-            learner.learn(per_chunk.min(cfg.steps - learner.num_timesteps()), &mut on_progress)?;
-            learner.save_checkpoint(&run.file("checkpoint.ckpt"))?;
-        }
-        learner.save_policy(&policy_path)?;
+    // Checkpoint at least every tenth of the run and every 50,000 steps.
+    let per_chunk = cfg.steps.div_ceil(10).clamp(1, 50_000);
+    while learner.num_timesteps() < target && !STOP.load(std::sync::atomic::Ordering::SeqCst) {
+        learner.learn(per_chunk.min(target - learner.num_timesteps()), &mut on_progress)?;
+        learner.save_checkpoint(&file("checkpoint.ckpt"))?;
     }
+    learner.save_checkpoint(&file("checkpoint.ckpt"))?;
+    let policy_path = file(POLICY_FILE);
+    learner.save_policy(&policy_path)?;
     bar.finish_and_clear();
-    let train_s = t0.elapsed().as_secs_f64();
-    let mut csv = String::from("step,episodes,mean_return,policy_loss,value_loss,entropy,steps_per_s\n");
+    let interrupted = learner.num_timesteps() < target;
+    let mut csv = if previous_csv.is_empty() {
+        String::from("step,episodes,mean_return,policy_loss,value_loss,entropy,steps_per_s\n")
+    } else {
+        previous_csv.to_string()
+    };
     for r in &rows {
         let mean = r.mean_return.map(|m| format!("{m:.4}")).unwrap_or_default();
         let _ = writeln!(
@@ -157,7 +250,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
             r.step, r.episodes, r.policy_loss, r.value_loss, r.entropy, r.steps_per_s
         );
     }
-    write_atomic(&run.file("metrics.csv"), csv.as_bytes())?;
+    write_atomic(&file("metrics.csv"), csv.as_bytes())?;
     let mut policy = Policy::load(&policy_path)?;
     let summary = evaluate(
         &mut policy,
@@ -166,15 +259,19 @@ pub fn train(a: TrainArgs) -> Result<()> {
         cfg.eval_episodes,
         cfg.seed + 1_000_000,
     )?;
-    let mut text = format!("train_s={train_s:.1}\n");
+    let mut text = format!(
+        "train_s={:.1}\nsteps={}\n",
+        t0.elapsed().as_secs_f64(),
+        learner.num_timesteps()
+    );
+    if interrupted {
+        text.push_str("interrupted=true\n");
+    }
     for l in summary.lines() {
         let _ = writeln!(text, "{l}");
     }
-    write_atomic(&run.file("eval.txt"), text.as_bytes())?;
-    let dir = run.finish()?;
-    println!("run_dir={}", dir.display());
-    print!("{text}");
-    Ok(())
+    write_atomic(&file("eval.txt"), text.as_bytes())?;
+    Ok(text)
 }
 
 /// What deterministic evaluation found.

@@ -83,6 +83,64 @@ mod issue_5_cli {
     }
 
     #[test]
+    fn ctrl_c_leaves_a_complete_run_that_resume_continues() {
+        let d = tmp("ctrlc");
+        let run = d.join("run");
+        let cfg = tiny_config(&d);
+        let child = Command::new(env!("CARGO_BIN_EXE_agvrl"))
+            .args([
+                "train",
+                "--config",
+                cfg.to_str().unwrap(),
+                "--steps",
+                "100000000",
+                "--out",
+                run.to_str().unwrap(),
+            ])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Wait until training has checkpointed once, then interrupt.
+        let ckpt = PathBuf::from(format!("{}.partial", run.display())).join("checkpoint.ckpt");
+        let t0 = std::time::Instant::now();
+        while !ckpt.exists() && t0.elapsed().as_secs() < 120 {
+            std::thread::yield_now();
+        }
+        assert!(ckpt.exists(), "no checkpoint appeared");
+        let ok = Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(ok.success());
+        let o = child.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        let eval = std::fs::read_to_string(run.join("eval.txt")).unwrap();
+        assert!(eval.contains("interrupted=true"), "{eval}");
+        let step_of = |text: &str| -> u64 {
+            text.lines()
+                .find_map(|l| l.strip_prefix("steps="))
+                .unwrap()
+                .parse()
+                .unwrap()
+        };
+        let before = step_of(&eval);
+        let rows_before = std::fs::read_to_string(run.join("metrics.csv"))
+            .unwrap()
+            .lines()
+            .count();
+        let o = agvrl(&["train", "--resume", run.to_str().unwrap(), "--steps", "256"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let after = step_of(&std::fs::read_to_string(run.join("eval.txt")).unwrap());
+        assert!(after >= before + 256, "{before} -> {after}");
+        let rows_after = std::fs::read_to_string(run.join("metrics.csv"))
+            .unwrap()
+            .lines()
+            .count();
+        assert!(rows_after > rows_before);
+    }
+
+    #[test]
     fn bad_inputs_fail_with_a_one_line_error() {
         let d = tmp("bad");
         let bad = d.join("bad.toml");
