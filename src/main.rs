@@ -62,7 +62,7 @@ fn run() -> Result<()> {
 
 fn envs() -> Result<()> {
     for id in agvrl_envs::ENV_IDS {
-        let env = agvrl_envs::make(id)?;
+        let env = agvrl_envs::make(id, &agvrl_envs::EnvConfig::default())?;
         let (o, a) = (env.observation_space(), env.action_space());
         let fmt = |s: &agvrl_envs::BoxSpace| {
             let lo = s.low.iter().cloned().fold(f32::INFINITY, f32::min);

@@ -2,7 +2,7 @@
 
 use crate::config::{DEFAULT_TOML, RunConfig};
 use crate::runs::{RunDir, stamp, write_atomic};
-use agvrl_envs::{Env, EnvConfig, VecEnv, make_with};
+use agvrl_envs::{Env, EnvConfig, VecEnv, make};
 use agvrl_rl::{Control, Policy, Ppo, Progress, Sac};
 use anyhow::{Context, Result, bail};
 use clap::Args;
@@ -120,7 +120,7 @@ fn resolve(a: &TrainArgs) -> Result<RunConfig> {
 
 fn vec_env(cfg: &RunConfig) -> Result<VecEnv<Box<dyn Env>>> {
     let envs = (0..cfg.n_envs)
-        .map(|_| make_with(&cfg.env, &cfg.env_config))
+        .map(|_| make(&cfg.env, &cfg.env_config))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(VecEnv::new(envs, cfg.threads)?)
 }
@@ -309,7 +309,7 @@ impl Summary {
 }
 
 pub fn evaluate(policy: &mut Policy, env_id: &str, env_cfg: &EnvConfig, episodes: usize, seed: u64) -> Result<Summary> {
-    let mut env = make_with(env_id, env_cfg)?;
+    let mut env = make(env_id, env_cfg)?;
     policy
         .check_spaces(&env.observation_space(), &env.action_space())
         .context("the policy does not fit this env")?;

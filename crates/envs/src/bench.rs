@@ -45,7 +45,9 @@ pub fn run(quick: bool) -> Vec<String> {
     let steps = if quick { 200 } else { 2000 };
     let mut out = Vec::new();
     for id in ENV_IDS {
-        let Ok(mut env) = make(id) else { continue };
+        let Ok(mut env) = make(id, &crate::EnvConfig::default()) else {
+            continue;
+        };
         let rate = env_rate(env.as_mut(), steps, reps);
         let mut line = format!("env={id} steps_per_s={rate:.0}");
         if let Some(scene) = scene_of(id) {
@@ -80,7 +82,10 @@ pub fn run(quick: bool) -> Vec<String> {
         let n_envs = 8;
         let mut rates = Vec::new();
         for threads in [1, 2] {
-            let Ok(envs) = (0..n_envs).map(|_| make(id)).collect::<Result<Vec<_>, _>>() else {
+            let Ok(envs) = (0..n_envs)
+                .map(|_| make(id, &crate::EnvConfig::default()))
+                .collect::<Result<Vec<_>, _>>()
+            else {
                 continue;
             };
             let Ok(mut v) = VecEnv::new(envs, threads) else {

@@ -24,7 +24,7 @@ pub mod consts {
 use consts::*;
 
 /// The swing-up pendulum. Observation `[cos theta, sin theta, theta_dot]`, action a torque in
-/// `[-2, 2]` N m. Wrap it in `TimeLimit` (200 steps) as `make("pendulum")` does.
+/// `[-2, 2]` N m. Wrap it in `TimeLimit` (200 steps) as `make("pendulum", &agvrl_envs::EnvConfig::default())` does.
 pub struct Pendulum {
     theta: f64,
     theta_dot: f64,

@@ -148,13 +148,9 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
     })
 }
 
-/// Build the env registered under `id` with the default `EnvConfig`.
-pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
-    make_with(id, &EnvConfig::default())
-}
-
-/// Build the env registered under `id` with `cfg`, wrapped in its time limit.
-pub fn make_with(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
+/// Build the env registered under `id` with `cfg` (`EnvConfig::default()` for the standard
+/// setup), wrapped in its time limit.
+pub fn make(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
     if id == "pendulum" {
         return Ok(Box::new(TimeLimit::new(Pendulum::new(), 200)));
     }

@@ -19,7 +19,7 @@ mod issue_3_contract {
         for id in ENV_IDS {
             for cfg in [EnvConfig::default(), EnvConfig::paper(), EnvConfig::sim2real()] {
                 let name = format!("{id} {:?}", cfg.spawn);
-                let mut env = make_with(id, &EnvConfig { max_steps: 60, ..cfg }).unwrap();
+                let mut env = make(id, &EnvConfig { max_steps: 60, ..cfg }).unwrap();
                 check_env(env.as_mut(), 150).unwrap_or_else(|e| panic!("{name}: {e}"));
             }
         }
@@ -27,7 +27,10 @@ mod issue_3_contract {
 
     #[test]
     fn unknown_id_lists_the_valid_ids() {
-        let e = make("racing-moon").err().unwrap().to_string();
+        let e = make("racing-moon", &agvrl_envs::EnvConfig::default())
+            .err()
+            .unwrap()
+            .to_string();
         assert!(
             e.contains("racing-moon") && e.contains("racing-oval") && e.contains("pendulum"),
             "{e}"
@@ -36,8 +39,8 @@ mod issue_3_contract {
 
     #[test]
     fn nan_is_rejected_and_out_of_range_is_clamped() {
-        let mut a = make("racing-oval").unwrap();
-        let mut b = make("racing-oval").unwrap();
+        let mut a = make("racing-oval", &agvrl_envs::EnvConfig::default()).unwrap();
+        let mut b = make("racing-oval", &agvrl_envs::EnvConfig::default()).unwrap();
         a.reset(Some(3)).unwrap();
         b.reset(Some(3)).unwrap();
         assert!(a.step(&[f32::NAN, 0.0]).is_err());
@@ -51,11 +54,11 @@ mod issue_3_contract {
 
     #[test]
     fn observation_presets_have_the_documented_shapes() {
-        let mut env = make_with("search-outdoor-20", &EnvConfig::paper()).unwrap();
+        let mut env = make("search-outdoor-20", &EnvConfig::paper()).unwrap();
         let (obs, _) = env.reset(Some(1)).unwrap();
         assert_eq!(obs.len(), 100);
         assert!(obs.iter().any(|v| *v > 1.0), "paper preset keeps metres");
-        let mut env = make("search-outdoor-20").unwrap();
+        let mut env = make("search-outdoor-20", &agvrl_envs::EnvConfig::default()).unwrap();
         let (obs, _) = env.reset(Some(1)).unwrap();
         assert_eq!(obs.len(), 104);
         assert!(obs[..100].iter().all(|v| (0.0..=1.0).contains(v)));
@@ -99,7 +102,7 @@ mod issue_3_episodes {
             spawn: SpawnMode::Fixed,
             ..quick_cfg()
         };
-        let mut env = make_with("racing-oval", &cfg).unwrap();
+        let mut env = make("racing-oval", &cfg).unwrap();
         env.reset(Some(0)).unwrap();
         // Straight down the +x straight: the curve's outer wall stops it.
         for t in 0..1000 {
@@ -123,7 +126,7 @@ mod issue_3_episodes {
 
     #[test]
     fn the_time_limit_truncates_without_terminating() {
-        let mut env = make_with(
+        let mut env = make(
             "search-outdoor-20",
             &EnvConfig {
                 max_steps: 5,
@@ -138,7 +141,7 @@ mod issue_3_episodes {
             assert_eq!(st.truncated, t == 5);
             assert!(!st.terminated);
         }
-        let mut p = make("pendulum").unwrap();
+        let mut p = make("pendulum", &agvrl_envs::EnvConfig::default()).unwrap();
         p.reset(Some(0)).unwrap();
         for t in 1..=200 {
             let st = p.step(&[0.0]).unwrap();
@@ -168,7 +171,7 @@ mod issue_3_episodes {
             spawn: SpawnMode::Fixed,
             ..quick_cfg()
         };
-        let mut env = make_with("search-outdoor-20", &cfg).unwrap();
+        let mut env = make("search-outdoor-20", &cfg).unwrap();
         env.reset(Some(0)).unwrap();
         let mut last = None;
         for _ in 0..150 {
@@ -244,7 +247,7 @@ mod issue_3_vec_and_noise {
         };
         let mk = || {
             (0..3)
-                .map(|_| make_with("search-urban-20", &cfg).unwrap())
+                .map(|_| make("search-urban-20", &cfg).unwrap())
                 .collect::<Vec<_>>()
         };
         let mut v1 = VecEnv::new(mk(), 1).unwrap();
@@ -289,7 +292,7 @@ mod issue_3_vec_and_noise {
     #[test]
     fn noise_is_seeded_and_changes_observations() {
         let run = |cfg: &EnvConfig| {
-            let mut env = make_with("search-outdoor-20", cfg).unwrap();
+            let mut env = make("search-outdoor-20", cfg).unwrap();
             let mut out = vec![env.reset(Some(4)).unwrap().0];
             for t in 0..30 {
                 out.push(env.step(&actions(1, t)).unwrap().obs);
@@ -315,8 +318,8 @@ mod issue_3_vec_and_noise {
             },
             ..base.clone()
         };
-        let mut a = make_with("search-outdoor-20", &base).unwrap();
-        let mut b = make_with("search-outdoor-20", &late).unwrap();
+        let mut a = make("search-outdoor-20", &base).unwrap();
+        let mut b = make("search-outdoor-20", &late).unwrap();
         a.reset(Some(0)).unwrap();
         b.reset(Some(0)).unwrap();
         // Without latency: three idle periods, then the commands. With 3 periods of latency:

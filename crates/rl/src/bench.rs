@@ -206,7 +206,7 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
 
     // PPO: pendulum, 8 envs, SB3 defaults; one iteration = 8 x 2048 steps + 10 epochs.
     let envs = (0..8)
-        .map(|_| make("pendulum"))
+        .map(|_| make("pendulum", &agvrl_envs::EnvConfig::default()))
         .collect::<std::result::Result<Vec<_>, _>>()?;
     let mut ppo = Ppo::new(PpoConfig::default(), VecEnv::new(envs, 1)?, &device, 0)?;
     let per_iter = 8 * 2048;

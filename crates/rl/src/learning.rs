@@ -13,7 +13,7 @@ pub const EVAL_EPISODES: usize = 10;
 
 fn pendulum_envs(n: usize) -> Result<VecEnv<Box<dyn Env>>> {
     let envs = (0..n)
-        .map(|_| make("pendulum"))
+        .map(|_| make("pendulum", &agvrl_envs::EnvConfig::default()))
         .collect::<std::result::Result<Vec<_>, _>>()?;
     Ok(VecEnv::new(envs, 1)?)
 }
@@ -24,7 +24,7 @@ pub fn pendulum_sac(seed: u64, steps: u64) -> Result<f64> {
     let device = default_device();
     let mut sac = Sac::new(SacConfig::default(), pendulum_envs(1)?, &device, seed)?;
     sac.learn(steps, &mut |_| Control::Continue)?;
-    let mut env = make("pendulum")?;
+    let mut env = make("pendulum", &agvrl_envs::EnvConfig::default())?;
     sac.evaluate(&mut env, EVAL_EPISODES, 1_000_000 + seed)
 }
 
@@ -56,6 +56,6 @@ pub fn pendulum_ppo_gaussian(seed: u64, steps: u64) -> Result<f64> {
 fn pendulum_ppo_with(cfg: PpoConfig, seed: u64, steps: u64) -> Result<f64> {
     let mut ppo = Ppo::new(cfg, pendulum_envs(4)?, &default_device(), seed)?;
     ppo.learn(steps, &mut |_| Control::Continue)?;
-    let mut env = make("pendulum")?;
+    let mut env = make("pendulum", &agvrl_envs::EnvConfig::default())?;
     ppo.evaluate(&mut env, EVAL_EPISODES, 1_000_000 + seed)
 }

@@ -85,7 +85,7 @@ fn corrupted_truncated_and_foreign_files_are_rejected() {
 fn policy_for_another_env_is_rejected() {
     let sac = small_sac(2);
     let policy = sac.policy(&default_device());
-    let pendulum = make("pendulum").unwrap();
+    let pendulum = make("pendulum", &agvrl_envs::EnvConfig::default()).unwrap();
     let e = policy
         .check_spaces(&pendulum.observation_space(), &pendulum.action_space())
         .unwrap_err();
@@ -99,7 +99,7 @@ fn policy_for_another_env_is_rejected() {
         ),
         "{e}"
     );
-    let mut env = make("pendulum").unwrap();
+    let mut env = make("pendulum", &agvrl_envs::EnvConfig::default()).unwrap();
     assert!(agvrl_rl::evaluate(&mut sac.policy(&default_device()), &mut env, 1, 0).is_err());
     let mut p = sac.policy(&default_device());
     assert!(matches!(p.act(&[1.0, 2.0, 3.0], true), Err(RlError::Shape { .. })));
@@ -133,7 +133,7 @@ fn sac_checkpoint_resumes_the_same_state() {
         Ppo::load_checkpoint(&a, vec_env(2), &default_device()),
         Err(RlError::Mismatch { .. })
     ));
-    let pend = agvrl_envs::VecEnv::new(vec![make("pendulum").unwrap()], 1).unwrap();
+    let pend = agvrl_envs::VecEnv::new(vec![make("pendulum", &agvrl_envs::EnvConfig::default()).unwrap()], 1).unwrap();
     assert!(matches!(
         Sac::load_checkpoint(&a, pend, &default_device()),
         Err(RlError::Mismatch { .. })

@@ -420,11 +420,11 @@ impl Camera {
         }
         while (0..g.nx).contains(&i) && (0..g.ny).contains(&j) {
             for &k in &g.cells[(i * g.ny + j) as usize] {
-                if let Some((t, n, idx)) = test(k, *best) {
-                    if t < *best {
-                        *best = t;
-                        *hit = Some((idx, n));
-                    }
+                if let Some((t, n, idx)) = test(k, *best)
+                    && t < *best
+                {
+                    *best = t;
+                    *hit = Some((idx, n));
                 }
             }
             let t_next = t_x.min(t_y);
