@@ -87,6 +87,16 @@ mod issue_5_cli {
         let d = tmp("ctrlc");
         let run = d.join("run");
         let cfg = tiny_config(&d);
+        /// Kills the training process if the test fails half-way.
+        struct Guard(Option<std::process::Child>);
+        impl Drop for Guard {
+            fn drop(&mut self) {
+                if let Some(c) = self.0.as_mut() {
+                    let _ = c.kill();
+                    let _ = c.wait();
+                }
+            }
+        }
         let child = Command::new(env!("CARGO_BIN_EXE_agvrl"))
             .args([
                 "train",
@@ -101,6 +111,8 @@ mod issue_5_cli {
             .stderr(std::process::Stdio::piped())
             .spawn()
             .unwrap();
+        let mut guard = Guard(Some(child));
+        let pid = guard.0.as_ref().map(|c| c.id()).unwrap_or(0);
         // Wait until training has checkpointed once, then interrupt.
         let ckpt = PathBuf::from(format!("{}.partial", run.display())).join("checkpoint.ckpt");
         let t0 = std::time::Instant::now();
@@ -108,12 +120,9 @@ mod issue_5_cli {
             std::thread::yield_now();
         }
         assert!(ckpt.exists(), "no checkpoint appeared");
-        let ok = Command::new("kill")
-            .args(["-INT", &child.id().to_string()])
-            .status()
-            .unwrap();
+        let ok = Command::new("kill").args(["-INT", &pid.to_string()]).status().unwrap();
         assert!(ok.success());
-        let o = child.wait_with_output().unwrap();
+        let o = guard.0.take().unwrap().wait_with_output().unwrap();
         assert!(o.status.success(), "{}", stderr(&o));
         let eval = std::fs::read_to_string(run.join("eval.txt")).unwrap();
         assert!(eval.contains("interrupted=true"), "{eval}");
