@@ -37,6 +37,9 @@ pub struct TrainArgs {
     /// Run directory to create (default: runs/<date-time>-<env>-<algo>).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Compute device: flex or ndarray (CPU), cuda or wgpu (builds with that feature).
+    #[arg(long, default_value = "flex")]
+    pub device: String,
     /// Continue an interrupted (or finished) run directory up to its configured steps, or
     /// --steps more.
     #[arg(long, conflicts_with_all = ["env", "algo", "seed", "n_envs", "config", "out"])]
@@ -135,7 +138,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
             eprintln!("\ninterrupt: finishing the current update, then writing a checkpoint and the run directory");
         });
     }
-    let device = agvrl_rl::default_device();
+    let device = agvrl_rl::device_by_name(if a.device.is_empty() { "flex" } else { &a.device })?;
     if let Some(dir) = &a.resume {
         let cfg = RunConfig::load(&dir.join("config.toml"))
             .with_context(|| format!("{} is not a run directory", dir.display()))?;

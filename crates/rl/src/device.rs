@@ -46,3 +46,21 @@ impl CpuBackend {
 pub fn default_device() -> Device {
     CpuBackend::default().device()
 }
+
+/// A device by name: `flex` or `ndarray` (CPU, always built), `cuda` or `wgpu` (GPU, with the
+/// cargo feature of the same name).
+pub fn device_by_name(name: &str) -> Result<Device> {
+    match name {
+        "flex" | "ndarray" => Ok(CpuBackend::parse(name)?.device()),
+        #[cfg(feature = "cuda")]
+        "cuda" => Ok(Device::cuda(0)),
+        #[cfg(feature = "wgpu")]
+        "wgpu" => Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice)),
+        "cuda" | "wgpu" => Err(RlError::Config(format!(
+            "device '{name}' needs a build with the '{name}' feature: cargo build --release --features {name}"
+        ))),
+        _ => Err(RlError::Config(format!(
+            "unknown device '{name}' (flex, ndarray, cuda, wgpu)"
+        ))),
+    }
+}

@@ -54,7 +54,7 @@ pub mod sac;
 
 pub use buffer::ReplayBuffer;
 pub use checkpoint::CHECKPOINT_FORMAT_VERSION;
-pub use device::{CpuBackend, default_device};
+pub use device::{CpuBackend, default_device, device_by_name};
 pub use error::{Result, RlError};
 pub use eval::evaluate;
 pub use normalize::ObsNormalizer;
