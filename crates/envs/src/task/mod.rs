@@ -185,6 +185,47 @@ impl Default for CommonConfig {
     }
 }
 
+impl CommonConfig {
+    /// Sensors the observation needs.
+    pub fn needs(&self) -> SensorNeeds {
+        self.observation.needs()
+    }
+
+    /// The observation space.
+    pub fn space(&self) -> BoxSpace {
+        self.observation.space(self.n_rays, self.range_max_m)
+    }
+
+    /// Map an action to a control.
+    pub fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
+        map_control(self.action_mapping, action, steering_limit_rad)
+    }
+}
+
+/// The minimum LiDAR range of a frame, metres (infinite without a scan).
+pub fn min_range_m(frame: &SensorFrame) -> f64 {
+    frame
+        .scan
+        .as_ref()
+        .map(|s| s.min_range())
+        .unwrap_or(f32::INFINITY)
+        .min(1e6) as f64
+}
+
+/// Termination by `common_termination`, charging the collision penalty once.
+pub fn terminate(
+    terms: &mut RewardTerms,
+    frame: &SensorFrame,
+    map: Option<&MapInfo>,
+    threshold_m: f32,
+) -> Option<TerminationCause> {
+    let t = common_termination(frame, map, threshold_m);
+    if t.is_some() && terms.collision == 0.0 {
+        terms.collision = reward::PENALTY;
+    }
+    t
+}
+
 /// Termination shared by the tasks: too close (r_m below `threshold_m`), real contact,
 /// flipped, or out of the map. Returns the first that applies, in that order.
 pub fn common_termination(frame: &SensorFrame, map: Option<&MapInfo>, threshold_m: f32) -> Option<TerminationCause> {

@@ -1,8 +1,8 @@
 //! Racing on the oval (the paper's R_racing = 5 T^2 - 2 delta^2, -50 and the end when r_m <
 //! 0.8 m). Reports laps, lap times and progress along the centre line.
 
-use super::reward::{self, PENALTY};
-use super::{CommonConfig, Outcome, Task, common_termination, map_control};
+use super::reward;
+use super::{CommonConfig, Outcome, Task, min_range_m, terminate};
 use crate::api::{BoxSpace, Control, MapInfo, RacingInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -52,18 +52,15 @@ impl Racing {
 
 impl Task for Racing {
     fn needs(&self) -> SensorNeeds {
-        self.cfg.common.observation.needs()
+        self.cfg.common.needs()
     }
 
     fn observation_space(&self) -> BoxSpace {
-        self.cfg
-            .common
-            .observation
-            .space(self.cfg.common.n_rays, self.cfg.common.range_max_m)
+        self.cfg.common.space()
     }
 
     fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
-        map_control(self.cfg.common.action_mapping, action, steering_limit_rad)
+        self.cfg.common.control(action, steering_limit_rad)
     }
 
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
@@ -81,13 +78,10 @@ impl Task for Racing {
     }
 
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
-        let d = frame.scan.as_ref().map(|s| s.min_range()).unwrap_or(f32::INFINITY) as f64;
+        let d = min_range_m(frame);
         let c = frame.applied;
         let mut terms = reward::racing(d, c.throttle, c.steering_rad);
-        let termination = common_termination(frame, map, self.cfg.terminate_below_m);
-        if termination.is_some() && terms.collision == 0.0 {
-            terms.collision = PENALTY;
-        }
+        let termination = terminate(&mut terms, frame, map, self.cfg.terminate_below_m);
         let mut racing = None;
         if let (Some(t), Some(g)) = (map.and_then(|m| m.track), &frame.gps) {
             let lap = t.lap_length_m() as f64;

@@ -1,8 +1,8 @@
 //! Search / exploration (the paper's R_search): drive fast, keep a clearance band, avoid
 //! obstacles. Reports coverage of the free map and the distance travelled.
 
-use super::reward::{self, PENALTY, SearchReward};
-use super::{CommonConfig, Outcome, Task, common_termination, map_control};
+use super::reward::{self, SearchReward};
+use super::{CommonConfig, Outcome, Task, min_range_m, terminate};
 use crate::api::{BoxSpace, Control, MapInfo, SearchInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -115,18 +115,15 @@ impl Search {
 
 impl Task for Search {
     fn needs(&self) -> SensorNeeds {
-        self.cfg.common.observation.needs()
+        self.cfg.common.needs()
     }
 
     fn observation_space(&self) -> BoxSpace {
-        self.cfg
-            .common
-            .observation
-            .space(self.cfg.common.n_rays, self.cfg.common.range_max_m)
+        self.cfg.common.space()
     }
 
     fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
-        map_control(self.cfg.common.action_mapping, action, steering_limit_rad)
+        self.cfg.common.control(action, steering_limit_rad)
     }
 
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
@@ -169,19 +166,10 @@ impl Task for Search {
     }
 
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
-        let d = frame.scan.as_ref().map(|s| s.min_range()).unwrap_or(f32::INFINITY) as f64;
+        let d = min_range_m(frame);
         let c = frame.applied;
-        let mut terms = reward::search(
-            self.cfg.reward,
-            d.min(1e6),
-            c.throttle,
-            c.steering_rad,
-            self.cfg.slow_penalty,
-        );
-        let termination = common_termination(frame, map, self.cfg.terminate_below_m);
-        if termination.is_some() && terms.collision == 0.0 {
-            terms.collision = PENALTY;
-        }
+        let mut terms = reward::search(self.cfg.reward, d, c.throttle, c.steering_rad, self.cfg.slow_penalty);
+        let termination = terminate(&mut terms, frame, map, self.cfg.terminate_below_m);
         if let Some(g) = &frame.gps {
             let xy = [g.position_m[0], g.position_m[1]];
             if let Some(p) = self.last_xy {
