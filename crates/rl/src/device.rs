@@ -52,15 +52,56 @@ pub fn default_device() -> Device {
 pub fn device_by_name(name: &str) -> Result<Device> {
     match name {
         "flex" | "ndarray" => Ok(CpuBackend::parse(name)?.device()),
-        #[cfg(feature = "cuda")]
-        "cuda" => Ok(Device::cuda(0)),
-        #[cfg(feature = "wgpu")]
-        "wgpu" => Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice)),
-        "cuda" | "wgpu" => Err(RlError::Config(format!(
-            "device '{name}' needs a build with the '{name}' feature: cargo build --release --features {name}"
-        ))),
+        "cuda" => cuda(),
+        "wgpu" => wgpu(),
         _ => Err(RlError::Config(format!(
             "unknown device '{name}' (flex, ndarray, cuda, wgpu)"
         ))),
+    }
+}
+
+#[cfg(not(all(feature = "cuda", feature = "wgpu")))]
+fn missing(name: &str) -> RlError {
+    RlError::Config(format!(
+        "device '{name}' needs a build with the '{name}' feature: cargo build --release --features {name}"
+    ))
+}
+
+#[cfg(feature = "cuda")]
+fn cuda() -> Result<Device> {
+    Ok(Device::cuda(0))
+}
+
+#[cfg(not(feature = "cuda"))]
+fn cuda() -> Result<Device> {
+    Err(missing("cuda"))
+}
+
+#[cfg(feature = "wgpu")]
+fn wgpu() -> Result<Device> {
+    Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice))
+}
+
+#[cfg(not(feature = "wgpu"))]
+fn wgpu() -> Result<Device> {
+    Err(missing("wgpu"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn devices_by_name() {
+        assert!(device_by_name("flex").is_ok() && device_by_name("ndarray").is_ok());
+        let e = device_by_name("tpu").unwrap_err().to_string();
+        assert!(e.contains("tpu") && e.contains("flex"), "{e}");
+        #[cfg(not(feature = "cuda"))]
+        assert!(
+            device_by_name("cuda")
+                .unwrap_err()
+                .to_string()
+                .contains("--features cuda")
+        );
     }
 }
