@@ -285,6 +285,8 @@ pub struct Summary {
     pub laps: u32,
     pub best_lap_s: Option<f64>,
     pub coverage: Option<f64>,
+    /// Subjects found / placed, summed over episodes, and the find times.
+    pub subjects: (usize, usize, Vec<f64>),
     pub racing: bool,
 }
 
@@ -295,6 +297,13 @@ impl Summary {
             format!("episodes={}", self.episodes),
             format!("collisions={}", self.collisions),
         ];
+        if self.subjects.1 > 0 {
+            v.push(format!("subjects_found={}/{}", self.subjects.0, self.subjects.1));
+            let t = &self.subjects.2;
+            if !t.is_empty() {
+                v.push(format!("mean_find_s={:.2}", t.iter().sum::<f64>() / t.len() as f64));
+            }
+        }
         if let Some(c) = self.coverage {
             v.push(format!("coverage={c:.3}"));
         }
@@ -323,6 +332,7 @@ pub fn evaluate(policy: &mut Policy, env_id: &str, env_cfg: &EnvConfig, episodes
         laps: 0,
         best_lap_s: None,
         coverage: None,
+        subjects: (0, 0, Vec::new()),
         racing: false,
     };
     let mut cov_sum = 0.0;
@@ -345,6 +355,9 @@ pub fn evaluate(policy: &mut Policy, env_id: &str, env_cfg: &EnvConfig, episodes
                 }
                 if let Some(c) = &st.info.search {
                     cov_sum += c.coverage;
+                    s.subjects.0 += c.subjects_found;
+                    s.subjects.1 += c.subjects_total;
+                    s.subjects.2.extend(&c.find_times_s);
                 }
                 break;
             }

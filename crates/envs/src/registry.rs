@@ -35,6 +35,11 @@ pub struct EnvConfig {
     pub substeps: u32,
     /// LiDAR.
     pub lidar: LidarConfig,
+    /// Search subjects placed in the scene (seeded by `subject_seed`); finding them needs the
+    /// camera.
+    pub subjects: usize,
+    /// Seed of the subjects' placement.
+    pub subject_seed: u64,
     /// The vehicle camera (frames appear in `SensorFrame::image`; off by default).
     pub camera: Option<agvrl_sim::sensors::CameraConfig>,
     /// Observation composition.
@@ -60,6 +65,8 @@ impl Default for EnvConfig {
             dynamics: DynamicsMode::Raycast,
             substeps: 4,
             lidar: LidarConfig::default(),
+            subjects: 0,
+            subject_seed: 0,
             camera: None,
             observation: ObsConfig::default(),
             action_mapping: ActionMapping::Scaled,
@@ -138,6 +145,8 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
         substeps: cfg.substeps,
         lidar: cfg.lidar.clone(),
         camera: cfg.camera.clone(),
+        subjects: cfg.subjects,
+        subject_seed: cfg.subject_seed,
         ..SimConfig::default()
     };
     let v = SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?;

@@ -111,12 +111,20 @@ impl SimVehicle {
                 }
             }
         }
+        let subjects = sim
+            .scene()
+            .objects
+            .iter()
+            .filter(|o| o.class == "person")
+            .map(|o| o.id)
+            .collect();
         Ok(Self {
             map: MapInfo {
                 half_extent_m: half,
                 track,
                 free_cells,
                 cell_m: CELL_M,
+                subjects,
             },
             sim,
             spawn,

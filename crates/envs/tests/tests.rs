@@ -409,3 +409,78 @@ mod issue_6_camera_frames {
         assert!(plain.reset(0).unwrap().image.is_none());
     }
 }
+
+mod issue_6_subjects {
+    use super::*;
+    use agvrl_envs::task::Search;
+    use agvrl_envs::task::search::SearchConfig;
+    use agvrl_sim::PlanarPose;
+
+    #[test]
+    fn subjects_stand_by_trees_and_are_found_when_the_camera_sees_them() {
+        let sim = agvrl_sim::SimConfig {
+            scene: agvrl_sim::SceneSource::Builtin("outdoor-20".into()),
+            subjects: 3,
+            subject_seed: 7,
+            camera: Some(agvrl_sim::sensors::CameraConfig {
+                width: 80,
+                height: 60,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let vehicle = SimVehicle::new(sim, SpawnMode::Fixed, Randomisation::default()).unwrap();
+        let subjects = vehicle.map().unwrap().subjects.clone();
+        assert_eq!(subjects.len(), 3);
+        let scene = vehicle.sim().scene();
+        let target = &scene.objects[subjects[0] as usize];
+        let p = target.shapes[0].pose.translation;
+        // Every subject stands near a tree (outdoor scenes have no buildings).
+        for id in &subjects {
+            let s = scene.objects[*id as usize].shapes[0].pose.translation;
+            let near_tree = scene
+                .file
+                .objects
+                .iter()
+                .any(|o| o.model == "tree" && ((o.x_m - s.x).powi(2) + (o.y_m - s.y).powi(2)).sqrt() < 1.7);
+            assert!(near_tree, "subject at ({}, {})", s.x, s.y);
+        }
+        let mut env = TaskEnv::new(vehicle, Search::new(SearchConfig::default(), 0.36));
+        env.reset(Some(0)).unwrap();
+        // Stand 3 m from the first subject, looking at it.
+        let yaw = 0.3f32;
+        let pose = PlanarPose {
+            x_m: p.x - 3.0 * yaw.cos(),
+            y_m: p.y - 3.0 * yaw.sin(),
+            yaw_rad: yaw,
+        };
+        env.vehicle_mut().sim_mut().reset(pose).unwrap();
+        let st = env.step(&[-1.0, 0.0]).unwrap();
+        let info = st.info.search.unwrap();
+        assert_eq!(info.subjects_total, 3);
+        assert!(info.subjects_found >= 1, "{info:?}");
+        assert_eq!(info.find_times_s.len(), info.subjects_found);
+        // The same view with a 2 m detection range: 3 m away is too far.
+        let sim2 = agvrl_sim::SimConfig {
+            scene: agvrl_sim::SceneSource::Builtin("outdoor-20".into()),
+            subjects: 3,
+            subject_seed: 7,
+            camera: Some(agvrl_sim::sensors::CameraConfig {
+                width: 80,
+                height: 60,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let v2 = SimVehicle::new(sim2, SpawnMode::Fixed, Randomisation::default()).unwrap();
+        let near_only = SearchConfig {
+            found_range_m: 2.0,
+            ..SearchConfig::default()
+        };
+        let mut env = TaskEnv::new(v2, Search::new(near_only, 0.36));
+        env.reset(Some(0)).unwrap();
+        env.vehicle_mut().sim_mut().reset(pose).unwrap();
+        let st = env.step(&[-1.0, 0.0]).unwrap();
+        assert_eq!(st.info.search.unwrap().subjects_found, 0);
+    }
+}

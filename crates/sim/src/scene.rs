@@ -215,6 +215,80 @@ pub struct Scene {
     pub objects: Vec<SceneObject>,
 }
 
+impl SceneFile {
+    /// Add `n` human-sized subjects (model `subject`), seeded: each stands 1.0-1.6 m from a tree
+    /// trunk or 0.6-1.2 m outside a building's wall, clear of every other object and at least
+    /// `spawn_clearance_m` from the spawn. Fewer are placed when the scene has no room.
+    pub fn with_subjects(mut self, n: usize, seed: u64, spawn_clearance_m: f32) -> Self {
+        let mut rng = StdRng::seed_from_u64(seed ^ 0x5eed_5b1e);
+        // Footprints (centre, half extents) of what is there, to keep subjects clear of it.
+        let mut taken: Vec<([f32; 2], [f32; 2])> = self
+            .objects
+            .iter()
+            .map(|o| {
+                let half = match o.model.as_str() {
+                    "tree" => [0.35, 0.35],
+                    "rock_1" => [1.4, 1.4],
+                    "rock_2" => [0.9, 0.9],
+                    "building" => [o.scale[0] / 2.0, o.scale[1] / 2.0],
+                    "car_1" | "car_2" => [2.6 * o.scale[0], 2.6 * o.scale[0]],
+                    _ => [0.5, 0.5],
+                };
+                ([o.x_m, o.y_m], half)
+            })
+            .collect();
+        let anchors: Vec<Placement> = self
+            .objects
+            .iter()
+            .filter(|o| o.model == "tree" || o.model == "building")
+            .cloned()
+            .collect();
+        let limit = match &self.boundary {
+            Some(b) => b.inner_half_m - 0.5,
+            None => self.ground.size_m[0].min(self.ground.size_m[1]) / 2.0 - 0.5,
+        };
+        let mut placed = 0;
+        for _ in 0..(200 * n) {
+            if placed == n || anchors.is_empty() {
+                break;
+            }
+            let a = &anchors[rng.random_range(0..anchors.len())];
+            let (x, y) = if a.model == "tree" {
+                let (r, ang) = (rng.random_range(1.0..1.6f32), rng.random_range(-PI..PI));
+                (a.x_m + r * ang.cos(), a.y_m + r * ang.sin())
+            } else {
+                let (hx, hy) = (a.scale[0] / 2.0, a.scale[1] / 2.0);
+                let gap = rng.random_range(0.6..1.2f32);
+                match rng.random_range(0..4) {
+                    0 => (a.x_m + hx + gap, a.y_m + rng.random_range(-hy..hy)),
+                    1 => (a.x_m - hx - gap, a.y_m + rng.random_range(-hy..hy)),
+                    2 => (a.x_m + rng.random_range(-hx..hx), a.y_m + hy + gap),
+                    _ => (a.x_m + rng.random_range(-hx..hx), a.y_m - hy - gap),
+                }
+            };
+            let clear = |c: [f32; 2], h: [f32; 2]| (x - c[0]).abs() > h[0] + 0.4 || (y - c[1]).abs() > h[1] + 0.4;
+            let spawn_d = ((x - self.spawn.x_m).powi(2) + (y - self.spawn.y_m).powi(2)).sqrt();
+            if x.abs() > limit
+                || y.abs() > limit
+                || spawn_d < spawn_clearance_m
+                || !taken.iter().all(|(c, h)| clear(*c, *h))
+            {
+                continue;
+            }
+            taken.push(([x, y], [0.2, 0.2]));
+            self.objects.push(Placement {
+                model: "subject".into(),
+                x_m: x,
+                y_m: y,
+                yaw_deg: rng.random_range(-180.0..180.0),
+                scale: [1.0; 3],
+            });
+            placed += 1;
+        }
+        self
+    }
+}
+
 /// Ids of the built-in scenes.
 pub const SCENE_IDS: &[&str] = &["outdoor-20", "outdoor-50", "urban-20", "urban-50", "oval"];
 

@@ -50,6 +50,10 @@ pub struct SimConfig {
     pub lidar: LidarConfig,
     /// GPS settings.
     pub gps: GpsConfig,
+    /// Human-sized subjects added to the scene (search targets), placed by `subject_seed`.
+    pub subjects: usize,
+    /// Seed of the subjects' placement.
+    pub subject_seed: u64,
     /// The vehicle's camera (on its camera link), when set.
     pub camera: Option<crate::sensors::CameraConfig>,
     /// Split steering between the front wheels by Ackermann geometry (`None`: the vehicle's
@@ -67,6 +71,8 @@ impl Default for SimConfig {
             substeps: 4,
             lidar: LidarConfig::default(),
             gps: GpsConfig::default(),
+            subjects: 0,
+            subject_seed: 0,
             camera: None,
             ackermann: None,
         }
@@ -139,7 +145,7 @@ impl Sim {
             c.validate().map_err(invalid)?;
         }
         let assets = AssetSource::builtin();
-        let scene = match &cfg.scene {
+        let mut scene = match &cfg.scene {
             SceneSource::Builtin(id) => Scene::builtin(&assets, id)?,
             SceneSource::File(path) => {
                 let (src, name) = AssetSource::for_file(path);
@@ -147,6 +153,10 @@ impl Sim {
             }
             SceneSource::Procedural { kind, seed, half_m } => Scene::procedural(*kind, *seed, *half_m, 2.0)?,
         };
+        if cfg.subjects > 0 {
+            let file = scene.file.clone().with_subjects(cfg.subjects, cfg.subject_seed, 3.0);
+            scene = Scene::build(file, &assets, "scene with subjects")?;
+        }
         let model = if cfg.vehicle.ends_with(".toml") {
             let (src, name) = AssetSource::for_file(std::path::Path::new(&cfg.vehicle));
             VehicleModel::load(&src, &name)?

@@ -766,3 +766,26 @@ mod issue_6_camera {
         assert!((m[5] - 1.0).abs() < 1e-6 && (m[0] - 0.5).abs() < 1e-6 && m[11] == -1.0);
     }
 }
+
+mod issue_6_subjects {
+    use super::*;
+
+    #[test]
+    fn subjects_are_seeded_and_stand_clear() {
+        let src = AssetSource::builtin();
+        let base = Scene::builtin(&src, "urban-20").unwrap().file;
+        let a = base.clone().with_subjects(4, 1, 3.0);
+        let b = base.clone().with_subjects(4, 1, 3.0);
+        let c = base.clone().with_subjects(4, 2, 3.0);
+        assert_eq!(a, b);
+        assert_ne!(a, c);
+        let subjects: Vec<_> = a.objects.iter().filter(|o| o.model == "subject").collect();
+        assert_eq!(subjects.len(), 4);
+        for s in subjects {
+            assert!((s.x_m.powi(2) + s.y_m.powi(2)).sqrt() >= 3.0, "too close to the spawn");
+        }
+        // They load as solid `person` objects the car can collide with.
+        let scene = Scene::build(a, &src, "test").unwrap();
+        assert_eq!(scene.objects.iter().filter(|o| o.class == "person").count(), 4);
+    }
+}

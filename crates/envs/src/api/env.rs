@@ -79,6 +79,12 @@ pub struct SearchInfo {
     pub coverage: f64,
     /// Path length since reset, metres.
     pub distance_m: f64,
+    /// Subjects seen by the camera so far (see `SearchConfig::found_min_pixels`).
+    pub subjects_found: usize,
+    /// Subjects placed in the scene.
+    pub subjects_total: usize,
+    /// Time from reset to each find, seconds, in the order found.
+    pub find_times_s: Vec<f64>,
 }
 
 /// Why an episode terminated.

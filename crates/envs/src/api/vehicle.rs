@@ -64,6 +64,8 @@ pub struct MapInfo {
     pub free_cells: Vec<[f32; 2]>,
     /// Cell size of `free_cells`, metres.
     pub cell_m: f32,
+    /// Scene object ids of the search subjects (segmentation shows id + 1).
+    pub subjects: Vec<u32>,
 }
 
 /// The sensor/actuator seam shared by the simulator and a real car. Time belongs to the

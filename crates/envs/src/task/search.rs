@@ -21,6 +21,10 @@ pub struct SearchConfig {
     pub terminate_below_m: f32,
     /// A free cell counts as covered once the vehicle came this close, metres.
     pub coverage_radius_m: f32,
+    /// A subject counts as found once it covers this many camera pixels...
+    pub found_min_pixels: usize,
+    /// ...no farther than this, metres (the stand-in for a detector's range).
+    pub found_range_m: f32,
 }
 
 impl Default for SearchConfig {
@@ -31,6 +35,8 @@ impl Default for SearchConfig {
             slow_penalty: false,
             terminate_below_m: 0.6,
             coverage_radius_m: 2.0,
+            found_min_pixels: 30,
+            found_range_m: 8.0,
         }
     }
 }
@@ -44,6 +50,9 @@ pub struct Search {
     n_covered: usize,
     distance_m: f64,
     last_xy: Option<[f64; 2]>,
+    start_s: f64,
+    found: Vec<(u32, f64)>,
+    n_subjects: usize,
 }
 
 #[derive(Default)]
@@ -67,6 +76,30 @@ impl Search {
             n_covered: 0,
             distance_m: 0.0,
             last_xy: None,
+            start_s: 0.0,
+            found: vec![],
+            n_subjects: 0,
+        }
+    }
+
+    /// Mark subjects that cover enough near pixels of the frame's segmentation as found.
+    fn look(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
+        let (Some(img), Some(m)) = (&frame.image, map) else {
+            return;
+        };
+        for &id in &m.subjects {
+            if self.found.iter().any(|(f, _)| *f == id) {
+                continue;
+            }
+            let n = img
+                .segmentation
+                .iter()
+                .zip(&img.depth_m)
+                .filter(|(s, z)| **s == id + 1 && **z <= self.cfg.found_range_m)
+                .count();
+            if n >= self.cfg.found_min_pixels {
+                self.found.push((id, frame.stamp_s - self.start_s));
+            }
         }
     }
 
@@ -109,6 +142,9 @@ impl Search {
         SearchInfo {
             coverage,
             distance_m: self.distance_m,
+            subjects_found: self.found.len(),
+            subjects_total: self.n_subjects,
+            find_times_s: self.found.iter().map(|(_, t)| *t).collect(),
         }
     }
 }
@@ -128,6 +164,10 @@ impl Task for Search {
 
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         self.grid = Grid::default();
+        self.start_s = frame.stamp_s;
+        self.found.clear();
+        self.n_subjects = map.map(|m| m.subjects.len()).unwrap_or(0);
+        self.look(frame, map);
         if let Some(m) = map {
             let cell = m.cell_m.max(1e-3);
             let origin = [-m.half_extent_m[0], -m.half_extent_m[1]];
@@ -178,6 +218,7 @@ impl Task for Search {
             self.last_xy = Some(xy);
             self.cover(xy[0] as f32, xy[1] as f32);
         }
+        self.look(frame, map);
         Outcome {
             terms,
             termination,
