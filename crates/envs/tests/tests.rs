@@ -484,3 +484,66 @@ mod issue_6_subjects {
         assert_eq!(st.info.search.unwrap().subjects_found, 0);
     }
 }
+
+mod issue_6_image_observations {
+    use super::*;
+    use agvrl_envs::task::{ImageChannels, ImageObs, ObsConfig};
+
+    fn cfg(channels: ImageChannels, camera: bool) -> EnvConfig {
+        EnvConfig {
+            camera: camera.then(|| agvrl_sim::sensors::CameraConfig {
+                width: 64,
+                height: 48,
+                ..Default::default()
+            }),
+            observation: ObsConfig {
+                image: ImageObs {
+                    channels,
+                    width: 16,
+                    height: 12,
+                    depth_max_m: 12.0,
+                },
+                ..ObsConfig::default()
+            },
+            max_steps: 40,
+            ..EnvConfig::default()
+        }
+    }
+
+    #[test]
+    fn camera_channels_are_stacked_after_the_lidar_vector() {
+        for (ch, n) in [
+            (ImageChannels::Depth, 1),
+            (ImageChannels::Rgb, 3),
+            (ImageChannels::DepthRgb, 4),
+        ] {
+            let mut env = make("racing-oval", &cfg(ch, true)).unwrap();
+            assert_eq!(env.observation_space().dim(), 104 + n * 16 * 12);
+            check_env(env.as_mut(), 60).unwrap();
+            let (obs, _) = env.reset(Some(1)).unwrap();
+            let img = &obs[104..];
+            assert!(img.iter().all(|v| (0.0..=1.0).contains(v)));
+            assert!(
+                img.iter().any(|v| *v > 0.0) && img.iter().any(|v| *v < 1.0),
+                "{ch:?}: the image carries information"
+            );
+        }
+        // Depth in the bottom row (the track just ahead) is nearer than in the middle row.
+        let mut env = make("racing-oval", &cfg(ImageChannels::Depth, true)).unwrap();
+        let (obs, _) = env.reset(Some(1)).unwrap();
+        let img = &obs[104..];
+        assert!(
+            img[11 * 16 + 8] < img[6 * 16 + 8],
+            "bottom {} middle {}",
+            img[11 * 16 + 8],
+            img[6 * 16 + 8]
+        );
+    }
+
+    #[test]
+    fn image_observations_without_a_camera_are_refused() {
+        let mut env = make("racing-oval", &cfg(ImageChannels::Depth, false)).unwrap();
+        let e = env.reset(Some(0)).err().unwrap().to_string();
+        assert!(e.contains("camera"), "{e}");
+    }
+}

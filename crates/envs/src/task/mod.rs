@@ -55,7 +55,7 @@ pub enum RangeScale {
 
 /// Composition of the observation vector: the LiDAR ranges, then the enabled extras in this
 /// order (speed / 2 m/s, yaw rate / 2 rad/s, steering / limit, throttle).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ObsConfig {
     /// How ranges are scaled.
@@ -68,6 +68,101 @@ pub struct ObsConfig {
     pub steering: bool,
     /// The throttle in force.
     pub throttle: bool,
+    /// Camera channels appended after everything else (needs the vehicle camera).
+    pub image: ImageObs,
+}
+
+/// Which camera channels enter the observation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ImageChannels {
+    /// No image.
+    #[default]
+    None,
+    /// Depth only.
+    Depth,
+    /// RGB only.
+    Rgb,
+    /// Depth, then RGB.
+    DepthRgb,
+}
+
+/// The camera part of the observation: the frame resampled (nearest pixel) to `width` x
+/// `height`, flattened channel-major (`[C, H, W]`, depth first), every value in [0, 1] (depth /
+/// `depth_max_m`, colour / 255), ready for a CNN encoder.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ImageObs {
+    /// Channels.
+    pub channels: ImageChannels,
+    /// Width after resampling, pixels.
+    pub width: u32,
+    /// Height after resampling, pixels.
+    pub height: u32,
+    /// Depth that maps to 1, metres (farther reads 1).
+    pub depth_max_m: f32,
+}
+
+impl Default for ImageObs {
+    fn default() -> Self {
+        Self {
+            channels: ImageChannels::None,
+            width: 64,
+            height: 48,
+            depth_max_m: 12.0,
+        }
+    }
+}
+
+impl ImageObs {
+    fn n_channels(&self) -> usize {
+        match self.channels {
+            ImageChannels::None => 0,
+            ImageChannels::Depth => 1,
+            ImageChannels::Rgb => 3,
+            ImageChannels::DepthRgb => 4,
+        }
+    }
+
+    /// Number of values appended.
+    pub fn len(&self) -> usize {
+        self.n_channels() * self.width as usize * self.height as usize
+    }
+
+    /// Whether no image enters the observation.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    fn append(&self, img: Option<&agvrl_sim::msg::CameraFrame>, out: &mut Vec<f32>) {
+        let n = self.len();
+        let Some(img) = img.filter(|i| i.width > 0 && i.height > 0) else {
+            out.extend(std::iter::repeat_n(0.0, n));
+            return;
+        };
+        let (w, h) = (self.width as usize, self.height as usize);
+        let (sw, sh) = (img.width as usize, img.height as usize);
+        let src = |x: usize, y: usize| ((y * sh + sh / 2) / h).min(sh - 1) * sw + ((x * sw + sw / 2) / w).min(sw - 1);
+        let depth = matches!(self.channels, ImageChannels::Depth | ImageChannels::DepthRgb);
+        let rgb = matches!(self.channels, ImageChannels::Rgb | ImageChannels::DepthRgb);
+        if depth {
+            for y in 0..h {
+                for x in 0..w {
+                    let z = img.depth_m.get(src(x, y)).copied().unwrap_or(self.depth_max_m);
+                    out.push((z / self.depth_max_m).clamp(0.0, 1.0));
+                }
+            }
+        }
+        if rgb {
+            for c in 0..3 {
+                for y in 0..h {
+                    for x in 0..w {
+                        out.push(img.rgb.get(3 * src(x, y) + c).copied().unwrap_or(0) as f32 / 255.0);
+                    }
+                }
+            }
+        }
+    }
 }
 
 impl Default for ObsConfig {
@@ -79,6 +174,7 @@ impl Default for ObsConfig {
             yaw_rate: true,
             steering: true,
             throttle: true,
+            image: ImageObs::default(),
         }
     }
 }
@@ -92,6 +188,7 @@ impl ObsConfig {
             yaw_rate: false,
             steering: false,
             throttle: false,
+            image: ImageObs::default(),
         }
     }
 
@@ -108,7 +205,7 @@ impl ObsConfig {
             scan: true,
             imu: self.speed || self.yaw_rate,
             gps: false,
-            image: false,
+            image: !self.image.is_empty(),
         }
     }
 
@@ -130,6 +227,8 @@ impl ObsConfig {
                 s.high.push(hi);
             }
         }
+        s.low.extend(std::iter::repeat_n(0.0, self.image.len()));
+        s.high.extend(std::iter::repeat_n(1.0, self.image.len()));
         s
     }
 
@@ -155,6 +254,9 @@ impl ObsConfig {
         }
         if self.throttle {
             out.push(frame.applied.throttle.clamp(0.0, 1.0) as f32);
+        }
+        if !self.image.is_empty() {
+            self.image.append(frame.image.as_ref(), &mut out);
         }
         out
     }
