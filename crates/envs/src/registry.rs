@@ -157,6 +157,37 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
     })
 }
 
+/// The task of vehicle env `id` with `cfg`, for a vehicle whose steering limit is
+/// `steering_limit_rad` (the deploy loop pairs it with any `Vehicle`).
+pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<Box<dyn crate::task::Task>, EnvError> {
+    scene_of(id).ok_or_else(|| unknown(id))?;
+    let common = CommonConfig {
+        observation: cfg.observation,
+        action_mapping: cfg.action_mapping,
+        n_rays: cfg.lidar.n_rays,
+        range_max_m: cfg.lidar.range_max_m,
+    };
+    Ok(if id == "racing-oval" {
+        Box::new(Racing::new(
+            RacingConfig {
+                common,
+                ..RacingConfig::default()
+            },
+            steering_limit_rad,
+        ))
+    } else {
+        Box::new(Search::new(
+            SearchConfig {
+                common,
+                reward: cfg.search_reward,
+                slow_penalty: id == "search-outdoor-50" && cfg.search_reward == SearchReward::AutovrlCode,
+                ..SearchConfig::default()
+            },
+            steering_limit_rad,
+        ))
+    })
+}
+
 /// Build the env registered under `id` with `cfg` (`EnvConfig::default()` for the standard
 /// setup), wrapped in its time limit.
 pub fn make(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
@@ -164,32 +195,6 @@ pub fn make(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
         return Ok(Box::new(TimeLimit::new(Pendulum::new(), 200)));
     }
     let vehicle = make_vehicle(id, cfg)?;
-    let limit = vehicle.steering_limit_rad();
-    let common = CommonConfig {
-        observation: cfg.observation,
-        action_mapping: cfg.action_mapping,
-        n_rays: cfg.lidar.n_rays,
-        range_max_m: cfg.lidar.range_max_m,
-    };
-    if id == "racing-oval" {
-        let task = Racing::new(
-            RacingConfig {
-                common,
-                ..RacingConfig::default()
-            },
-            limit,
-        );
-        Ok(Box::new(TimeLimit::new(TaskEnv::new(vehicle, task), cfg.max_steps)))
-    } else {
-        let task = Search::new(
-            SearchConfig {
-                common,
-                reward: cfg.search_reward,
-                slow_penalty: id == "search-outdoor-50" && cfg.search_reward == SearchReward::AutovrlCode,
-                ..SearchConfig::default()
-            },
-            limit,
-        );
-        Ok(Box::new(TimeLimit::new(TaskEnv::new(vehicle, task), cfg.max_steps)))
-    }
+    let task = make_task(id, cfg, vehicle.steering_limit_rad())?;
+    Ok(Box::new(TimeLimit::new(TaskEnv::new(vehicle, task), cfg.max_steps)))
 }

@@ -42,6 +42,27 @@ pub trait Task: Send {
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome;
 }
 
+impl<T: Task + ?Sized> Task for Box<T> {
+    fn needs(&self) -> SensorNeeds {
+        (**self).needs()
+    }
+    fn observation_space(&self) -> BoxSpace {
+        (**self).observation_space()
+    }
+    fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
+        (**self).control(action, steering_limit_rad)
+    }
+    fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
+        (**self).reset(frame, map)
+    }
+    fn observe(&self, frame: &SensorFrame) -> Vec<f32> {
+        (**self).observe(frame)
+    }
+    fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
+        (**self).evaluate(frame, map)
+    }
+}
+
 /// How LiDAR ranges enter the observation.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

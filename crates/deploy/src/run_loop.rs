@@ -1,0 +1,184 @@
+//! The fixed-rate control loop and its watchdog.
+
+use agvrl_envs::api::{Control, SensorFrame, Vehicle};
+use agvrl_envs::task::Task;
+use agvrl_rl::Policy;
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+/// Why the loop could not start or go on.
+#[derive(Debug, Error)]
+pub enum DeployError {
+    /// The policy was trained for other observation or action spaces.
+    #[error("the policy does not match this task: {0}")]
+    Mismatch(String),
+    /// The vehicle failed (not a stale reading: a broken connection, a simulator error).
+    #[error("vehicle: {0}")]
+    Vehicle(String),
+}
+
+/// Loop settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveConfig {
+    /// Control rate, Hz (30: AutoVRL's and the training period).
+    pub rate_hz: f64,
+    /// A frame older than this many control periods is stale.
+    pub max_age_periods: f64,
+    /// Hold the rate with the wall clock (hardware); off: run as fast as the vehicle allows
+    /// (a simulated vehicle keeps its own time).
+    pub realtime: bool,
+}
+
+impl Default for DriveConfig {
+    fn default() -> Self {
+        Self {
+            rate_hz: 30.0,
+            max_age_periods: 2.0,
+            realtime: false,
+        }
+    }
+}
+
+/// Why a tick commanded a safe stop.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// The newest frame is older than the limit.
+    Stale {
+        /// Its age, seconds.
+        age_s: f64,
+    },
+    /// A reading holds NaN or infinity.
+    NotFinite {
+        /// Which sensor.
+        sensor: &'static str,
+    },
+    /// A sensor the task needs is missing.
+    Missing(String),
+    /// The policy failed.
+    Inference(String),
+}
+
+/// What one tick did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tick {
+    /// Tick number since start.
+    pub index: u64,
+    /// The frame's time stamp, seconds.
+    pub stamp_s: f64,
+    /// The command sent.
+    pub control: Control,
+    /// Set when the watchdog or the policy forced a safe stop.
+    pub event: Option<Event>,
+    /// Observation + inference time, microseconds.
+    pub infer_us: f64,
+}
+
+/// A policy driving a vehicle through a task's observation and action mapping.
+pub struct DriveLoop<V, T> {
+    vehicle: V,
+    task: T,
+    policy: Policy,
+    cfg: DriveConfig,
+    ticks: u64,
+    clock_s: f64,
+}
+
+impl<V: Vehicle, T: Task> DriveLoop<V, T> {
+    /// Check the policy against the task and reset the vehicle.
+    pub fn new(mut vehicle: V, mut task: T, policy: Policy, cfg: DriveConfig, seed: u64) -> Result<Self, DeployError> {
+        let action_space = agvrl_envs::BoxSpace::uniform(2, -1.0, 1.0);
+        policy
+            .check_spaces(&task.observation_space(), &action_space)
+            .map_err(|e| DeployError::Mismatch(e.to_string()))?;
+        let frame = vehicle.reset(seed).map_err(|e| DeployError::Vehicle(e.to_string()))?;
+        task.reset(&frame, vehicle.map());
+        let clock_s = frame.stamp_s;
+        Ok(Self {
+            vehicle,
+            task,
+            policy,
+            cfg,
+            ticks: 0,
+            clock_s,
+        })
+    }
+
+    /// The vehicle.
+    pub fn vehicle(&self) -> &V {
+        &self.vehicle
+    }
+
+    /// The vehicle, mutably.
+    pub fn vehicle_mut(&mut self) -> &mut V {
+        &mut self.vehicle
+    }
+
+    fn check(&self, f: &SensorFrame, now_s: f64) -> Result<(), Event> {
+        self.task.needs().check(f).map_err(|e| Event::Missing(e.to_string()))?;
+        let age_s = now_s - f.stamp_s;
+        if age_s > self.cfg.max_age_periods / self.cfg.rate_hz + 1e-9 {
+            return Err(Event::Stale { age_s });
+        }
+        if let Some(s) = &f.scan
+            && s.ranges.iter().any(|r| !r.is_finite())
+        {
+            return Err(Event::NotFinite { sensor: "scan" });
+        }
+        if let Some(i) = &f.imu
+            && i.lin_vel_b
+                .iter()
+                .chain(&i.ang_vel_b)
+                .chain(&i.lin_acc_b)
+                .any(|v| !v.is_finite())
+        {
+            return Err(Event::NotFinite { sensor: "imu" });
+        }
+        if let Some(g) = &f.gps
+            && g.position_m.iter().any(|v| !v.is_finite())
+        {
+            return Err(Event::NotFinite { sensor: "gps" });
+        }
+        Ok(())
+    }
+
+    /// One control period: sense, check, infer, actuate. The loop's clock advances by one
+    /// period per tick (the vehicle's own time when it is simulated).
+    pub fn tick(&mut self) -> Result<Tick, DeployError> {
+        let t0 = Instant::now();
+        let period = 1.0 / self.cfg.rate_hz;
+        let frame = self.vehicle.sense().map_err(|e| DeployError::Vehicle(e.to_string()))?;
+        let now_s = self.clock_s;
+        let (control, event) = match self.check(&frame, now_s) {
+            Err(ev) => (Control::default(), Some(ev)),
+            Ok(()) => {
+                let obs = self.task.observe(&frame);
+                match self.policy.act(&obs, true) {
+                    Ok(a) if a.iter().all(|v| v.is_finite()) => {
+                        (self.task.control(&a, self.vehicle.steering_limit_rad()), None)
+                    }
+                    Ok(_) => (Control::default(), Some(Event::Inference("non-finite action".into()))),
+                    Err(e) => (Control::default(), Some(Event::Inference(e.to_string()))),
+                }
+            }
+        };
+        let infer_us = t0.elapsed().as_secs_f64() * 1e6;
+        self.vehicle
+            .actuate(control)
+            .map_err(|e| DeployError::Vehicle(e.to_string()))?;
+        self.clock_s += period;
+        self.ticks += 1;
+        if self.cfg.realtime {
+            let spent = t0.elapsed();
+            if let Some(rest) = Duration::from_secs_f64(period).checked_sub(spent) {
+                std::thread::sleep(rest);
+            }
+        }
+        Ok(Tick {
+            index: self.ticks,
+            stamp_s: frame.stamp_s,
+            control,
+            event,
+            infer_us,
+        })
+    }
+}
