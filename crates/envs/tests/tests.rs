@@ -429,7 +429,7 @@ mod issue_6_subjects {
             }),
             ..Default::default()
         };
-        let vehicle = SimVehicle::new(sim, SpawnMode::Fixed, Randomisation::default()).unwrap();
+        let vehicle = SimVehicle::new(sim.clone(), SpawnMode::Fixed, Randomisation::default()).unwrap();
         let subjects = vehicle.map().unwrap().subjects.clone();
         assert_eq!(subjects.len(), 3);
         let scene = vehicle.sim().scene();
@@ -461,18 +461,7 @@ mod issue_6_subjects {
         assert!(info.subjects_found >= 1, "{info:?}");
         assert_eq!(info.find_times_s.len(), info.subjects_found);
         // The same view with a 2 m detection range: 3 m away is too far.
-        let sim2 = agvrl_sim::SimConfig {
-            scene: agvrl_sim::SceneSource::Builtin("outdoor-20".into()),
-            subjects: 3,
-            subject_seed: 7,
-            camera: Some(agvrl_sim::sensors::CameraConfig {
-                width: 80,
-                height: 60,
-                ..Default::default()
-            }),
-            ..Default::default()
-        };
-        let v2 = SimVehicle::new(sim2, SpawnMode::Fixed, Randomisation::default()).unwrap();
+        let v2 = SimVehicle::new(sim, SpawnMode::Fixed, Randomisation::default()).unwrap();
         let near_only = SearchConfig {
             found_range_m: 2.0,
             ..SearchConfig::default()
