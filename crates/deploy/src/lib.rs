@@ -13,6 +13,8 @@
 
 #![warn(missing_docs)]
 
+pub mod bench;
+pub mod hardware;
 pub mod run_loop;
 
 pub use run_loop::{DeployError, DriveConfig, DriveLoop, Event, Tick};

@@ -1,6 +1,6 @@
 //! The fixed-rate control loop and its watchdog.
 
-use agvrl_envs::api::{Control, SensorFrame, Vehicle};
+use agvrl_envs::api::{Control, RacingInfo, SensorFrame, TerminationCause, Vehicle};
 use agvrl_envs::task::Task;
 use agvrl_rl::Policy;
 use std::time::{Duration, Instant};
@@ -15,6 +15,9 @@ pub enum DeployError {
     /// The vehicle failed (not a stale reading: a broken connection, a simulator error).
     #[error("vehicle: {0}")]
     Vehicle(String),
+    /// A bad setting (the car's TOML, a topic name).
+    #[error("config: {0}")]
+    Config(String),
 }
 
 /// Loop settings.
@@ -24,8 +27,10 @@ pub struct DriveConfig {
     pub rate_hz: f64,
     /// A frame older than this many control periods is stale.
     pub max_age_periods: f64,
-    /// Hold the rate with the wall clock (hardware); off: run as fast as the vehicle allows
-    /// (a simulated vehicle keeps its own time).
+    /// Hold the rate with the wall clock (hardware): ticks start on fixed deadlines and a
+    /// frame's age is measured by the wall clock since the first frame; off: run as fast as
+    /// the vehicle allows and advance the loop's clock one period per tick (a simulated or
+    /// lockstep vehicle keeps its own time).
     pub realtime: bool,
 }
 
@@ -69,8 +74,13 @@ pub struct Tick {
     pub control: Control,
     /// Set when the watchdog or the policy forced a safe stop.
     pub event: Option<Event>,
-    /// Observation + inference time, microseconds.
+    /// Watchdog checks + observation + inference time, microseconds.
     pub infer_us: f64,
+    /// What the task says about the frame (a car without a map has no laps).
+    pub racing: Option<RacingInfo>,
+    /// The task's termination verdict on the frame (collision, too close, ...); the loop
+    /// drives on, a caller may stop.
+    pub termination: Option<TerminationCause>,
 }
 
 /// A policy driving a vehicle through a task's observation and action mapping.
@@ -81,6 +91,8 @@ pub struct DriveLoop<V, T> {
     cfg: DriveConfig,
     ticks: u64,
     clock_s: f64,
+    start: Instant,
+    start_stamp_s: f64,
 }
 
 impl<V: Vehicle, T: Task> DriveLoop<V, T> {
@@ -100,6 +112,8 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             cfg,
             ticks: 0,
             clock_s,
+            start: Instant::now(),
+            start_stamp_s: frame.stamp_s,
         })
     }
 
@@ -144,11 +158,18 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
     /// One control period: sense, check, infer, actuate. The loop's clock advances by one
     /// period per tick (the vehicle's own time when it is simulated).
     pub fn tick(&mut self) -> Result<Tick, DeployError> {
-        let t0 = Instant::now();
         let period = 1.0 / self.cfg.rate_hz;
         let frame = self.vehicle.sense().map_err(|e| DeployError::Vehicle(e.to_string()))?;
-        let now_s = self.clock_s;
-        let (control, event) = match self.check(&frame, now_s) {
+        // Timed from here: checks, observation and inference (not the vehicle's wait).
+        let t0 = Instant::now();
+        let now_s = if self.cfg.realtime {
+            self.start_stamp_s + self.start.elapsed().as_secs_f64()
+        } else {
+            self.clock_s
+        };
+        let checked = self.check(&frame, now_s);
+        let fresh = checked.is_ok();
+        let (control, event) = match checked {
             Err(ev) => (Control::default(), Some(ev)),
             Ok(()) => {
                 let obs = self.task.observe(&frame);
@@ -162,14 +183,16 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             }
         };
         let infer_us = t0.elapsed().as_secs_f64() * 1e6;
+        let outcome = fresh.then(|| self.task.evaluate(&frame, self.vehicle.map()));
         self.vehicle
             .actuate(control)
             .map_err(|e| DeployError::Vehicle(e.to_string()))?;
         self.clock_s += period;
         self.ticks += 1;
         if self.cfg.realtime {
-            let spent = t0.elapsed();
-            if let Some(rest) = Duration::from_secs_f64(period).checked_sub(spent) {
+            // Absolute deadlines: sleep overshoot does not accumulate into drift.
+            let deadline = self.start + Duration::from_secs_f64(period * self.ticks as f64);
+            if let Some(rest) = deadline.checked_duration_since(Instant::now()) {
                 std::thread::sleep(rest);
             }
         }
@@ -179,6 +202,8 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             control,
             event,
             infer_us,
+            racing: outcome.as_ref().and_then(|o| o.racing.clone()),
+            termination: outcome.and_then(|o| o.termination),
         })
     }
 }

@@ -125,3 +125,148 @@ fn a_policy_for_another_task_refuses_to_start() {
         Ok(_) => panic!("a pendulum policy must not drive a car"),
     }
 }
+
+/// ROS 2 over DDS on loopback: the sim-backed robot in a thread, the drive loop here.
+#[cfg(feature = "ros2")]
+mod issue_7_ros2_loopback {
+    use super::*;
+    use agvrl_deploy::hardware::config::{InvalidRay, Reliability};
+    use agvrl_deploy::hardware::{Faults, Pace, RobotHandle, Ros2Config, Ros2Vehicle, SimRobot};
+    use std::sync::atomic::{AtomicU16, Ordering};
+
+    /// A DDS domain no other test (or process) of this run uses: a random base per process,
+    /// then one step per call.
+    fn domain() -> u16 {
+        static NEXT: AtomicU16 = AtomicU16::new(0);
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .subsec_nanos();
+        let base = (nanos ^ std::process::id().wrapping_mul(2_654_435_761)) % 150;
+        1 + ((base as u16 + 7 * NEXT.fetch_add(1, Ordering::Relaxed)) % 230)
+    }
+
+    fn ros_cfg(invalid: InvalidRay) -> Ros2Config {
+        let mut c = Ros2Config {
+            domain_id: domain(),
+            startup_timeout_s: 30.0,
+            fresh_timeout_s: 0.2,
+            ..Ros2Config::default()
+        };
+        c.qos.sensors.reliability = Reliability::Reliable;
+        c.scan.invalid = invalid;
+        c
+    }
+
+    /// Run `f` on a drive loop (shipped policy, lockstep ROS 2 vehicle) against a robot with
+    /// `faults`; the robot stops afterwards.
+    fn with_robot<R>(
+        cfg: Ros2Config,
+        faults: Faults,
+        f: impl FnOnce(&mut DriveLoop<Ros2Vehicle, Box<dyn agvrl_envs::task::Task>>, &RobotHandle) -> R,
+    ) -> R {
+        let env_cfg = EnvConfig::default();
+        let mut robot = SimRobot::new("racing-oval", &env_cfg, cfg.clone(), 0, faults).unwrap();
+        let h = robot.handle();
+        let th = std::thread::spawn(move || robot.run(Pace::Lockstep, 0));
+        let v = Ros2Vehicle::new(cfg.clone(), true).unwrap();
+        let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
+        let policy = Policy::load(&agvrl_deploy::bench::shipped_policy()).unwrap();
+        let mut lp = DriveLoop::new(v, task, policy, DriveConfig::default(), 0).unwrap();
+        let r = f(&mut lp, &h);
+        h.stop();
+        th.join().unwrap().unwrap();
+        r
+    }
+
+    #[test]
+    fn the_shipped_policy_laps_the_oval_over_dds_without_collision() {
+        let ticks = 1200; // 40 s of simulated time; a lap takes about 31 s
+        let stats = with_robot(ros_cfg(InvalidRay::Stop), Faults::default(), |lp, h| {
+            for k in 0..ticks {
+                let t = lp.tick().unwrap();
+                assert!(t.event.is_none(), "tick {k}: {:?}", t.event);
+            }
+            // The robot applies the last command once it arrives.
+            let t0 = std::time::Instant::now();
+            while h.stats().commands < ticks && t0.elapsed().as_secs() < 10 {
+                std::thread::yield_now();
+            }
+            h.stats()
+        });
+        assert_eq!(stats.commands, ticks, "every command arrived once: {stats:?}");
+        assert_eq!(stats.ticks, ticks, "one control period per command: {stats:?}");
+        assert!(stats.laps >= 1, "no full lap: {stats:?}");
+        assert_eq!(stats.terminations, 0, "collision or too close: {stats:?}");
+    }
+
+    #[test]
+    fn muted_scans_stop_the_car_over_dds_within_two_periods() {
+        let faults = Faults {
+            mute_scan_from: 30,
+            ..Faults::default()
+        };
+        with_robot(ros_cfg(InvalidRay::Stop), faults, |lp, h| {
+            let mut first_stop = None;
+            for k in 0..40u64 {
+                let t = lp.tick().unwrap();
+                match &t.event {
+                    None => assert!(k < 32, "tick {k} drove on a scan {} periods old", k - 29),
+                    Some(Event::Stale { .. }) => {
+                        assert!(k >= 30, "tick {k} stopped while scans were fresh");
+                        first_stop.get_or_insert(k);
+                        assert_eq!(t.control, Control::default());
+                    }
+                    Some(e) => panic!("tick {k}: unexpected event {e:?}"),
+                }
+            }
+            // The last scan is the tick-29 one: two periods later it is too old.
+            assert_eq!(first_stop, Some(32));
+            let t0 = std::time::Instant::now();
+            while h.stats().commands < 40 && t0.elapsed().as_secs() < 10 {
+                std::thread::yield_now();
+            }
+            let s = h.stats();
+            assert_eq!(s.commands, 40);
+            assert_eq!(s.last_command, Control::default(), "the robot got zero throttle");
+        });
+    }
+
+    #[test]
+    fn nan_ranges_over_dds_never_reach_the_policy() {
+        let faults = Faults {
+            nan_ticks: 5..8,
+            nan_rays: 10..13,
+            ..Faults::default()
+        };
+        // One scan ray per policy ray: a NaN ray has nothing valid to fall back on -> stop.
+        with_robot(ros_cfg(InvalidRay::Stop), faults.clone(), |lp, _| {
+            for k in 0..12u64 {
+                let t = lp.tick().unwrap();
+                if (5..8).contains(&k) {
+                    assert_eq!(t.event, Some(Event::NotFinite { sensor: "scan" }), "tick {k}");
+                    assert_eq!(t.control, Control::default());
+                } else {
+                    assert!(t.event.is_none(), "tick {k}: {:?}", t.event);
+                }
+            }
+        });
+        // Mapped to "no return" instead: the loop drives on, with finite observations only.
+        with_robot(ros_cfg(InvalidRay::RangeMax), faults, |lp, _| {
+            for k in 0..12u64 {
+                let t = lp.tick().unwrap();
+                assert!(t.event.is_none(), "tick {k}: {:?}", t.event);
+            }
+        });
+    }
+
+    #[test]
+    fn a_bad_car_toml_is_one_clear_line() {
+        let e = Ros2Config::from_toml("[scan]\nn_ray = 3\n").unwrap_err();
+        assert!(e.contains("n_ray") && !e.contains('\n'), "{e}");
+        let e = Ros2Config::from_toml("[scan]\nangle_min_rad = 1.0\nangle_max_rad = -1.0\n").unwrap_err();
+        assert!(e.contains("angle_min_rad"), "{e}");
+        let example = include_str!("../car.example.toml");
+        assert_eq!(Ros2Config::from_toml(example).unwrap(), Ros2Config::default());
+    }
+}

@@ -1,47 +1,66 @@
 //! agvrl-drive: run a trained policy on a vehicle at a fixed rate, with a watchdog.
 //!
-//! `agvrl-drive --run runs/<dir> --vehicle sim` drives the simulated car with the run's policy
-//! and env settings; each tick prints one `key=value` line.
+//! `agvrl-drive --policy assets/policies/racing-oval-ppo.agvrl` drives the simulated car with
+//! the shipped policy (env settings from the `.toml` beside it); `--vehicle ros2 --config
+//! car.toml` drives a ROS 2 car; `--serve-sim racing-oval` is the simulated car behind ROS 2
+//! topics. Each tick prints one `key=value` line, the run ends with a summary line.
 
+use agvrl_deploy::bench::{cpu_time_s, quantile, rss_mb};
 use agvrl_deploy::{DriveConfig, DriveLoop};
+use agvrl_envs::api::Vehicle;
+use agvrl_envs::task::Task;
 use agvrl_envs::{EnvConfig, make_task, make_vehicle};
 use agvrl_rl::Policy;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use serde::Deserialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 #[derive(Parser)]
 #[command(
     name = "agvrl-drive",
     version,
-    about = "Drive a trained agvrl policy on the simulator (or, later, a ROS 2 car) at a fixed rate, with a watchdog."
+    about = "Drive a trained agvrl policy on the simulator or a ROS 2 car at a fixed rate, with a watchdog; or serve the simulated car over ROS 2."
 )]
 struct Args {
     /// A run directory from `agvrl train` (its policy.agvrl and config.toml).
     #[arg(long, conflicts_with = "policy")]
     run: Option<PathBuf>,
-    /// A policy file (with --env and the default env settings).
+    /// A policy file; env settings come from FILE.toml beside it when present (else defaults).
     #[arg(long)]
     policy: Option<PathBuf>,
-    /// Environment id whose task to run (default: the run's).
+    /// Environment id whose task to run (default: the run's, else racing-oval).
     #[arg(long)]
     env: Option<String>,
-    /// Which vehicle: sim (ros2 is not built yet).
+    /// Which vehicle: sim, or ros2 (needs --config, or uses the default topics).
     #[arg(long, default_value = "sim")]
     vehicle: String,
+    /// The car's TOML: topics, QoS, scan mapping, command scaling (see car.example.toml).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Override the config's DDS domain id.
+    #[arg(long)]
+    domain_id: Option<u16>,
+    /// Serve the simulated car of env ENV over ROS 2 instead of driving.
+    #[arg(long, value_name = "ENV", conflicts_with = "vehicle")]
+    serve_sim: Option<String>,
     /// Control rate, Hz.
     #[arg(long, default_value_t = 30.0)]
     rate_hz: f64,
     /// Ticks to run (0: until interrupted).
     #[arg(long, default_value_t = 900)]
     steps: u64,
-    /// Hold the rate with the wall clock.
+    /// Hold the rate with the wall clock (a car); without it a ROS 2 vehicle runs lockstep
+    /// with `--serve-sim` (which must then also run without --realtime).
     #[arg(long)]
     realtime: bool,
     /// Seed of the vehicle's reset.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Print only the summary line.
+    #[arg(long)]
+    quiet: bool,
 }
 
 #[derive(Deserialize)]
@@ -58,46 +77,164 @@ fn main() {
     }
 }
 
-fn run() -> Result<()> {
-    let a = Args::parse();
-    let (policy_path, mut env, cfg) = match (&a.run, &a.policy) {
+fn read_run_file(path: &Path) -> Result<RunFile> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message().trim()))
+}
+
+/// Policy path, env id and env settings from --run / --policy (+ its .toml) / --env.
+fn policy_and_env(a: &Args) -> Result<(Option<PathBuf>, String, EnvConfig)> {
+    let (policy, mut env, cfg) = match (&a.run, &a.policy) {
         (Some(dir), _) => {
-            let text = std::fs::read_to_string(dir.join("config.toml"))
+            let r = read_run_file(&dir.join("config.toml"))
                 .with_context(|| format!("{} is not a run directory", dir.display()))?;
-            let r: RunFile = toml::from_str(&text)
-                .map_err(|e| anyhow::anyhow!("{}: {}", dir.join("config.toml").display(), e.message().trim()))?;
-            (dir.join("policy.agvrl"), r.env, r.env_config)
+            (Some(dir.join("policy.agvrl")), r.env, r.env_config)
         }
-        (None, Some(p)) => (p.clone(), "racing-oval".to_string(), EnvConfig::default()),
-        (None, None) => bail!("give --run DIR or --policy FILE"),
+        (None, Some(p)) => {
+            let side = p.with_extension("toml");
+            if side.exists() {
+                let r = read_run_file(&side)?;
+                (Some(p.clone()), r.env, r.env_config)
+            } else {
+                (Some(p.clone()), "racing-oval".to_string(), EnvConfig::default())
+            }
+        }
+        (None, None) => (None, "racing-oval".to_string(), EnvConfig::default()),
     };
     if let Some(e) = &a.env {
         env = e.clone();
     }
-    if a.vehicle != "sim" {
-        bail!("--vehicle '{}': only 'sim' is built so far", a.vehicle);
+    Ok((policy, env, cfg))
+}
+
+#[cfg(feature = "ros2")]
+fn ros2_config(a: &Args) -> Result<agvrl_deploy::hardware::Ros2Config> {
+    let mut c = match &a.config {
+        Some(p) => agvrl_deploy::hardware::Ros2Config::load(p)?,
+        None => agvrl_deploy::hardware::Ros2Config::default(),
+    };
+    if let Some(d) = a.domain_id {
+        c.domain_id = d;
+        c.validate().map_err(|e| anyhow::anyhow!("--domain-id: {e}"))?;
     }
+    Ok(c)
+}
+
+fn run() -> Result<()> {
+    let a = Args::parse();
     if !(a.rate_hz > 0.0 && a.rate_hz.is_finite()) {
         bail!("--rate-hz must be positive");
     }
+    let (policy_path, env, env_cfg) = policy_and_env(&a)?;
+    if let Some(sim_env) = &a.serve_sim {
+        return serve_sim(&a, sim_env, &env_cfg);
+    }
+    let Some(policy_path) = policy_path else {
+        bail!("give --run DIR or --policy FILE (e.g. assets/policies/racing-oval-ppo.agvrl)");
+    };
     let policy = Policy::load(&policy_path).with_context(|| format!("loading {}", policy_path.display()))?;
-    let vehicle = make_vehicle(&env, &cfg)?;
-    let task = make_task(&env, &cfg, vehicle.steering_limit_rad())?;
     let drive = DriveConfig {
         rate_hz: a.rate_hz,
         realtime: a.realtime,
         ..DriveConfig::default()
     };
-    let mut lp = DriveLoop::new(vehicle, task, policy, drive, a.seed)?;
-    let mut k = 0u64;
+    match a.vehicle.as_str() {
+        "sim" => {
+            let vehicle = make_vehicle(&env, &env_cfg)?;
+            let task = make_task(&env, &env_cfg, vehicle.steering_limit_rad())?;
+            drive_loop(&a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?)
+        }
+        "ros2" => drive_ros2(&a, &env, &env_cfg, policy, drive),
+        other => bail!("--vehicle '{other}': choose sim or ros2"),
+    }
+}
+
+#[cfg(feature = "ros2")]
+fn drive_ros2(a: &Args, env: &str, env_cfg: &EnvConfig, policy: Policy, drive: DriveConfig) -> Result<()> {
+    let cfg = ros2_config(a)?;
+    cfg.check_lidar(env_cfg.lidar.n_rays, env_cfg.lidar.range_max_m)?;
+    let task = make_task(env, env_cfg, cfg.drive.steering_limit_rad)?;
+    let vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime)?;
+    drive_loop(a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?)
+}
+
+#[cfg(not(feature = "ros2"))]
+fn drive_ros2(_: &Args, _: &str, _: &EnvConfig, _: Policy, _: DriveConfig) -> Result<()> {
+    bail!("--vehicle ros2: this agvrl-drive was built without the `ros2` feature")
+}
+
+fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<()> {
+    let (cpu0, t0) = (cpu_time_s(), Instant::now());
+    let (mut k, mut events, mut terminations) = (0u64, 0u64, 0u64);
+    let mut infer_us = Vec::new();
+    let mut racing = None;
     while a.steps == 0 || k < a.steps {
         let t = lp.tick()?;
         k += 1;
-        let ev = t.event.as_ref().map(|e| format!(" event={e:?}")).unwrap_or_default();
-        println!(
-            "tick={} stamp_s={:.3} throttle={:.3} steering_rad={:.3} infer_us={:.1}{ev}",
-            t.index, t.stamp_s, t.control.throttle, t.control.steering_rad, t.infer_us
-        );
+        events += u64::from(t.event.is_some());
+        terminations += u64::from(t.termination.is_some());
+        infer_us.push(t.infer_us);
+        if t.racing.is_some() {
+            racing = t.racing.clone();
+        }
+        if !a.quiet {
+            let ev = t.event.as_ref().map(|e| format!(" event={e:?}")).unwrap_or_default();
+            let term = t.termination.map(|c| format!(" termination={c:?}")).unwrap_or_default();
+            let laps = t
+                .racing
+                .as_ref()
+                .map(|r| format!(" laps={}", r.laps))
+                .unwrap_or_default();
+            println!(
+                "tick={} stamp_s={:.3} throttle={:.3} steering_rad={:.3} infer_us={:.1}{laps}{ev}{term}",
+                t.index, t.stamp_s, t.control.throttle, t.control.steering_rad, t.infer_us
+            );
+        }
     }
+    let wall_s = t0.elapsed().as_secs_f64();
+    let cpu = match (cpu0, cpu_time_s()) {
+        (Some(c0), Some(c1)) if wall_s > 0.0 => format!("{:.1}", 100.0 * (c1 - c0) / wall_s),
+        _ => "na".into(),
+    };
+    let rss = rss_mb().map_or("na".into(), |r| format!("{r:.1}"));
+    let laps = racing.as_ref().map_or(String::new(), |r| {
+        format!(
+            " laps={} best_lap_s={}",
+            r.laps,
+            r.best_lap_s.map_or("na".into(), |b| format!("{b:.2}"))
+        )
+    });
+    println!(
+        "summary ticks={k} events={events} terminations={terminations}{laps} infer_us_p50={:.1} infer_us_p99={:.1} wall_s={wall_s:.2} cpu_pct={cpu} rss_mb={rss}",
+        quantile(&infer_us, 0.5),
+        quantile(&infer_us, 0.99)
+    );
     Ok(())
+}
+
+#[cfg(feature = "ros2")]
+fn serve_sim(a: &Args, env: &str, env_cfg: &EnvConfig) -> Result<()> {
+    use agvrl_deploy::hardware::{Faults, Pace, SimRobot};
+    let cfg = ros2_config(a)?;
+    let mut robot = SimRobot::new(env, env_cfg, cfg, a.seed, Faults::default())?;
+    let h = robot.handle();
+    let pace = if a.realtime { Pace::Realtime } else { Pace::Lockstep };
+    eprintln!("serving {env} over ROS 2 ({pace:?}); Ctrl-C stops");
+    robot.run(pace, a.steps)?;
+    let s = h.stats();
+    println!(
+        "summary ticks={} stamp_s={:.3} commands={} laps={} best_lap_s={} terminations={}",
+        s.ticks,
+        s.stamp_s,
+        s.commands,
+        s.laps,
+        s.best_lap_s.map_or("na".into(), |b| format!("{b:.2}")),
+        s.terminations
+    );
+    Ok(())
+}
+
+#[cfg(not(feature = "ros2"))]
+fn serve_sim(_: &Args, _: &str, _: &EnvConfig) -> Result<()> {
+    bail!("--serve-sim: this agvrl-drive was built without the `ros2` feature")
 }

@@ -1,0 +1,174 @@
+//! Deploy figures for `agvrl bench`: watchdog + observation + inference latency per tick,
+//! CPU and memory of `agvrl-drive` driving at 30 Hz in real time, its binary size, and the
+//! ROS 2 loopback rate. Also the /proc readers the binary uses for its summary line.
+
+use crate::{DriveConfig, DriveLoop};
+use agvrl_envs::{EnvConfig, make_task, make_vehicle};
+use agvrl_rl::Policy;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// The shipped racing policy (`assets/policies/racing-oval-ppo.agvrl`) in this source tree.
+pub fn shipped_policy() -> PathBuf {
+    PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../assets/policies/racing-oval-ppo.agvrl"
+    ))
+}
+
+/// CPU time (user + system) this process has used, seconds (/proc/self/stat; Linux only).
+pub fn cpu_time_s() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+    let rest = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    // USER_HZ is 100 on every Linux ABI /proc reports in.
+    Some(ticks / 100.0)
+}
+
+/// Resident set size of this process, MB (/proc/self/status VmRSS).
+pub fn rss_mb() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+/// The `q` quantile (0..=1) of `v` (nearest rank; NaN for none).
+pub fn quantile(v: &[f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[((q * s.len() as f64).ceil() as usize).clamp(1, s.len()) - 1]
+}
+
+fn kv(k: &str, v: impl std::fmt::Display) -> (String, String) {
+    (k.to_string(), v.to_string())
+}
+
+/// The deploy figures as `key=value` pairs (`quick`: fewer ticks, a smoke test).
+pub fn run(quick: bool) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let policy = shipped_policy();
+    // Latency: the simulated car as fast as it goes, the shipped policy.
+    let lat = (|| -> Result<Vec<f64>, String> {
+        let cfg = EnvConfig::default();
+        let v = make_vehicle("racing-oval", &cfg).map_err(|e| e.to_string())?;
+        let t = make_task("racing-oval", &cfg, v.steering_limit_rad()).map_err(|e| e.to_string())?;
+        let p = Policy::load(&policy).map_err(|e| e.to_string())?;
+        let mut lp = DriveLoop::new(v, t, p, DriveConfig::default(), 0).map_err(|e| e.to_string())?;
+        let n = if quick { 100 } else { 2000 };
+        (0..n)
+            .map(|_| lp.tick().map(|t| t.infer_us).map_err(|e| e.to_string()))
+            .collect()
+    })();
+    match lat {
+        Ok(us) => {
+            out.push(kv("deploy_infer_us_p50", format!("{:.1}", quantile(&us, 0.5))));
+            out.push(kv("deploy_infer_us_p99", format!("{:.1}", quantile(&us, 0.99))));
+        }
+        Err(e) => out.push(kv("deploy_infer_error", e.replace(char::is_whitespace, "_"))),
+    }
+    // CPU and RSS: agvrl-drive itself (built beside this binary), 30 Hz real time.
+    let exe = std::env::current_exe()
+        .ok()
+        .and_then(|p| p.parent().map(|d| d.join("agvrl-drive")));
+    match exe.filter(|p| p.exists()) {
+        Some(drive) => {
+            if let Ok(m) = std::fs::metadata(&drive) {
+                out.push(kv("deploy_binary_mb", format!("{:.1}", m.len() as f64 / 1e6)));
+            }
+            let steps = if quick { "30" } else { "300" };
+            let res = std::process::Command::new(&drive)
+                .args([
+                    "--policy",
+                    &policy.to_string_lossy(),
+                    "--realtime",
+                    "--quiet",
+                    "--steps",
+                    steps,
+                ])
+                .output();
+            match res {
+                Ok(o) if o.status.success() => {
+                    let text = String::from_utf8_lossy(&o.stdout);
+                    let summary = text.lines().last().unwrap_or("");
+                    for key in ["cpu_pct", "rss_mb", "wall_s"] {
+                        if let Some(v) = summary
+                            .split_whitespace()
+                            .find_map(|f| f.strip_prefix(&format!("{key}=")))
+                        {
+                            out.push(kv(&format!("deploy_30hz_{key}"), v));
+                        }
+                    }
+                }
+                Ok(o) => out.push(kv(
+                    "deploy_30hz_error",
+                    String::from_utf8_lossy(&o.stderr)
+                        .trim()
+                        .replace(char::is_whitespace, "_"),
+                )),
+                Err(e) => out.push(kv("deploy_30hz_error", e.to_string().replace(char::is_whitespace, "_"))),
+            }
+        }
+        None => out.push(kv(
+            "deploy_binary_mb",
+            "not_built(cargo build --release -p agvrl-deploy)",
+        )),
+    }
+    #[cfg(feature = "ros2")]
+    out.extend(loopback(quick));
+    out
+}
+
+/// Ticks per second of the drive loop against the sim-backed robot over DDS on loopback
+/// (lockstep: each tick is a full command -> simulate -> sensors round trip).
+#[cfg(feature = "ros2")]
+fn loopback(quick: bool) -> Vec<(String, String)> {
+    use crate::hardware::{Faults, Pace, Ros2Config, Ros2Vehicle, SimRobot};
+    let r = (|| -> Result<(f64, f64, f64), String> {
+        let cfg = Ros2Config {
+            // A domain of its own, away from ROS 2's default 0.
+            domain_id: 200 + (std::process::id() % 30) as u16,
+            ..Ros2Config::default()
+        };
+        let env_cfg = EnvConfig::default();
+        let mut robot =
+            SimRobot::new("racing-oval", &env_cfg, cfg.clone(), 0, Faults::default()).map_err(|e| e.to_string())?;
+        let h = robot.handle();
+        let th = std::thread::spawn(move || robot.run(Pace::Lockstep, 0));
+        let res = (|| {
+            let v = Ros2Vehicle::new(cfg.clone(), true).map_err(|e| e.to_string())?;
+            let t = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).map_err(|e| e.to_string())?;
+            let p = Policy::load(&shipped_policy()).map_err(|e| e.to_string())?;
+            let mut lp = DriveLoop::new(v, t, p, DriveConfig::default(), 0).map_err(|e| e.to_string())?;
+            let n = if quick { 60 } else { 900 };
+            let t0 = Instant::now();
+            let mut tick_us = Vec::with_capacity(n);
+            for _ in 0..n {
+                let t1 = Instant::now();
+                lp.tick().map_err(|e| e.to_string())?;
+                tick_us.push(t1.elapsed().as_secs_f64() * 1e6);
+            }
+            Ok((
+                n as f64 / t0.elapsed().as_secs_f64(),
+                quantile(&tick_us, 0.5),
+                quantile(&tick_us, 0.99),
+            ))
+        })();
+        h.stop();
+        let _ = th.join();
+        res
+    })();
+    match r {
+        Ok((rate, p50, p99)) => vec![
+            kv("deploy_ros2_lockstep_ticks_per_s", format!("{rate:.0}")),
+            kv("deploy_ros2_tick_us_p50", format!("{p50:.0}")),
+            kv("deploy_ros2_tick_us_p99", format!("{p99:.0}")),
+        ],
+        Err(e) => vec![kv("deploy_ros2_error", e.replace(char::is_whitespace, "_"))],
+    }
+}

@@ -1,0 +1,262 @@
+//! The car's TOML (`agvrl-drive --vehicle ros2 --config car.toml`): topics, QoS, the scan to
+//! observation mapping and the command scaling. Unknown keys are an error.
+
+use crate::DeployError;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Everything the ROS 2 vehicle and the sim-backed robot need to agree on.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Ros2Config {
+    /// DDS domain (`ROS_DOMAIN_ID`), 0..=232.
+    pub domain_id: u16,
+    /// Node name (the robot appends `_sim`).
+    pub node_name: String,
+    /// `reset` waits this long for a full sensor set and a subscriber on the drive topic, s.
+    pub startup_timeout_s: f64,
+    /// Lockstep only (no `--realtime`): how long `sense` waits for the next sensor set, s.
+    pub fresh_timeout_s: f64,
+    /// Topic names.
+    pub topics: Topics,
+    /// Quality of service.
+    pub qos: Qos,
+    /// LaserScan to observation rays.
+    pub scan: ScanMapping,
+    /// Control to AckermannDrive.
+    pub drive: DriveMapping,
+}
+
+impl Default for Ros2Config {
+    fn default() -> Self {
+        Self {
+            domain_id: 0,
+            node_name: "agvrl_drive".into(),
+            startup_timeout_s: 10.0,
+            fresh_timeout_s: 0.5,
+            topics: Topics::default(),
+            qos: Qos::default(),
+            scan: ScanMapping::default(),
+            drive: DriveMapping::default(),
+        }
+    }
+}
+
+/// Topic names; an empty name is not subscribed (`scan` and `drive` are required).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Topics {
+    /// `sensor_msgs/LaserScan`.
+    pub scan: String,
+    /// `sensor_msgs/Imu` (gyroscope, accelerometer, orientation).
+    pub imu: String,
+    /// `nav_msgs/Odometry` (pose; body-frame twist gives the speed).
+    pub odom: String,
+    /// `sensor_msgs/NavSatFix`.
+    pub navsat: String,
+    /// `ackermann_msgs/AckermannDriveStamped`, published.
+    pub drive: String,
+    /// `header.frame_id` of the published commands.
+    pub frame_id: String,
+}
+
+impl Default for Topics {
+    fn default() -> Self {
+        Self {
+            scan: "/scan".into(),
+            imu: "/imu".into(),
+            odom: "/odom".into(),
+            navsat: String::new(),
+            drive: "/drive".into(),
+            frame_id: "base_link".into(),
+        }
+    }
+}
+
+/// DDS reliability.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Reliability {
+    /// Samples may be lost (ROS 2 "sensor data"); a best-effort reader matches any writer.
+    BestEffort,
+    /// Lost samples are resent; a reliable reader matches only reliable writers.
+    Reliable,
+}
+
+/// QoS of one direction.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TopicQos {
+    /// Reliability.
+    pub reliability: Reliability,
+    /// History depth (keep last), >= 1.
+    pub depth: usize,
+}
+
+/// QoS of the sensor topics and of the drive topic.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Qos {
+    /// Sensor subscriptions (and the robot's sensor publishers).
+    pub sensors: TopicQos,
+    /// The drive command.
+    pub drive: TopicQos,
+}
+
+impl Default for Qos {
+    fn default() -> Self {
+        Self {
+            sensors: TopicQos {
+                reliability: Reliability::BestEffort,
+                depth: 1,
+            },
+            drive: TopicQos {
+                reliability: Reliability::Reliable,
+                depth: 1,
+            },
+        }
+    }
+}
+
+/// What a resampled ray with no valid reading (all NaN, or outside the scan) becomes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InvalidRay {
+    /// NaN: the watchdog stops the car on that tick.
+    Stop,
+    /// No return (free space).
+    RangeMax,
+    /// An obstacle at range_min.
+    RangeMin,
+}
+
+/// LaserScan to the policy's rays: the window `[angle_min_rad, angle_max_rad]` is split into
+/// `n_rays` evenly spaced bearings (as the simulator's LiDAR); each takes the smallest valid
+/// range among the scan's rays within half a spacing of it (the nearest ray when the scan is
+/// coarser). +inf (no return) reads `range_max_m`, -inf (too close) `range_min_m`, NaN is
+/// skipped; finite ranges are clipped to `[range_min_m, range_max_m]`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ScanMapping {
+    /// First bearing, rad (REP 103: counter-clockwise from x forward).
+    pub angle_min_rad: f32,
+    /// Last bearing, rad.
+    pub angle_max_rad: f32,
+    /// Rays the policy sees (the env's `lidar.n_rays`).
+    pub n_rays: usize,
+    /// Clip below, metres.
+    pub range_min_m: f32,
+    /// Clip above and no-return value, metres (the env's `lidar.range_max_m`).
+    pub range_max_m: f32,
+    /// A ray with no valid reading.
+    pub invalid: InvalidRay,
+}
+
+impl Default for ScanMapping {
+    /// The default env's LiDAR: 100 rays over 90 degrees centred ahead, 0.05-12 m.
+    fn default() -> Self {
+        Self {
+            angle_min_rad: -std::f32::consts::FRAC_PI_4,
+            angle_max_rad: std::f32::consts::FRAC_PI_4,
+            n_rays: 100,
+            range_min_m: 0.05,
+            range_max_m: 12.0,
+            invalid: InvalidRay::Stop,
+        }
+    }
+}
+
+/// Control to `AckermannDrive`: speed = throttle * `max_speed_mps`, steering_angle = steering.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DriveMapping {
+    /// Speed commanded at full throttle, m/s.
+    pub max_speed_mps: f32,
+    /// Steering limit of the virtual centre wheel, rad (the trained vehicle's).
+    pub steering_limit_rad: f64,
+}
+
+impl Default for DriveMapping {
+    /// xtenth_car: 0.36 rad steering.
+    fn default() -> Self {
+        Self {
+            max_speed_mps: 4.0,
+            steering_limit_rad: 0.36,
+        }
+    }
+}
+
+impl Ros2Config {
+    /// Read and check a TOML file.
+    pub fn load(path: &Path) -> Result<Self, DeployError> {
+        let text =
+            std::fs::read_to_string(path).map_err(|e| DeployError::Config(format!("{}: {e}", path.display())))?;
+        Self::from_toml(&text).map_err(|e| DeployError::Config(format!("{}: {e}", path.display())))
+    }
+
+    /// Parse and check TOML text; the error is one line.
+    pub fn from_toml(text: &str) -> Result<Self, String> {
+        let c: Self = toml::from_str(text).map_err(|e| e.message().trim().replace('\n', " "))?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// Check the values, naming the first bad one.
+    pub fn validate(&self) -> Result<(), String> {
+        let s = &self.scan;
+        let checks: [(bool, &str); 10] = [
+            (self.domain_id <= 232, "domain_id must be in 0..=232"),
+            (
+                self.startup_timeout_s > 0.0 && self.fresh_timeout_s > 0.0,
+                "startup_timeout_s and fresh_timeout_s must be positive",
+            ),
+            (
+                !self.topics.scan.is_empty() && !self.topics.drive.is_empty(),
+                "topics.scan and topics.drive are required",
+            ),
+            (
+                s.n_rays >= 1 && s.n_rays <= 100_000,
+                "scan.n_rays must be in 1..=100000",
+            ),
+            (
+                s.angle_min_rad.is_finite() && s.angle_max_rad.is_finite() && s.angle_min_rad <= s.angle_max_rad,
+                "scan.angle_min_rad must be finite and <= scan.angle_max_rad",
+            ),
+            (
+                s.n_rays == 1 || s.angle_min_rad < s.angle_max_rad,
+                "scan window is empty: angle_min_rad == angle_max_rad needs n_rays = 1",
+            ),
+            (
+                s.range_min_m >= 0.0 && s.range_min_m < s.range_max_m && s.range_max_m.is_finite(),
+                "scan ranges must satisfy 0 <= range_min_m < range_max_m < inf",
+            ),
+            (
+                self.qos.sensors.depth >= 1 && self.qos.drive.depth >= 1,
+                "qos depth must be at least 1",
+            ),
+            (
+                self.drive.max_speed_mps > 0.0 && self.drive.max_speed_mps.is_finite(),
+                "drive.max_speed_mps must be positive",
+            ),
+            (
+                self.drive.steering_limit_rad > 0.0 && self.drive.steering_limit_rad.is_finite(),
+                "drive.steering_limit_rad must be positive",
+            ),
+        ];
+        match checks.iter().find(|(ok, _)| !ok) {
+            Some((_, why)) => Err(why.to_string()),
+            None => Ok(()),
+        }
+    }
+
+    /// Error unless the scan mapping gives the rays the env's task was trained on.
+    pub fn check_lidar(&self, n_rays: usize, range_max_m: f32) -> Result<(), DeployError> {
+        if self.scan.n_rays != n_rays || self.scan.range_max_m != range_max_m {
+            return Err(DeployError::Config(format!(
+                "scan mapping gives {} rays up to {} m; the policy's task expects {n_rays} rays up to {range_max_m} m",
+                self.scan.n_rays, self.scan.range_max_m
+            )));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,326 @@
+//! The ROS 2 `Vehicle` over DDS (ros2-client / RustDDS, no ROS install): subscribes the
+//! car's LaserScan, Imu, Odometry and NavSatFix topics, publishes AckermannDriveStamped.
+//!
+//! Two ways to keep time. Real time (`lockstep = false`, for a car): `sense` returns the newest
+//! messages at once and the drive loop holds the rate with the wall clock. Lockstep (for the
+//! sim-backed robot): the robot advances one control period per command it receives, and
+//! `sense` after an `actuate` waits (up to `fresh_timeout_s`) for the sensor set that command
+//! produced, so both sides' clocks move one period per tick, as fast as DDS allows.
+//!
+//! The frame's `stamp_s` is the oldest header stamp among the subscribed topics, so a topic
+//! that stops makes the whole frame stale and the watchdog stops the car.
+
+use super::config::{Reliability, Ros2Config, TopicQos};
+use super::mapping::{self, scan_to_rays};
+use super::msg;
+use crate::DeployError;
+use agvrl_envs::api::{Control, EnvError, SensorFrame, Vehicle};
+use ros2_client::dds::rustdds::Topic;
+use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
+use ros2_client::qos::{Durability, History, WhenFull};
+use ros2_client::{Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile};
+use serde::de::DeserializeOwned;
+use std::time::{Duration, Instant};
+
+pub use ros2_client::{Publisher, Subscription};
+
+/// ROS type names of the topics.
+pub(crate) const SCAN_TYPE: (&str, &str) = ("sensor_msgs", "LaserScan");
+pub(crate) const IMU_TYPE: (&str, &str) = ("sensor_msgs", "Imu");
+pub(crate) const ODOM_TYPE: (&str, &str) = ("nav_msgs", "Odometry");
+pub(crate) const NAVSAT_TYPE: (&str, &str) = ("sensor_msgs", "NavSatFix");
+pub(crate) const DRIVE_TYPE: (&str, &str) = ("ackermann_msgs", "AckermannDriveStamped");
+
+fn dds_err(what: &str, e: impl std::fmt::Display) -> DeployError {
+    DeployError::Vehicle(format!("DDS {what}: {e}"))
+}
+
+/// The QoS profile of `q` (volatile, keep last `depth`).
+pub(crate) fn qos(q: TopicQos) -> QosProfile {
+    let p = QosProfile::subscription_default()
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth: q.depth });
+    match q.reliability {
+        Reliability::BestEffort => p.reliability_best_effort(),
+        Reliability::Reliable => p.reliability_reliable(WhenFull::DEFAULT),
+    }
+}
+
+/// A node on `cfg.domain_id`. RustDDS also announces itself to the localhost discovery ports,
+/// so two processes on one host find each other without multicast (a container's `lo`).
+pub(crate) fn node(cfg: &Ros2Config, name: &str) -> Result<Node, DeployError> {
+    let ctx =
+        Context::with_options(ContextOptions::new().domain_id(cfg.domain_id)).map_err(|e| dds_err("participant", e))?;
+    let name = NodeName::new("/", name).map_err(|e| DeployError::Config(format!("node name '{name}': {e:?}")))?;
+    ctx.new_node(
+        name,
+        NodeOptions::new().enable_rosout(false).start_parameter_services(false),
+    )
+    .map_err(|e| dds_err("node", format!("{e:?}")))
+}
+
+/// The topic `name` of ROS type `ty`.
+pub(crate) fn topic(node: &Node, name: &str, ty: (&str, &str), q: &QosProfile) -> Result<Topic, DeployError> {
+    let n = Name::parse(name).map_err(|e| DeployError::Config(format!("topic name '{name}': {e:?}")))?;
+    node.create_topic(&n, MessageTypeName::new(ty.0, ty.1), q)
+        .map_err(|e| dds_err(name, e))
+}
+
+/// A subscription to `name` (None for an empty name).
+pub(crate) fn subscribe<M: DeserializeOwned + 'static>(
+    node: &mut Node,
+    name: &str,
+    ty: (&str, &str),
+    q: TopicQos,
+) -> Result<Option<Subscription<M>>, DeployError> {
+    if name.is_empty() {
+        return Ok(None);
+    }
+    let q = qos(q);
+    let t = topic(node, name, ty, &q)?;
+    node.create_subscription(&t, Some(q))
+        .map(Some)
+        .map_err(|e| dds_err(name, e))
+}
+
+/// A publisher on `name`.
+pub(crate) fn publisher<M: serde::Serialize>(
+    node: &mut Node,
+    name: &str,
+    ty: (&str, &str),
+    q: TopicQos,
+) -> Result<Publisher<M>, DeployError> {
+    let q = qos(q);
+    let t = topic(node, name, ty, &q)?;
+    node.create_publisher(&t, Some(q)).map_err(|e| dds_err(name, e))
+}
+
+/// Take every waiting sample of `sub`; keep the newest in `latest`. Samples that fail to
+/// decode are counted, not fatal (one bad message must not stop the loop).
+pub(crate) fn drain<M: DeserializeOwned + 'static>(
+    sub: &Option<Subscription<M>>,
+    latest: &mut Option<M>,
+    bad: &mut u64,
+) {
+    let Some(s) = sub else { return };
+    loop {
+        match s.take() {
+            Ok(Some((m, _))) => *latest = Some(m),
+            Ok(None) => break,
+            Err(_) => *bad += 1,
+        }
+    }
+}
+
+#[derive(Default)]
+struct Latest {
+    scan: Option<msg::LaserScan>,
+    imu: Option<msg::Imu>,
+    odom: Option<msg::Odometry>,
+    navsat: Option<msg::NavSatFix>,
+}
+
+/// A car (or the sim-backed robot) over ROS 2.
+pub struct Ros2Vehicle {
+    cfg: Ros2Config,
+    lockstep: bool,
+    node: Node,
+    scan: Option<Subscription<msg::LaserScan>>,
+    imu: Option<Subscription<msg::Imu>>,
+    odom: Option<Subscription<msg::Odometry>>,
+    navsat: Option<Subscription<msg::NavSatFix>>,
+    drive: Publisher<msg::AckermannDriveStamped>,
+    poll: Poll,
+    events: Events,
+    latest: Latest,
+    bad_messages: u64,
+    last_stamp_s: f64,
+    awaiting: bool,
+    applied: Control,
+}
+
+impl Ros2Vehicle {
+    /// Join domain `cfg.domain_id` and create the subscriptions and the drive publisher.
+    pub fn new(cfg: Ros2Config, lockstep: bool) -> Result<Self, DeployError> {
+        cfg.validate().map_err(DeployError::Config)?;
+        let mut node = node(&cfg, &cfg.node_name)?;
+        let (t, q) = (&cfg.topics, cfg.qos.sensors);
+        let mut scan = subscribe(&mut node, &t.scan, SCAN_TYPE, q)?;
+        let mut imu = subscribe(&mut node, &t.imu, IMU_TYPE, q)?;
+        let mut odom = subscribe(&mut node, &t.odom, ODOM_TYPE, q)?;
+        let mut navsat = subscribe(&mut node, &t.navsat, NAVSAT_TYPE, q)?;
+        let drive = publisher(&mut node, &t.drive, DRIVE_TYPE, cfg.qos.drive)?;
+        let poll = Poll::new().map_err(|e| dds_err("poll", e))?;
+        let reg = poll.registry();
+        let io = |e: std::io::Error| dds_err("poll", e);
+        if let Some(s) = scan.as_mut() {
+            reg.register(s, Token(0), Interest::READABLE).map_err(io)?;
+        }
+        if let Some(s) = imu.as_mut() {
+            reg.register(s, Token(1), Interest::READABLE).map_err(io)?;
+        }
+        if let Some(s) = odom.as_mut() {
+            reg.register(s, Token(2), Interest::READABLE).map_err(io)?;
+        }
+        if let Some(s) = navsat.as_mut() {
+            reg.register(s, Token(3), Interest::READABLE).map_err(io)?;
+        }
+        Ok(Self {
+            cfg,
+            lockstep,
+            node,
+            scan,
+            imu,
+            odom,
+            navsat,
+            drive,
+            poll,
+            events: Events::with_capacity(16),
+            latest: Latest::default(),
+            bad_messages: 0,
+            last_stamp_s: f64::NEG_INFINITY,
+            awaiting: false,
+            applied: Control::default(),
+        })
+    }
+
+    /// Messages that failed to decode so far.
+    pub fn bad_messages(&self) -> u64 {
+        self.bad_messages
+    }
+
+    fn drain(&mut self) {
+        let b = &mut self.bad_messages;
+        drain(&self.scan, &mut self.latest.scan, b);
+        drain(&self.imu, &mut self.latest.imu, b);
+        drain(&self.odom, &mut self.latest.odom, b);
+        drain(&self.navsat, &mut self.latest.navsat, b);
+    }
+
+    /// Stamps of the subscribed topics (None: one has sent nothing yet).
+    fn stamps(&self) -> Option<f64> {
+        let l = &self.latest;
+        let s = |on: bool, h: Option<&msg::Header>| -> Option<f64> {
+            if on {
+                h.map(|h| h.stamp.as_secs())
+            } else {
+                Some(f64::INFINITY)
+            }
+        };
+        let all = [
+            s(self.scan.is_some(), l.scan.as_ref().map(|m| &m.header))?,
+            s(self.imu.is_some(), l.imu.as_ref().map(|m| &m.header))?,
+            s(self.odom.is_some(), l.odom.as_ref().map(|m| &m.header))?,
+            s(self.navsat.is_some(), l.navsat.as_ref().map(|m| &m.header))?,
+        ];
+        Some(all.into_iter().fold(f64::INFINITY, f64::min))
+    }
+
+    /// Wait until every subscribed topic has a message stamped after `after_s`, or `timeout`.
+    fn wait_newer(&mut self, after_s: f64, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        loop {
+            self.drain();
+            if self.stamps().is_some_and(|t| t > after_s) {
+                return true;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            // A poll error (EINTR) just retries until the deadline.
+            let _ = self.poll.poll(&mut self.events, Some(left));
+        }
+    }
+
+    fn frame(&self) -> SensorFrame {
+        let l = &self.latest;
+        let odom_ready = self.odom.is_none() || l.odom.is_some();
+        SensorFrame {
+            stamp_s: self.stamps().unwrap_or(f64::NEG_INFINITY),
+            scan: l.scan.as_ref().map(|s| scan_to_rays(s, &self.cfg.scan)),
+            imu: l
+                .imu
+                .as_ref()
+                .filter(|_| odom_ready)
+                .map(|i| mapping::imu_reading(i, l.odom.as_ref())),
+            gps: (l.odom.is_some() || l.navsat.is_some())
+                .then(|| mapping::gps_reading(l.odom.as_ref(), l.navsat.as_ref())),
+            image: None,
+            contact: None,
+            applied: self.applied,
+        }
+    }
+}
+
+impl Vehicle for Ros2Vehicle {
+    /// Wait for a full sensor set and a subscriber on the drive topic (`startup_timeout_s`);
+    /// nothing is published, so a car stays as it is.
+    fn reset(&mut self, _seed: u64) -> Result<SensorFrame, EnvError> {
+        let timeout = Duration::from_secs_f64(self.cfg.startup_timeout_s);
+        let t0 = Instant::now();
+        if !self.wait_newer(f64::NEG_INFINITY, timeout) {
+            let t = &self.cfg.topics;
+            return Err(EnvError::Vehicle(format!(
+                "no sensor data on {} within {} s (domain {}); is the car or `agvrl-drive --serve-sim` running?",
+                [&t.scan, &t.imu, &t.odom, &t.navsat]
+                    .iter()
+                    .filter(|n| !n.is_empty())
+                    .map(|n| n.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                self.cfg.startup_timeout_s,
+                self.cfg.domain_id
+            )));
+        }
+        // A command sent before its reader is matched would be lost; wait for one.
+        while self.node.subscription_count(&self.cfg.topics.drive) == 0 {
+            if t0.elapsed() > timeout {
+                return Err(EnvError::Vehicle(format!(
+                    "nobody subscribes {} within {} s (domain {})",
+                    self.cfg.topics.drive, self.cfg.startup_timeout_s, self.cfg.domain_id
+                )));
+            }
+            let _ = self.poll.poll(&mut self.events, Some(Duration::from_millis(5)));
+        }
+        self.applied = Control::default();
+        self.awaiting = false;
+        let f = self.frame();
+        self.last_stamp_s = f.stamp_s;
+        Ok(f)
+    }
+
+    fn actuate(&mut self, control: Control) -> Result<(), EnvError> {
+        let cmd = mapping::drive_command(control, &self.cfg.drive, self.last_stamp_s, &self.cfg.topics.frame_id);
+        self.drive
+            .publish(cmd)
+            .map_err(|e| EnvError::Vehicle(format!("publishing {}: {e}", self.cfg.topics.drive)))?;
+        self.applied = mapping::clip(control, &self.cfg.drive);
+        self.awaiting = true;
+        Ok(())
+    }
+
+    fn sense(&mut self) -> Result<SensorFrame, EnvError> {
+        if self.lockstep && self.awaiting {
+            // A timeout is no error: the old frame goes out and the watchdog judges its age.
+            self.wait_newer(self.last_stamp_s, Duration::from_secs_f64(self.cfg.fresh_timeout_s));
+        } else {
+            self.drain();
+        }
+        self.awaiting = false;
+        let f = self.frame();
+        if f.stamp_s.is_finite() {
+            self.last_stamp_s = f.stamp_s;
+        }
+        Ok(f)
+    }
+
+    fn control_period_s(&self) -> f64 {
+        // The car has no period of its own; the drive loop's rate rules.
+        1.0 / 30.0
+    }
+
+    fn steering_limit_rad(&self) -> f64 {
+        self.cfg.drive.steering_limit_rad
+    }
+}

@@ -1,0 +1,310 @@
+//! A sim-backed ROS 2 robot (`agvrl-drive --serve-sim ENV`): publishes the simulated car's
+//! LaserScan, Imu, Odometry (and NavSatFix) and applies the AckermannDriveStamped commands it
+//! receives, so the whole drive loop runs over real DDS. Each tick advances the simulator by
+//! exactly one control period; the task's evaluation counts laps and collisions on this side
+//! (a car's drive loop knows no map).
+
+use super::config::Ros2Config;
+use super::mapping;
+use super::msg;
+use super::ros2::{
+    DRIVE_TYPE, IMU_TYPE, NAVSAT_TYPE, ODOM_TYPE, Publisher, SCAN_TYPE, Subscription, node, publisher, subscribe,
+};
+use crate::DeployError;
+use agvrl_envs::api::{Control, SensorFrame, TerminationCause, Vehicle};
+use agvrl_envs::task::Task;
+use agvrl_envs::{EnvConfig, make_task, make_vehicle};
+use ros2_client::Node;
+use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
+use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// How the robot keeps time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pace {
+    /// One control period per received command, as fast as commands come (tests, benches).
+    Lockstep,
+    /// One control period per wall-clock period, holding the newest command (zero after
+    /// `COMMAND_TIMEOUT_S` without one, as a motor controller does).
+    Realtime,
+}
+
+/// Without a command for this long a real-time robot stops, seconds.
+pub const COMMAND_TIMEOUT_S: f64 = 0.5;
+
+/// Faults to inject, by robot tick (ticks count control periods since reset).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Faults {
+    /// From this tick on, no scans are published.
+    pub mute_scan_from: u64,
+    /// On these ticks, scan rays `nan_rays` read NaN.
+    pub nan_ticks: Range<u64>,
+    /// Which rays.
+    pub nan_rays: Range<usize>,
+}
+
+impl Default for Faults {
+    fn default() -> Self {
+        Self {
+            mute_scan_from: u64::MAX,
+            nan_ticks: 0..0,
+            nan_rays: 0..0,
+        }
+    }
+}
+
+/// What the robot has seen so far.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RobotStats {
+    /// Control periods simulated.
+    pub ticks: u64,
+    /// Simulated time, seconds.
+    pub stamp_s: f64,
+    /// Commands received.
+    pub commands: u64,
+    /// The newest command, as applied.
+    pub last_command: Control,
+    /// Completed laps (racing).
+    pub laps: u32,
+    /// Fastest lap, seconds.
+    pub best_lap_s: Option<f64>,
+    /// Ticks on which the task saw a termination (collision, too close, flipped, out).
+    pub terminations: u64,
+    /// The first termination and its tick.
+    pub first_termination: Option<(u64, TerminationCause)>,
+}
+
+/// A handle to stop a running robot and read its stats from another thread.
+#[derive(Clone, Default)]
+pub struct RobotHandle {
+    stop: Arc<AtomicBool>,
+    stats: Arc<Mutex<RobotStats>>,
+}
+
+impl RobotHandle {
+    /// Ask `run` to return.
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+
+    /// A copy of the stats.
+    pub fn stats(&self) -> RobotStats {
+        self.stats.lock().map(|s| s.clone()).unwrap_or_default()
+    }
+}
+
+/// The simulated car behind ROS 2 topics.
+pub struct SimRobot {
+    cfg: Ros2Config,
+    vehicle: Box<dyn Vehicle>,
+    task: Box<dyn Task>,
+    _node: Node,
+    scan: Publisher<msg::LaserScan>,
+    imu: Option<Publisher<msg::Imu>>,
+    odom: Option<Publisher<msg::Odometry>>,
+    navsat: Option<Publisher<msg::NavSatFix>>,
+    drive: Option<Subscription<msg::AckermannDriveStamped>>,
+    poll: Poll,
+    events: Events,
+    frame: SensorFrame,
+    faults: Faults,
+    handle: RobotHandle,
+    bad_messages: u64,
+}
+
+impl SimRobot {
+    /// The env `env`'s vehicle and task, reset with `seed`, behind the topics of `cfg` (its
+    /// `node_name` gets a `_sim` suffix). Sensor topics are published with the sensor QoS
+    /// made reliable, which a best-effort or a reliable reader both accept.
+    pub fn new(
+        env: &str,
+        env_cfg: &EnvConfig,
+        cfg: Ros2Config,
+        seed: u64,
+        faults: Faults,
+    ) -> Result<Self, DeployError> {
+        cfg.validate().map_err(DeployError::Config)?;
+        let err = |e: agvrl_envs::EnvError| DeployError::Vehicle(e.to_string());
+        let mut vehicle = make_vehicle(env, env_cfg).map_err(err)?;
+        let mut task = make_task(env, env_cfg, vehicle.steering_limit_rad()).map_err(err)?;
+        let frame = vehicle.reset(seed).map_err(err)?;
+        task.reset(&frame, vehicle.map());
+        let mut node = node(&cfg, &format!("{}_sim", cfg.node_name))?;
+        let t = &cfg.topics;
+        let q = super::config::TopicQos {
+            reliability: super::config::Reliability::Reliable,
+            ..cfg.qos.sensors
+        };
+        let scan = publisher(&mut node, &t.scan, SCAN_TYPE, q)?;
+        fn opt<M: serde::Serialize>(
+            node: &mut Node,
+            name: &str,
+            ty: (&str, &str),
+            q: super::config::TopicQos,
+        ) -> Result<Option<Publisher<M>>, DeployError> {
+            if name.is_empty() {
+                Ok(None)
+            } else {
+                publisher(node, name, ty, q).map(Some)
+            }
+        }
+        let imu = opt(&mut node, &t.imu, IMU_TYPE, q)?;
+        let odom = opt(&mut node, &t.odom, ODOM_TYPE, q)?;
+        let navsat = opt(&mut node, &t.navsat, NAVSAT_TYPE, q)?;
+        let mut drive = subscribe(&mut node, &t.drive, DRIVE_TYPE, cfg.qos.drive)?;
+        let poll = Poll::new().map_err(|e| DeployError::Vehicle(format!("poll: {e}")))?;
+        if let Some(d) = drive.as_mut() {
+            poll.registry()
+                .register(d, Token(0), Interest::READABLE)
+                .map_err(|e| DeployError::Vehicle(format!("poll: {e}")))?;
+        }
+        let handle = RobotHandle::default();
+        Ok(Self {
+            cfg,
+            vehicle,
+            task,
+            _node: node,
+            scan,
+            imu,
+            odom,
+            navsat,
+            drive,
+            poll,
+            events: Events::with_capacity(8),
+            frame,
+            faults,
+            handle,
+            bad_messages: 0,
+        })
+    }
+
+    /// A handle for another thread.
+    pub fn handle(&self) -> RobotHandle {
+        self.handle.clone()
+    }
+
+    /// Commands that failed to decode so far.
+    pub fn bad_messages(&self) -> u64 {
+        self.bad_messages
+    }
+
+    fn publish(&mut self) -> Result<(), DeployError> {
+        let f = &self.frame;
+        let t = &self.cfg.topics;
+        let tick = (f.stamp_s / self.vehicle.control_period_s()).round() as u64;
+        let pub_err = |name: &str, e: String| DeployError::Vehicle(format!("publishing {name}: {e}"));
+        if let Some(s) = &f.scan
+            && tick < self.faults.mute_scan_from
+        {
+            let mut m = mapping::scan_msg(s, f.stamp_s, "laser", self.vehicle.control_period_s() as f32);
+            if self.faults.nan_ticks.contains(&tick) {
+                for i in self.faults.nan_rays.clone() {
+                    if let Some(r) = m.ranges.get_mut(i) {
+                        *r = f32::NAN;
+                    }
+                }
+            }
+            self.scan.publish(m).map_err(|e| pub_err(&t.scan, e.to_string()))?;
+        }
+        if let (Some(p), Some(i)) = (&self.imu, &f.imu) {
+            p.publish(mapping::imu_msg(i, f.stamp_s, &t.frame_id))
+                .map_err(|e| pub_err(&t.imu, e.to_string()))?;
+        }
+        if let (Some(p), Some(i), Some(g)) = (&self.odom, &f.imu, &f.gps) {
+            p.publish(mapping::odom_msg(g, i, f.stamp_s, &t.frame_id))
+                .map_err(|e| pub_err(&t.odom, e.to_string()))?;
+        }
+        if let (Some(p), Some(geo)) = (&self.navsat, f.gps.as_ref().and_then(|g| g.geodetic)) {
+            p.publish(mapping::navsat_msg(&geo, f.stamp_s, "gps"))
+                .map_err(|e| pub_err(&t.navsat, e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    fn commands(&mut self) -> Vec<Control> {
+        let mut out = Vec::new();
+        if let Some(d) = &self.drive {
+            loop {
+                match d.take() {
+                    Ok(Some((m, _))) => out.push(mapping::control_of(&m.drive, &self.cfg.drive)),
+                    Ok(None) => break,
+                    Err(_) => self.bad_messages += 1,
+                }
+            }
+        }
+        out
+    }
+
+    /// One control period with `c`, then publish the new sensor set.
+    fn step(&mut self, c: Control, received: bool) -> Result<(), DeployError> {
+        let err = |e: agvrl_envs::EnvError| DeployError::Vehicle(e.to_string());
+        self.vehicle.actuate(c).map_err(err)?;
+        self.frame = self.vehicle.sense().map_err(err)?;
+        let out = self.task.evaluate(&self.frame, self.vehicle.map());
+        if let Ok(mut s) = self.handle.stats.lock() {
+            s.ticks += 1;
+            s.stamp_s = self.frame.stamp_s;
+            s.last_command = c;
+            s.commands += u64::from(received);
+            if let Some(r) = out.racing {
+                s.laps = r.laps;
+                s.best_lap_s = r.best_lap_s;
+            }
+            if let Some(t) = out.termination {
+                s.terminations += 1;
+                let tick = s.ticks;
+                s.first_termination.get_or_insert((tick, t));
+            }
+        }
+        self.publish()
+    }
+
+    /// Serve until `max_ticks` control periods have run (0: until stopped).
+    pub fn run(&mut self, pace: Pace, max_ticks: u64) -> Result<(), DeployError> {
+        let period = self.vehicle.control_period_s();
+        let done = |h: &RobotHandle| h.stop.load(Ordering::Relaxed) || (max_ticks > 0 && h.stats().ticks >= max_ticks);
+        self.publish()?;
+        match pace {
+            Pace::Lockstep => {
+                // Until a command comes, re-send the current set now and then for late joiners.
+                let mut last_pub = Instant::now();
+                while !done(&self.handle) {
+                    let _ = self.poll.poll(&mut self.events, Some(Duration::from_millis(20)));
+                    let cmds = self.commands();
+                    if cmds.is_empty() && last_pub.elapsed() > Duration::from_millis(50) {
+                        self.publish()?;
+                        last_pub = Instant::now();
+                    }
+                    for c in cmds {
+                        self.step(c, true)?;
+                        last_pub = Instant::now();
+                    }
+                }
+            }
+            Pace::Realtime => {
+                let t0 = Instant::now();
+                let mut held = Control::default();
+                let mut last_cmd = Instant::now();
+                let mut k = 0u32;
+                while !done(&self.handle) {
+                    k += 1;
+                    let deadline = t0 + Duration::from_secs_f64(period * k as f64);
+                    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+                        let _ = self.poll.poll(&mut self.events, Some(left));
+                    }
+                    let cmds = self.commands();
+                    if let Some(c) = cmds.last() {
+                        held = *c;
+                        last_cmd = Instant::now();
+                    } else if last_cmd.elapsed().as_secs_f64() > COMMAND_TIMEOUT_S {
+                        held = Control::default();
+                    }
+                    self.step(held, !cmds.is_empty())?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
