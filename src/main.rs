@@ -35,7 +35,7 @@ enum Cmd {
         /// Also run the learning checks (SAC and PPO on pendulum, 3 seeds; tens of minutes).
         #[arg(long)]
         learning: bool,
-        /// Only this part: sim, envs or rl.
+        /// Only this part: sim, envs, rl or deploy.
         #[arg(long)]
         only: Option<String>,
     },
@@ -78,8 +78,8 @@ fn bench(quick: bool, learning: bool, only: Option<&str>) -> Result<()> {
     let want = |part: &str| only.is_none_or(|o| o == part);
     if let Some(o) = only {
         anyhow::ensure!(
-            ["sim", "envs", "rl"].contains(&o),
-            "--only takes sim, envs or rl, not '{o}'"
+            ["sim", "envs", "rl", "deploy"].contains(&o),
+            "--only takes sim, envs, rl or deploy, not '{o}'"
         );
     }
     println!(
@@ -102,6 +102,11 @@ fn bench(quick: bool, learning: bool, only: Option<&str>) -> Result<()> {
     if want("rl") {
         for l in agvrl_rl::bench::run(quick)? {
             println!("{l}");
+        }
+    }
+    if want("deploy") {
+        for (k, v) in agvrl_deploy::bench::run(quick) {
+            println!("{k}={v}");
         }
     }
     if learning {

@@ -35,6 +35,28 @@ pub fn rss_mb() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
+/// Bytes of an ELF64 file's sections that are loaded into memory (what `strip` keeps, near
+/// enough: the release profile adds line tables, which are not loaded). None if not ELF64 LE.
+pub fn elf_loaded_bytes(b: &[u8]) -> Option<u64> {
+    let u16_at = |o: usize| Some(u16::from_le_bytes(b.get(o..o + 2)?.try_into().ok()?));
+    let u32_at = |o: usize| Some(u32::from_le_bytes(b.get(o..o + 4)?.try_into().ok()?));
+    let u64_at = |o: usize| Some(u64::from_le_bytes(b.get(o..o + 8)?.try_into().ok()?));
+    if b.get(0..4)? != b"\x7fELF" || *b.get(4)? != 2 || *b.get(5)? != 1 {
+        return None;
+    }
+    let (shoff, shentsize, shnum) = (u64_at(0x28)? as usize, u16_at(0x3a)? as usize, u16_at(0x3c)? as usize);
+    let mut total = 0;
+    for i in 0..shnum {
+        let h = shoff + i * shentsize;
+        let (kind, flags, size) = (u32_at(h + 4)?, u64_at(h + 8)?, u64_at(h + 32)?);
+        // SHF_ALLOC, and not SHT_NOBITS (.bss takes no file space).
+        if flags & 2 != 0 && kind != 8 {
+            total += size;
+        }
+    }
+    Some(total)
+}
+
 /// The `q` quantile (0..=1) of `v` (nearest rank; NaN for none).
 pub fn quantile(v: &[f64], q: f64) -> f64 {
     if v.is_empty() {
@@ -80,6 +102,9 @@ pub fn run(quick: bool) -> Vec<(String, String)> {
         Some(drive) => {
             if let Ok(m) = std::fs::metadata(&drive) {
                 out.push(kv("deploy_binary_mb", format!("{:.1}", m.len() as f64 / 1e6)));
+            }
+            if let Some(b) = std::fs::read(&drive).ok().and_then(|b| elf_loaded_bytes(&b)) {
+                out.push(kv("deploy_binary_loaded_mb", format!("{:.1}", b as f64 / 1e6)));
             }
             let steps = if quick { "30" } else { "300" };
             let res = std::process::Command::new(&drive)

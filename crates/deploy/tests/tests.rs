@@ -270,3 +270,47 @@ mod issue_7_ros2_loopback {
         assert_eq!(Ros2Config::from_toml(example).unwrap(), Ros2Config::default());
     }
 }
+
+/// The deploy binary's dependency tree (normal edges, default features): no viewer, no
+/// TLS / OpenSSL (a static link needs none), no zenoh. Cheaper than a static build in CI.
+#[test]
+fn issue_7_deploy_links_no_rerun_openssl_or_zenoh() {
+    let cargo = option_env!("CARGO").unwrap_or("cargo");
+    let out = std::process::Command::new(cargo)
+        .args([
+            "tree",
+            "-p",
+            "agvrl-deploy",
+            "-e",
+            "normal",
+            "--prefix",
+            "none",
+            "--offline",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("cargo tree runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let tree = String::from_utf8(out.stdout).unwrap();
+    let names: Vec<&str> = tree.lines().filter_map(|l| l.split_whitespace().next()).collect();
+    assert!(names.contains(&"ros2-client"), "the ros2 feature is on by default");
+    for bad in [
+        "rerun",
+        "openssl",
+        "openssl-sys",
+        "native-tls",
+        "zenoh",
+        "ring",
+        "plotters",
+    ] {
+        assert!(!names.contains(&bad), "agvrl-deploy depends on {bad}");
+    }
+}
+
+#[test]
+fn issue_7_elf_loaded_size_of_this_test_binary() {
+    let b = std::fs::read(std::env::current_exe().unwrap()).unwrap();
+    let n = agvrl_deploy::bench::elf_loaded_bytes(&b).unwrap();
+    assert!(n > 100_000 && n < b.len() as u64, "{n} of {}", b.len());
+    assert_eq!(agvrl_deploy::bench::elf_loaded_bytes(b"not an ELF file at all"), None);
+}
