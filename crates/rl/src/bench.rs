@@ -14,6 +14,7 @@
 //! `2 sigmoid(2x) - 1`, and PPO's loss head is fused on the host (see `ppo/update.rs`).
 //! Burn's `rayon`/`simd` options gave no measurable gain on this busy machine and are off.
 
+use crate::cnn::{Encoder, ImageSpec};
 use crate::device::CpuBackend;
 use crate::error::Result;
 use crate::nets::{Activation, Init, MlpSpec};
@@ -240,6 +241,7 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         head: ActionHead::SquashedGaussian,
         normalizer: Some(crate::normalize::ObsNormalizer::new(o)),
         config_toml: String::new(),
+        encoder: None,
     };
     let mut policy = Policy::new(data, &device);
     let obs = rng.normals(o);
@@ -257,6 +259,47 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
     lines.push(format!(
         "policy_infer_us={:.1} obs={o} act={a} net=256x256 batch=1 reps={reps}",
         median(us)
+    ));
+
+    // NatureCNN encoder alone, batch 1, one 48x64 depth image.
+    let spec = ImageSpec::new(1, 48, 64);
+    let enc = Encoder::new(spec, &spec.init(Init::TorchDefault, &mut rng)?, &device)?;
+    let image: Vec<f32> = (0..spec.len()).map(|_| rng.uniform() as f32).collect();
+    let calls = if quick { 200 } else { 500 };
+    let mut us = vec![];
+    for r in 0..=reps {
+        let t = Instant::now();
+        for _ in 0..calls {
+            std::hint::black_box(enc.forward(&image, spec.len())?);
+        }
+        if r > 0 {
+            us.push(t.elapsed().as_secs_f64() * 1e6 / calls as f64);
+        }
+    }
+    lines.push(format!(
+        "cnn_forward_us={:.1} image=1x48x64 features=256 batch=1 mflop={:.1} reps={reps}",
+        median(us),
+        2.0 * spec.macs()? as f64 / 1e6
+    ));
+
+    // PPO with that encoder on random observations (vector 8 + image): rollouts and updates.
+    let cfg = PpoConfig {
+        n_steps: 256,
+        image: Some(spec),
+        ..PpoConfig::default()
+    };
+    let env = VecEnv::new(vec![RandomEnv::new(8 + spec.len(), a)], 1)?;
+    let mut ppo = Ppo::new(cfg, env, &device, 0)?;
+    ppo.learn(256, &mut |_| Control::Continue)?;
+    let mut sps = vec![];
+    for _ in 0..ppo_reps {
+        let t = Instant::now();
+        ppo.learn(256, &mut |_| Control::Continue)?;
+        sps.push(256.0 / t.elapsed().as_secs_f64());
+    }
+    lines.push(format!(
+        "ppo_cnn_steps_per_s={:.0} image=1x48x64 n_envs=1 n_steps=256 batch=64 n_epochs=10 reps={ppo_reps}",
+        median(sps)
     ));
     Ok(lines)
 }

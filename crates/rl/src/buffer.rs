@@ -100,8 +100,8 @@ impl ReplayBuffer {
             b.dones.push(self.dones[i]);
         }
         if let Some(norm) = normalizer {
-            norm.normalize(&mut b.obs);
-            norm.normalize(&mut b.next_obs);
+            norm.normalize_rows(&mut b.obs, o);
+            norm.normalize_rows(&mut b.next_obs, o);
         }
         b
     }

@@ -14,7 +14,9 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Version of the checkpoint layout this build writes and reads.
-pub const CHECKPOINT_FORMAT_VERSION: u32 = 1;
+pub const CHECKPOINT_FORMAT_VERSION: u32 = 2;
+/// Versions this build reads: 1 has no image encoder (its configs lack `image`), 2 may have one.
+const CHECKPOINT_READS: [u32; 2] = [1, 2];
 const CHECKPOINT_MAGIC: &[u8; 8] = b"AGVRLCKP";
 
 /// Adam's scalars; its moments travel as arrays.
@@ -117,8 +119,7 @@ pub(crate) fn write<H: Serialize>(path: &Path, header: &H, arrays: &ArrayWriter<
 
 /// Read a checkpoint written by `algorithm`: its header and a reader over its arrays.
 pub(crate) fn read<'p, H: DeserializeOwned>(path: &'p Path, algorithm: Algorithm) -> Result<(H, ArrayReader<'p>)> {
-    let (h, arrays): (serde_json::Value, _) =
-        file::read(path, CHECKPOINT_MAGIC, CHECKPOINT_FORMAT_VERSION, "checkpoint")?;
+    let (h, arrays): (serde_json::Value, _) = file::read(path, CHECKPOINT_MAGIC, &CHECKPOINT_READS, "checkpoint")?;
     let found = h
         .get("algorithm")
         .and_then(|a| a.as_str())

@@ -121,13 +121,13 @@ impl Reader<'_> {
     }
 }
 
-/// Decode a container read from `path`: checks the checksum, magic and version, then parses
-/// the header as `H` and returns the arrays.
+/// Decode a container read from `path`: checks the checksum, magic and that the version is one
+/// of `versions`, then parses the header as `H` and returns the arrays.
 pub fn decode<H: DeserializeOwned>(
     path: &Path,
     bytes: &[u8],
     magic: &[u8; 8],
-    version: u32,
+    versions: &[u32],
     kind: &str,
 ) -> Result<(H, Vec<Vec<f32>>)> {
     if bytes.len() < 8 || &bytes[..8] != magic {
@@ -145,10 +145,10 @@ pub fn decode<H: DeserializeOwned>(
         ));
     }
     let got_version = u32::from_le_bytes([body[8], body[9], body[10], body[11]]);
-    if got_version != version {
+    if !versions.contains(&got_version) {
         return Err(bad(
             path,
-            format!("{kind} format version {got_version}, this build reads version {version}"),
+            format!("{kind} format version {got_version}, this build reads versions {versions:?}"),
         ));
     }
     let mut r = Reader {
@@ -176,9 +176,14 @@ pub fn decode<H: DeserializeOwned>(
 }
 
 /// Read and decode the container at `path`.
-pub fn read<H: DeserializeOwned>(path: &Path, magic: &[u8; 8], version: u32, kind: &str) -> Result<(H, Vec<Vec<f32>>)> {
+pub fn read<H: DeserializeOwned>(
+    path: &Path,
+    magic: &[u8; 8],
+    versions: &[u32],
+    kind: &str,
+) -> Result<(H, Vec<Vec<f32>>)> {
     let bytes = std::fs::read(path).map_err(io(path))?;
-    decode(path, &bytes, magic, version, kind)
+    decode(path, &bytes, magic, versions, kind)
 }
 
 #[cfg(test)]
@@ -195,15 +200,18 @@ mod tests {
         let a = [1.0f32, -2.5, 3.25];
         let bytes = encode(b"AGVRLTST", 3, &"hello", &[&a, &[]]).unwrap();
         let p = Path::new("x");
-        let (h, arrays): (String, _) = decode(p, &bytes, b"AGVRLTST", 3, "test").unwrap();
+        let (h, arrays): (String, _) = decode(p, &bytes, b"AGVRLTST", &[3], "test").unwrap();
         assert_eq!(h, "hello");
         assert_eq!(arrays, vec![a.to_vec(), vec![]]);
         for n in 0..bytes.len() {
-            assert!(decode::<String>(p, &bytes[..n], b"AGVRLTST", 3, "test").is_err(), "{n}");
+            assert!(
+                decode::<String>(p, &bytes[..n], b"AGVRLTST", &[3], "test").is_err(),
+                "{n}"
+            );
         }
         let mut flipped = bytes.clone();
         flipped[30] ^= 1;
-        assert!(decode::<String>(p, &flipped, b"AGVRLTST", 3, "test").is_err());
-        assert!(decode::<String>(p, &bytes, b"AGVRLTST", 4, "test").is_err());
+        assert!(decode::<String>(p, &flipped, b"AGVRLTST", &[3], "test").is_err());
+        assert!(decode::<String>(p, &bytes, b"AGVRLTST", &[4], "test").is_err());
     }
 }

@@ -18,6 +18,9 @@
 //! Invariants:
 //! - The learners know nothing of vehicles: observations and actions are flat `f32` rows; the
 //!   action space's box is honoured (SAC maps `[-1, 1]` onto it, PPO clips to it).
+//! - With `image` in the config, the last `C*H*W` values of a row are an image in [0, 1]
+//!   encoded by a NatureCNN ([`cnn`]) and never normalised; without it nothing differs from
+//!   an MLP-only build, bit for bit.
 //! - Termination stops bootstrapping, truncation bootstraps from `Info::final_obs`.
 //! - All randomness comes from one seeded [`rng::Rng`] per learner: the same seed on one thread
 //!   gives the same run, bit for bit (also for a fixed `Sac::set_threads` count).
@@ -39,6 +42,7 @@
 pub mod bench;
 mod buffer;
 mod checkpoint;
+pub mod cnn;
 pub mod device;
 mod error;
 pub mod eval;
@@ -54,11 +58,12 @@ pub mod sac;
 
 pub use buffer::ReplayBuffer;
 pub use checkpoint::CHECKPOINT_FORMAT_VERSION;
+pub use cnn::ImageSpec;
 pub use device::{CpuBackend, default_device, device_by_name};
 pub use error::{Result, RlError};
 pub use eval::evaluate;
 pub use normalize::ObsNormalizer;
-pub use policy::{Algorithm, POLICY_FORMAT_VERSION, Policy, PolicyData};
+pub use policy::{Algorithm, EncoderData, POLICY_FORMAT_VERSION, Policy, PolicyData};
 pub use ppo::{Ppo, PpoConfig};
 pub use progress::{Control, Losses, Progress};
 pub use sac::{Sac, SacConfig};

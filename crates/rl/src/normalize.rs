@@ -78,6 +78,36 @@ impl ObsNormalizer {
     }
 }
 
+impl ObsNormalizer {
+    /// [`update`](Self::update) with the statistics of the first `dim()` values of each
+    /// `row_len`-wide row (the rest, an image, is left out).
+    pub fn update_rows(&mut self, batch: &[f32], row_len: usize) {
+        let d = self.dim();
+        if row_len == d {
+            return self.update(batch);
+        }
+        if d == 0 || row_len == 0 {
+            return;
+        }
+        let head: Vec<f32> = batch.chunks_exact(row_len).flat_map(|r| &r[..d]).copied().collect();
+        self.update(&head);
+    }
+
+    /// [`normalize`](Self::normalize) of the first `dim()` values of each `row_len`-wide row.
+    pub fn normalize_rows(&self, obs: &mut [f32], row_len: usize) {
+        let d = self.dim();
+        if row_len == d {
+            return self.normalize(obs);
+        }
+        if d == 0 || row_len == 0 {
+            return;
+        }
+        for row in obs.chunks_exact_mut(row_len) {
+            self.normalize(&mut row[..d]);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -94,5 +124,17 @@ mod tests {
         let mut x = vec![499.5, 5.0 - 0.5 * 499.5];
         n.normalize(&mut x);
         assert!(x[0].abs() < 1e-3 && x[1].abs() < 1e-3);
+    }
+
+    #[test]
+    fn rows_leave_the_image_part_alone() {
+        let mut n = ObsNormalizer::new(1);
+        // Rows [v, image, image]: only v is tracked and normalised.
+        n.update_rows(&[2.0, 0.5, 0.25, 4.0, 0.5, 0.75], 3);
+        assert!((n.mean[0] - 3.0).abs() < 1e-3, "{:?}", n.mean);
+        let mut x = [3.0, 0.5, 0.25];
+        n.normalize_rows(&mut x, 3);
+        assert!(x[0].abs() < 1e-3);
+        assert_eq!(&x[1..], &[0.5, 0.25]);
     }
 }

@@ -1,7 +1,12 @@
 //! The trained policy: its file format and the [`Policy`] inference type used by eval and
 //! deploy. A policy file holds everything inference needs and nothing training needs: the
-//! actor's weights, the observation normaliser, both spaces, the algorithm and a format version.
+//! actor's weights (and its image encoder), the observation normaliser, both spaces, the
+//! algorithm and a format version.
+//!
+//! Format versions: 1 (MLP only) still loads; 2 adds an optional `encoder` (image spec in the
+//! header, its 8 arrays after the MLP's).
 
+use crate::cnn::{ImageSpec, encode};
 use crate::error::{Result, RlError};
 use crate::file;
 use crate::nets::{HostParams, MlpSpec, mlp_forward, to_vec};
@@ -13,7 +18,9 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Version of the policy file layout this build writes and reads.
-pub const POLICY_FORMAT_VERSION: u32 = 1;
+pub const POLICY_FORMAT_VERSION: u32 = 2;
+/// Older versions this build still reads.
+const POLICY_READS: [u32; 2] = [1, 2];
 const POLICY_MAGIC: &[u8; 8] = b"AGVRLPOL";
 
 /// Which algorithm trained a policy.
@@ -72,10 +79,21 @@ pub struct PolicyData {
     pub params: HostParams,
     /// How outputs become actions.
     pub head: ActionHead,
-    /// Observation normaliser, if training used one.
+    /// Observation normaliser of the vector part, if training used one.
     pub normalizer: Option<ObsNormalizer>,
     /// The training configuration, as resolved TOML (provenance only).
     pub config_toml: String,
+    /// The actor's image encoder, when the observation ends with an image.
+    pub encoder: Option<EncoderData>,
+}
+
+/// An image encoder's spec and weights (see [`crate::cnn`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EncoderData {
+    /// Image layout and feature width.
+    pub spec: ImageSpec,
+    /// Weights, in [`ImageSpec::param_shapes`] order.
+    pub params: HostParams,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -88,6 +106,8 @@ struct Header {
     head: ActionHead,
     normalizer: Option<ObsNormalizer>,
     config_toml: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    image: Option<ImageSpec>,
 }
 
 impl PolicyData {
@@ -102,8 +122,12 @@ impl PolicyData {
             head: self.head.clone(),
             normalizer: self.normalizer.clone(),
             config_toml: self.config_toml.clone(),
+            image: self.encoder.as_ref().map(|e| e.spec),
         };
-        let arrays: Vec<&[f32]> = self.params.data.iter().map(Vec::as_slice).collect();
+        let mut arrays: Vec<&[f32]> = self.params.data.iter().map(Vec::as_slice).collect();
+        if let Some(e) = &self.encoder {
+            arrays.extend(e.params.data.iter().map(Vec::as_slice));
+        }
         file::encode(POLICY_MAGIC, POLICY_FORMAT_VERSION, &header, &arrays)
     }
 
@@ -114,14 +138,36 @@ impl PolicyData {
 
     /// Read a policy file; rejects other formats, versions, truncation and corruption.
     pub fn load(path: &Path) -> Result<Self> {
-        let (h, arrays): (Header, _) = file::read(path, POLICY_MAGIC, POLICY_FORMAT_VERSION, "policy")?;
+        let (h, arrays): (Header, _) = file::read(path, POLICY_MAGIC, &POLICY_READS, "policy")?;
         Self::from_parts(path, h, arrays)
     }
 
-    fn from_parts(path: &Path, h: Header, arrays: Vec<Vec<f32>>) -> Result<Self> {
+    fn from_parts(path: &Path, h: Header, mut arrays: Vec<Vec<f32>>) -> Result<Self> {
         let bad = |reason: String| RlError::BadFile {
             path: path.to_path_buf(),
             reason,
+        };
+        let (o, a) = (h.observation_space.dim(), h.action_space.dim());
+        // The MLP sees the vector part and the image features instead of the raw image.
+        let (encoder, mlp_in, vec_dim) = match h.image {
+            None => (None, o, o),
+            Some(spec) => {
+                let shapes = spec.param_shapes().map_err(|e| bad(format!("image encoder: {e}")))?;
+                let vec_dim = spec.vector_dim(o).map_err(|e| bad(format!("image encoder: {e}")))?;
+                if arrays.len() < shapes.len() {
+                    return Err(bad("image encoder weights are missing".into()));
+                }
+                let data = arrays.split_off(arrays.len() - shapes.len());
+                if data
+                    .iter()
+                    .zip(&shapes)
+                    .any(|(d, s)| d.len() != s.iter().product::<usize>())
+                {
+                    return Err(bad("an image encoder weight array has the wrong length".into()));
+                }
+                let params = HostParams { shapes, data };
+                (Some(EncoderData { spec, params }), vec_dim + spec.features_dim, vec_dim)
+            }
         };
         let expect_shapes: Vec<[usize; 3]> = h
             .net
@@ -139,7 +185,6 @@ impl PolicyData {
         {
             return Err(bad("a weight array has the wrong length".into()));
         }
-        let (o, a) = (h.observation_space.dim(), h.action_space.dim());
         let out = match h.head {
             ActionHead::SquashedGaussian => 2 * a,
             ActionHead::Gaussian { ref log_std } if log_std.len() == a => a,
@@ -155,10 +200,10 @@ impl PolicyData {
                 return Err(bad("gSDE log_std shape differs from latent x action".into()));
             }
         };
-        if h.net.sizes.first() != Some(&o) || h.net.sizes.last() != Some(&out) {
+        if h.net.sizes.first() != Some(&mlp_in) || h.net.sizes.last() != Some(&out) {
             return Err(bad("network widths do not match the spaces".into()));
         }
-        if h.normalizer.as_ref().is_some_and(|n| n.dim() != o) {
+        if h.normalizer.as_ref().is_some_and(|n| n.dim() != vec_dim) {
             return Err(bad("normaliser width differs from the observation space".into()));
         }
         Ok(Self {
@@ -173,6 +218,7 @@ impl PolicyData {
             head: h.head,
             normalizer: h.normalizer,
             config_toml: h.config_toml,
+            encoder,
         })
     }
 
@@ -272,6 +318,7 @@ pub(crate) fn check_space(what: &'static str, file: &BoxSpace, env: &BoxSpace) -
 pub struct Policy {
     data: PolicyData,
     weights: Vec<Tensor<3>>,
+    encoder: Vec<Tensor<3>>,
     device: Device,
     rng: Rng,
     scratch: Vec<f32>,
@@ -282,9 +329,11 @@ impl Policy {
     pub fn new(data: PolicyData, device: &Device) -> Self {
         let device = device.clone().without_autodiff();
         let weights = data.params.to_device(&device);
+        let encoder = data.encoder.as_ref().map_or(vec![], |e| e.params.to_device(&device));
         Self {
             data,
             weights,
+            encoder,
             device,
             rng: Rng::new(0),
             scratch: Vec::new(),
@@ -353,9 +402,12 @@ impl Policy {
         self.scratch.clear();
         self.scratch.extend_from_slice(obs);
         if let Some(norm) = &self.data.normalizer {
-            norm.normalize(&mut self.scratch);
+            norm.normalize_rows(&mut self.scratch, o);
         }
-        let x = Tensor::<3>::from_data(TensorData::new(self.scratch.clone(), [1, n, o]), &self.device);
+        let mut x = Tensor::<3>::from_data(TensorData::new(self.scratch.clone(), [1, n, o]), &self.device);
+        if let Some(e) = &self.data.encoder {
+            x = encode(&self.encoder, &e.spec, x);
+        }
         let net = &self.data.net;
         let (out, latent) = match self.data.head {
             ActionHead::StateDependent { .. } if !deterministic => {

@@ -51,6 +51,9 @@ pub struct PpoConfig {
     pub sde_sample_freq: i64,
     /// Running observation normalisation (off).
     pub normalize_obs: bool,
+    /// The last `C*H*W` observation values are an image, encoded by one NatureCNN shared by
+    /// actor and critic (SB3's `CnnPolicy` default) and left out of `normalize_obs` (None).
+    pub image: Option<crate::cnn::ImageSpec>,
 }
 
 impl Default for PpoConfig {
@@ -76,6 +79,7 @@ impl Default for PpoConfig {
             use_sde: false,
             sde_sample_freq: -1,
             normalize_obs: false,
+            image: None,
         }
     }
 }
@@ -117,6 +121,9 @@ impl PpoConfig {
         }
         if self.net_arch.is_empty() || self.net_arch.contains(&0) {
             return bad("net_arch needs at least one non-zero width");
+        }
+        if let Some(image) = &self.image {
+            image.conv_shapes()?;
         }
         Ok(())
     }

@@ -3,6 +3,10 @@
 //! std (or gSDE with `use_sde`), GAE, clipped surrogate, advantage normalisation, global
 //! gradient clipping.
 //!
+//! With `image`, one NatureCNN ([`crate::cnn`]) shared by actor and critic turns the image
+//! part of the observation into features that join the vector part at the trunks' input (SB3's
+//! `CnnPolicy` / `MultiInputPolicy`); its weights follow the head tensors in the parameter list.
+//!
 //! Data flow per iteration: `n_steps` vector steps with the current policy on plain tensors
 //! (a truncated episode adds `gamma * V(final_obs)` to its last reward, as SB3) -> GAE ->
 //! `update.rs`: `n_epochs` passes of shuffled minibatches.
@@ -13,10 +17,11 @@ mod update;
 pub use config::PpoConfig;
 
 use crate::checkpoint::{self, AdamMeta, ArrayWriter};
+use crate::cnn::encode;
 use crate::error::Result;
 use crate::nets::{Adam, HostParams, Init, MlpSpec, init_layer, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
-use crate::policy::{ActionHead, Algorithm, Policy, PolicyData, check_space};
+use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, check_space};
 use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
 use agvrl_envs::{BoxSpace, Env, VecEnv};
@@ -29,11 +34,20 @@ fn head_idx(cfg: &PpoConfig) -> usize {
     2 * cfg.net_arch.len()
 }
 
+/// Index of the first image-encoder tensor (after `log_std`).
+fn encoder_idx(cfg: &PpoConfig) -> usize {
+    head_idx(cfg) + 5
+}
+
 /// `(mean [1, b, a], value [1, b, 1], actor latent [1, b, latent])` for observations
-/// `x [1, b, o]`. `params` is `[trunk..., pi_w, pi_b, vf_w, vf_b, log_std]`; `log_std` is
-/// `[1, 1, a]`, or `[1, latent, a]` with gSDE.
+/// `x [1, b, o]`. `params` is `[trunk..., pi_w, pi_b, vf_w, vf_b, log_std, encoder...]`;
+/// `log_std` is `[1, 1, a]`, or `[1, latent, a]` with gSDE; the encoder is there with `image`.
 pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (Tensor<3>, Tensor<3>, Tensor<3>) {
     let h0 = head_idx(cfg);
+    let x = match &cfg.image {
+        Some(spec) => encode(&params[encoder_idx(cfg)..], spec, x),
+        None => x,
+    };
     let h = mlp_forward(&params[..h0], x, cfg.activation_fn, true);
     let latent = h.clone().narrow(0, 0, 1);
     let mean = latent.clone().matmul(params[h0].clone()) + params[h0 + 1].clone();
@@ -104,8 +118,15 @@ impl<E: Env> Ppo<E> {
         cfg.validate()?;
         let obs_dim = env.observation_space().dim();
         let act_dim = env.action_space().dim();
+        let (vec_dim, mlp_in) = match &cfg.image {
+            Some(spec) => {
+                let v = spec.vector_dim(obs_dim)?;
+                (v, v + spec.features_dim)
+            }
+            None => (obs_dim, obs_dim),
+        };
         let mut rng = Rng::new(seed);
-        let mut sizes = vec![obs_dim];
+        let mut sizes = vec![mlp_in];
         sizes.extend(&cfg.net_arch);
         let trunk = MlpSpec {
             n_members: 2,
@@ -132,9 +153,16 @@ impl<E: Env> Ppo<E> {
         params.push([1, 1, 1], b);
         let rows = if cfg.use_sde { last } else { 1 };
         params.push([1, rows, act_dim], vec![cfg.log_std_init as f32; rows * act_dim]);
+        if let Some(spec) = &cfg.image {
+            // Drawn last, so MLP-only runs draw exactly what they always did.
+            let enc = spec.init(hidden, &mut rng)?;
+            for (s, d) in enc.shapes.into_iter().zip(enc.data) {
+                params.push(s, d);
+            }
+        }
         Ok(Self {
             opt: Adam::new(&params, cfg.learning_rate, 1e-5),
-            normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(obs_dim)),
+            normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(vec_dim)),
             device: device.clone().without_autodiff(),
             cfg,
             env,
@@ -169,7 +197,7 @@ impl<E: Env> Ppo<E> {
     fn normalized(&self, obs: &[f32]) -> Vec<f32> {
         let mut x = obs.to_vec();
         if let Some(n) = &self.normalizer {
-            n.normalize(&mut x);
+            n.normalize_rows(&mut x, self.obs_dim);
         }
         x
     }
@@ -202,7 +230,7 @@ impl<E: Env> Ppo<E> {
         let total = n_steps * n_envs;
         let dev = self.device.clone();
         let params = self.params.to_device(&dev);
-        let log_std = self.params.data[self.params.data.len() - 1].clone();
+        let log_std = self.params.data[head_idx(&self.cfg) + 4].clone();
         let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
         // log N(x; m, s) summed over elements = sum(-z^2/2) - sum(log s) - a ln(2 pi)/2
         let lp_const = -log_std.iter().sum::<f32>() - a as f32 * 0.918_938_5;
@@ -216,7 +244,7 @@ impl<E: Env> Ppo<E> {
                 let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
                 let (o0, _) = self.env.reset(Some(seed))?;
                 if let Some(n) = &mut self.normalizer {
-                    n.update(&o0);
+                    n.update_rows(&o0, o);
                 }
                 (o0, vec![true; n_envs])
             }
@@ -299,7 +327,7 @@ impl<E: Env> Ppo<E> {
             values.extend_from_slice(&value);
             episode_starts.extend(starts.iter().map(|s| *s as u8 as f32));
             if let Some(n) = &mut self.normalizer {
-                n.update(&st.obs);
+                n.update_rows(&st.obs, o);
             }
             self.episodes.record(&st.infos);
             self.num_timesteps += n_envs as u64;
@@ -342,7 +370,15 @@ impl<E: Env> Ppo<E> {
         }
         params.push(self.params.shapes[h0], self.params.data[h0].clone());
         params.push(self.params.shapes[h0 + 1], self.params.data[h0 + 1].clone());
-        let mut sizes = vec![self.obs_dim];
+        let e0 = encoder_idx(&self.cfg);
+        let encoder = self.cfg.image.map(|spec| EncoderData {
+            spec,
+            params: HostParams {
+                shapes: self.params.shapes[e0..].to_vec(),
+                data: self.params.data[e0..].to_vec(),
+            },
+        });
+        let mut sizes = vec![self.params.shapes[0][1]];
         sizes.extend(&self.cfg.net_arch);
         sizes.push(self.act_dim);
         PolicyData {
@@ -367,6 +403,7 @@ impl<E: Env> Ppo<E> {
             },
             normalizer: self.normalizer.clone(),
             config_toml: self.cfg.to_toml(),
+            encoder,
         }
     }
 

@@ -65,6 +65,10 @@ pub struct SacConfig {
     pub net_arch: Vec<usize>,
     /// Running observation normalisation (off, as SB3 without `VecNormalize`).
     pub normalize_obs: bool,
+    /// The last `C*H*W` observation values are an image, encoded by a NatureCNN for the actor
+    /// and another shared by the twin critics (SB3's SAC default, no sharing between actor and
+    /// critic); left out of `normalize_obs` (None).
+    pub image: Option<crate::cnn::ImageSpec>,
 }
 
 impl Default for SacConfig {
@@ -83,6 +87,7 @@ impl Default for SacConfig {
             target_entropy: None,
             net_arch: vec![256, 256],
             normalize_obs: false,
+            image: None,
         }
     }
 }
@@ -118,6 +123,9 @@ impl SacConfig {
         }
         if self.net_arch.is_empty() || self.net_arch.contains(&0) {
             return bad("net_arch needs at least one non-zero width");
+        }
+        if let Some(image) = &self.image {
+            image.conv_shapes()?;
         }
         self.ent_coef.auto_init().map(|_| ())
     }

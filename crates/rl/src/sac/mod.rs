@@ -1,6 +1,13 @@
 //! Soft Actor-Critic (Haarnoja et al. 2018) as Stable-Baselines3 runs it: tanh-squashed
 //! Gaussian actor, twin critics with Polyak-averaged targets, learned entropy coefficient.
 //!
+//! With `image`, the actor and the critics each have a NatureCNN ([`crate::cnn`]) whose
+//! features replace the image part of the observation at their input (SB3's SAC default: no
+//! sharing; the twin critics share theirs, and the target critics copy it). Its tensors follow
+//! the MLP's in `actor`, `critic` and `critic_target`. The replay buffer stores raw f32
+//! observations, images included: size `buffer_size` for the memory (2 x 4 bytes x
+//! observation width per transition).
+//!
 //! Data flow per vector step: actor (or uniform noise before `learning_starts`) -> env ->
 //! replay buffer (`next_obs` is `final_obs` where an episode ended; only termination stops
 //! bootstrapping) -> `update.rs` every `train_freq` steps.
@@ -12,10 +19,11 @@ pub use config::{EntCoef, SacConfig};
 
 use crate::buffer::ReplayBuffer;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter};
+use crate::cnn::encode;
 use crate::error::{Result, RlError};
 use crate::nets::{Activation, Adam, HostParams, Init, MlpSpec, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
-use crate::policy::{ActionHead, Algorithm, Policy, PolicyData, check_space, unsquash};
+use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, check_space, unsquash};
 use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
 use agvrl_envs::{BoxSpace, Env, VecEnv};
@@ -96,6 +104,13 @@ impl<E: Env> Sac<E> {
         let obs_dim = env.observation_space().dim();
         let act_dim = env.action_space().dim();
         finite_box(env.action_space())?;
+        let (vec_dim, mlp_in) = match &cfg.image {
+            Some(spec) => {
+                let v = spec.vector_dim(obs_dim)?;
+                (v, v + spec.features_dim)
+            }
+            None => (obs_dim, obs_dim),
+        };
         let mut rng = Rng::new(seed);
         let hidden = |input: usize, out: usize, members: usize| {
             let mut sizes = vec![input];
@@ -108,10 +123,19 @@ impl<E: Env> Sac<E> {
                 activate_last: false,
             }
         };
-        let actor_spec = hidden(obs_dim, 2 * act_dim, 1);
-        let critic_spec = hidden(obs_dim + act_dim, 1, 2);
-        let actor = actor_spec.init(&[Init::TorchDefault], &mut rng);
-        let critic = critic_spec.init(&[Init::TorchDefault], &mut rng);
+        let actor_spec = hidden(mlp_in, 2 * act_dim, 1);
+        let critic_spec = hidden(mlp_in + act_dim, 1, 2);
+        let mut actor = actor_spec.init(&[Init::TorchDefault], &mut rng);
+        let mut critic = critic_spec.init(&[Init::TorchDefault], &mut rng);
+        if let Some(spec) = &cfg.image {
+            // Drawn after the MLPs, so MLP-only runs draw exactly what they always did.
+            for net in [&mut actor, &mut critic] {
+                let enc = spec.init(Init::TorchDefault, &mut rng)?;
+                for (s, d) in enc.shapes.into_iter().zip(enc.data) {
+                    net.push(s, d);
+                }
+            }
+        }
         let critic_target = critic.clone();
         let ent_init = cfg.ent_coef.auto_init()?;
         let log_ent_coef = HostParams {
@@ -129,7 +153,7 @@ impl<E: Env> Sac<E> {
             critic_opt: Adam::new(&critic, cfg.learning_rate, 1e-8),
             target_entropy: cfg.target_entropy.unwrap_or(-(act_dim as f64)),
             buffer: ReplayBuffer::new(cfg.buffer_size, obs_dim, act_dim),
-            normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(obs_dim)),
+            normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(vec_dim)),
             threads: 1,
             actor_dev: vec![],
             critic_dev: vec![],
@@ -155,6 +179,11 @@ impl<E: Env> Sac<E> {
         };
         s.upload_all();
         Ok(s)
+    }
+
+    /// Tensors of the actor's (or a critic stack's) MLP; the image encoder's follow.
+    fn n_mlp(&self) -> usize {
+        2 * (self.cfg.net_arch.len() + 1)
     }
 
     fn upload_all(&mut self) {
@@ -205,7 +234,7 @@ impl<E: Env> Sac<E> {
                     let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
                     let (o, _) = self.env.reset(Some(seed))?;
                     if let Some(n) = &mut self.normalizer {
-                        n.update(&o);
+                        n.update_rows(&o, self.obs_dim);
                     }
                     o
                 }
@@ -239,7 +268,7 @@ impl<E: Env> Sac<E> {
                 );
             }
             if let Some(n) = &mut self.normalizer {
-                n.update(&st.obs);
+                n.update_rows(&st.obs, o);
             }
             self.episodes.record(&st.infos);
             self.num_timesteps += n_envs as u64;
@@ -271,10 +300,14 @@ impl<E: Env> Sac<E> {
         let n = obs.len() / self.obs_dim;
         let mut x = obs.to_vec();
         if let Some(norm) = &self.normalizer {
-            norm.normalize(&mut x);
+            norm.normalize_rows(&mut x, self.obs_dim);
         }
-        let x = Tensor::<3>::from_data(TensorData::new(x, [1, n, self.obs_dim]), &self.device);
-        let out = to_vec(mlp_forward(&self.actor_dev, x, Activation::Relu, false))?;
+        let mut x = Tensor::<3>::from_data(TensorData::new(x, [1, n, self.obs_dim]), &self.device);
+        let k = self.n_mlp();
+        if let Some(spec) = &self.cfg.image {
+            x = encode(&self.actor_dev[k..], spec, x);
+        }
+        let out = to_vec(mlp_forward(&self.actor_dev[..k], x, Activation::Relu, false))?;
         let a = self.act_dim;
         let mut acts = Vec::with_capacity(n * a);
         for row in out.chunks_exact(2 * a) {
@@ -292,15 +325,25 @@ impl<E: Env> Sac<E> {
     pub fn policy_data(&self) -> PolicyData {
         let mut net = self.actor_spec.clone();
         net.n_members = 1;
+        let k = self.n_mlp();
+        let part = |r: std::ops::Range<usize>| HostParams {
+            shapes: self.actor.shapes[r.clone()].to_vec(),
+            data: self.actor.data[r].to_vec(),
+        };
+        let n = self.actor.shapes.len();
         PolicyData {
             algorithm: Algorithm::Sac,
             observation_space: self.env.observation_space().clone(),
             action_space: self.env.action_space().clone(),
             net,
-            params: self.actor.clone(),
+            params: part(0..k),
             head: ActionHead::SquashedGaussian,
             normalizer: self.normalizer.clone(),
             config_toml: self.cfg.to_toml(),
+            encoder: self.cfg.image.map(|spec| EncoderData {
+                spec,
+                params: part(k..n),
+            }),
         }
     }
 

@@ -12,6 +12,7 @@
 //! deterministic for a fixed thread count.
 
 use super::Sac;
+use crate::cnn::{ImageSpec, encode};
 use crate::error::{Result, RlError};
 use crate::nets::{Activation, grads_of, mlp_forward, to_vec};
 use crate::policy::{LOG_STD_MAX, LOG_STD_MIN};
@@ -68,11 +69,38 @@ struct Shared<'a> {
     batch: usize,
     gamma: f64,
     ent_coef: f64,
+    /// MLP tensors per net; with `image` the encoder's follow.
+    n_mlp: usize,
+    image: Option<ImageSpec>,
 }
 
 impl Shared<'_> {
     fn t3(&self, v: &[f32], s: [usize; 3]) -> Tensor<3> {
         Tensor::<3>::from_data(TensorData::new(v.to_vec(), s), self.device)
+    }
+
+    /// The observation as a net's MLP sees it: the image part replaced by the net's encoder
+    /// features.
+    fn features(&self, net: &[Tensor<3>], obs: Tensor<3>) -> Tensor<3> {
+        match &self.image {
+            Some(spec) => encode(&net[self.n_mlp..], spec, obs),
+            None => obs,
+        }
+    }
+
+    /// Actor outputs `[1, b, 2a]`.
+    fn actor_out(&self, actor: &[Tensor<3>], obs: Tensor<3>) -> Tensor<3> {
+        mlp_forward(&actor[..self.n_mlp], self.features(actor, obs), Activation::Relu, false)
+    }
+
+    /// Twin Q values `[2, b, 1]` from critic features and actions.
+    fn q(&self, critic: &[Tensor<3>], features: Tensor<3>, action: Tensor<3>) -> Tensor<3> {
+        mlp_forward(
+            &critic[..self.n_mlp],
+            Tensor::cat(vec![features, action], 2),
+            Activation::Relu,
+            false,
+        )
     }
 
     /// Entropy statistics, TD target and critic gradients for one block.
@@ -83,16 +111,11 @@ impl Shared<'_> {
         // One plain actor forward on [obs; next_obs].
         let both = Tensor::cat(vec![obs.clone(), next_obs.clone()], 1);
         let eps = Tensor::cat(vec![self.t3(&b.eps_pi, [1, n, a]), self.t3(&b.eps_next, [1, n, a])], 1);
-        let (act, log_prob) = squashed_sample(mlp_forward(self.actor, both, Activation::Relu, false), eps, a);
+        let (act, log_prob) = squashed_sample(self.actor_out(self.actor, both), eps, a);
         let log_prob_sum = to_vec(log_prob.clone().narrow(1, 0, n).sum())?[0] as f64;
         let (next_action, next_log_prob) = (act.narrow(1, n, n), log_prob.narrow(1, n, n));
         // Target: r + gamma (1 - terminated) (min Q_targ(s', a') - alpha log pi(a'|s')).
-        let q_next = mlp_forward(
-            self.target,
-            Tensor::cat(vec![next_obs, next_action], 2),
-            Activation::Relu,
-            false,
-        );
+        let q_next = self.q(self.target, self.features(self.target, next_obs), next_action);
         let q_next = min_of_twins(q_next) - next_log_prob * self.ent_coef;
         let target_q = self.t3(&b.rewards, [1, n, 1]) + self.t3(&b.not_done, [1, n, 1]) * q_next * self.gamma;
         // 0.5 * sum over both critics of the MSE, one batched forward.
@@ -101,8 +124,8 @@ impl Shared<'_> {
             .iter()
             .map(|t| t.clone().autodiff().require_grad())
             .collect();
-        let x = Tensor::cat(vec![obs, self.t3(&b.actions, [1, n, a])], 2).autodiff();
-        let q = mlp_forward(&critic, x, Activation::Relu, false);
+        let features = self.features(&critic, obs.autodiff());
+        let q = self.q(&critic, features, self.t3(&b.actions, [1, n, a]).autodiff());
         let loss = (q - target_q.autodiff()).powi_scalar(2).sum() * (0.5 / self.batch as f64);
         let grads = grads_of(&critic, &loss.backward())?;
         Ok(CriticOut {
@@ -116,16 +139,13 @@ impl Shared<'_> {
     /// the (updated) critics held constant.
     fn actor_block(&self, b: &Block) -> Result<(Vec<Vec<f32>>, f64)> {
         let (n, o, a) = (b.rows, self.o, self.a);
-        let obs = self.t3(&b.obs, [1, n, o]).autodiff();
+        let obs = self.t3(&b.obs, [1, n, o]);
         let actor: Vec<Tensor<3>> = self.actor.iter().map(|t| t.clone().autodiff().require_grad()).collect();
-        let out = mlp_forward(&actor, obs.clone(), Activation::Relu, false);
+        let out = self.actor_out(&actor, obs.clone().autodiff());
         let (pi_action, log_prob) = squashed_sample(out, self.t3(&b.eps_pi, [1, n, a]).autodiff(), a);
-        let q_pi = mlp_forward(
-            self.critic,
-            Tensor::cat(vec![obs, pi_action], 2),
-            Activation::Relu,
-            false,
-        );
+        // The critics' features are constants here: computed plain, then joined to the graph.
+        let critic_features = self.features(self.critic, obs).autodiff();
+        let q_pi = self.q(self.critic, critic_features, pi_action);
         let loss = (log_prob * self.ent_coef - min_of_twins(q_pi)).sum() / self.batch as f64;
         let grads = grads_of(&actor, &loss.backward())?;
         Ok((grads, to_vec(loss.inner())?[0] as f64))
@@ -199,6 +219,8 @@ impl<E: Env> Sac<E> {
             batch: b,
             gamma: self.cfg.gamma,
             ent_coef,
+            n_mlp: self.n_mlp(),
+            image: self.cfg.image,
         };
         let critic_out = run_blocks(&blocks, |blk| shared.critic_block(blk))?;
         let mean_log_prob = critic_out.iter().map(|c| c.log_prob_sum).sum::<f64>() / b as f64;
