@@ -3,9 +3,13 @@
 //! racing policy (configs/default.toml).
 
 mod config;
+mod episode;
+mod plots;
 mod probe;
 mod runs;
 mod train;
+#[cfg_attr(not(feature = "rerun"), path = "viz_off.rs")]
+mod viz;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -23,6 +27,8 @@ enum Cmd {
     Train(train::TrainArgs),
     /// Evaluate a trained run with deterministic actions; prints key=value lines.
     Eval(train::EvalArgs),
+    /// Drive one episode (a policy, or random actions) into the rerun viewer or an .rrd file.
+    View(train::ViewArgs),
     /// List the environment ids with their observation and action spaces.
     Envs,
     /// Print what the car senses at a pose (LiDAR scan, GPS, IMU) as JSON.
@@ -54,6 +60,7 @@ fn run() -> Result<()> {
         None => train::train(train::TrainArgs::default()),
         Some(Cmd::Train(a)) => train::train(a),
         Some(Cmd::Eval(a)) => train::eval(a),
+        Some(Cmd::View(a)) => train::view(a),
         Some(Cmd::Envs) => envs(),
         Some(Cmd::Probe(a)) => probe::probe(a),
         Some(Cmd::Bench { quick, learning, only }) => bench(quick, learning, only.as_deref()),

@@ -1,8 +1,11 @@
 //! `agvrl train` and `agvrl eval`.
 
 use crate::config::{DEFAULT_TOML, RunConfig};
+use crate::episode::{Observer, RandomActions, StepView, drive, make_sim_env};
+use crate::plots::{self, Path2};
 use crate::runs::{RunDir, stamp, write_atomic};
-use agvrl_envs::{Env, EnvConfig, VecEnv, make};
+use crate::viz::{self, Recorder, Sink};
+use agvrl_envs::{Env, EnvConfig, Step, VecEnv, make};
 use agvrl_rl::{Control, Policy, Ppo, Progress, Sac};
 use anyhow::{Context, Result, bail};
 use clap::Args;
@@ -85,6 +88,44 @@ pub struct EvalArgs {
     /// Number of deterministic episodes.
     #[arg(long, default_value_t = 5)]
     pub episodes: usize,
+    /// Record the episodes into this rerun file (.rrd; open it with `rerun FILE`).
+    #[arg(long, value_name = "FILE.rrd", conflicts_with = "spawn_viewer")]
+    pub rerun: Option<PathBuf>,
+    /// Stream the episodes to a rerun viewer started from `rerun` on your PATH.
+    #[arg(long)]
+    pub spawn_viewer: bool,
+    /// Also draw the evaluated paths over the map into this PNG.
+    #[arg(long, value_name = "FILE.png")]
+    pub plot: Option<PathBuf>,
+    /// Evaluate on another env with the same spaces (a generalisation test, e.g. a policy
+    /// trained on search-outdoor-20 run on search-urban-50); the run's env settings are kept.
+    #[arg(long, value_name = "ID")]
+    pub env: Option<String>,
+}
+
+#[derive(Args)]
+pub struct ViewArgs {
+    /// Environment id (see `agvrl envs`).
+    #[arg(long, required_unless_present = "run")]
+    pub env: Option<String>,
+    /// Drive with this policy file (default: uniform random actions).
+    #[arg(long)]
+    pub policy: Option<PathBuf>,
+    /// Take env, env settings and policy from a run directory.
+    #[arg(long, conflicts_with_all = ["env"])]
+    pub run: Option<PathBuf>,
+    /// Seed of the episode (spawn, random actions).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Episode length limit, control steps (default: the env's).
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Write the recording here (default: view-<env>.rrd).
+    #[arg(long, value_name = "FILE.rrd", conflicts_with = "spawn_viewer")]
+    pub rerun: Option<PathBuf>,
+    /// Stream to a rerun viewer started from `rerun` on your PATH instead of a file.
+    #[arg(long)]
+    pub spawn_viewer: bool,
 }
 
 struct Row {
@@ -117,8 +158,28 @@ fn resolve(a: &TrainArgs) -> Result<RunConfig> {
     if let Some(v) = a.n_envs {
         cfg.n_envs = v;
     }
+    image_spec_from_env(&mut cfg);
     cfg.validate()?;
     Ok(cfg)
+}
+
+/// An env that appends camera channels gets the CNN encoder in both learners, sized to the
+/// image, unless the config already names one (its `features_dim` is kept).
+fn image_spec_from_env(cfg: &mut RunConfig) {
+    let img = &cfg.env_config.observation.image;
+    if img.is_empty() {
+        return;
+    }
+    let (h, w) = (img.height as usize, img.width as usize);
+    let spec = agvrl_rl::ImageSpec::new(img.len() / (h * w), h, w);
+    let keep = |s: Option<agvrl_rl::ImageSpec>| {
+        Some(agvrl_rl::ImageSpec {
+            features_dim: s.map_or(spec.features_dim, |s| s.features_dim),
+            ..spec
+        })
+    };
+    cfg.ppo.image = keep(cfg.ppo.image);
+    cfg.sac.image = keep(cfg.sac.image);
 }
 
 fn vec_env(cfg: &RunConfig) -> Result<VecEnv<Box<dyn Env>>> {
@@ -240,6 +301,7 @@ fn run_learner(
     learner.save_policy(&policy_path)?;
     bar.finish_and_clear();
     let interrupted = learner.num_timesteps() < target;
+    let train_s = t0.elapsed().as_secs_f64();
     let mut csv = if previous_csv.is_empty() {
         String::from("step,episodes,mean_return,policy_loss,value_loss,entropy,steps_per_s\n")
     } else {
@@ -255,16 +317,34 @@ fn run_learner(
     }
     write_atomic(&file("metrics.csv"), csv.as_bytes())?;
     let mut policy = Policy::load(&policy_path)?;
+    let mut watch = Watch {
+        rec_episodes: 1,
+        ..Watch::default()
+    };
+    if viz::ENABLED && agvrl_envs::registry::scene_of(&cfg.env).is_some() {
+        watch.rec = Some(Recorder::new(
+            Sink::File(file("eval.rrd")),
+            &format!("{} {} eval", cfg.env, cfg.algo),
+        )?);
+    }
     let summary = evaluate(
         &mut policy,
         &cfg.env,
         &cfg.eval_env_config(),
         cfg.eval_episodes,
         cfg.seed + 1_000_000,
+        &mut |v| watch.see(v),
     )?;
+    if let Some(r) = watch.rec.take() {
+        r.finish()?;
+    }
+    let title = format!("{} {} seed {}", cfg.env, cfg.algo, cfg.seed);
+    watch.plot(&file("trajectory.png"), &format!("{title}: deterministic evaluation"))?;
+    plots::learning_curve(&file("learning_curve.png"), &plots::curve_of_csv(&csv), &title)?;
     let mut text = format!(
-        "train_s={:.1}\nsteps={}\n",
-        t0.elapsed().as_secs_f64(),
+        "train_s={:.1}\neval_s={:.1}\nsteps={}\n",
+        train_s,
+        t0.elapsed().as_secs_f64() - train_s,
         learner.num_timesteps()
     );
     if interrupted {
@@ -320,11 +400,34 @@ impl Summary {
     }
 }
 
-pub fn evaluate(policy: &mut Policy, env_id: &str, env_cfg: &EnvConfig, episodes: usize, seed: u64) -> Result<Summary> {
-    let mut env = make(env_id, env_cfg)?;
-    policy
-        .check_spaces(&env.observation_space(), &env.action_space())
-        .context("the policy does not fit this env")?;
+fn account(s: &mut Summary, st: &Step, cov_sum: &mut f64) {
+    if st.terminated {
+        s.collisions += 1;
+    }
+    if let Some(r) = &st.info.racing {
+        s.racing = true;
+        s.laps += r.laps;
+        if let Some(b) = r.best_lap_s {
+            s.best_lap_s = Some(s.best_lap_s.map_or(b, |x: f64| x.min(b)));
+        }
+    }
+    if let Some(c) = &st.info.search {
+        *cov_sum += c.coverage;
+        s.subjects.0 += c.subjects_found;
+        s.subjects.1 += c.subjects_total;
+        s.subjects.2.extend(&c.find_times_s);
+    }
+}
+
+/// Deterministic evaluation; `obs` sees every step of vehicle envs.
+pub fn evaluate(
+    policy: &mut Policy,
+    env_id: &str,
+    env_cfg: &EnvConfig,
+    episodes: usize,
+    seed: u64,
+    obs: &mut Observer<'_>,
+) -> Result<Summary> {
     let mut s = Summary {
         episodes,
         mean_return: 0.0,
@@ -336,32 +439,34 @@ pub fn evaluate(policy: &mut Policy, env_id: &str, env_cfg: &EnvConfig, episodes
         racing: false,
     };
     let mut cov_sum = 0.0;
-    for k in 0..episodes {
-        let (mut obs, _) = env.reset(Some(seed + k as u64))?;
-        loop {
-            let act = policy.act(&obs, true)?;
-            let st = env.step(&act)?;
-            s.mean_return += st.reward;
-            if st.done() {
-                if st.terminated {
-                    s.collisions += 1;
-                }
-                if let Some(r) = &st.info.racing {
-                    s.racing = true;
-                    s.laps += r.laps;
-                    if let Some(b) = r.best_lap_s {
-                        s.best_lap_s = Some(s.best_lap_s.map_or(b, |x: f64| x.min(b)));
-                    }
-                }
-                if let Some(c) = &st.info.search {
-                    cov_sum += c.coverage;
-                    s.subjects.0 += c.subjects_found;
-                    s.subjects.1 += c.subjects_total;
-                    s.subjects.2.extend(&c.find_times_s);
-                }
-                break;
+    let check = |o: &agvrl_envs::BoxSpace, a: &agvrl_envs::BoxSpace, p: &Policy| {
+        p.check_spaces(o, a).context("the policy does not fit this env")
+    };
+    match make_sim_env(env_id, env_cfg)? {
+        Some(mut env) => {
+            check(&env.observation_space(), &env.action_space(), policy)?;
+            for k in 0..episodes {
+                let mut act = |o: &[f32]| Ok(policy.act(o, true)?);
+                let (ret, last) = drive(&mut env, seed + k as u64, k, &mut act, obs)?;
+                s.mean_return += ret;
+                account(&mut s, &last, &mut cov_sum);
             }
-            obs = st.obs;
+        }
+        None => {
+            let mut env = make(env_id, env_cfg)?;
+            check(&env.observation_space(), &env.action_space(), policy)?;
+            for k in 0..episodes {
+                let (mut o, _) = env.reset(Some(seed + k as u64))?;
+                loop {
+                    let st = env.step(&policy.act(&o, true)?)?;
+                    s.mean_return += st.reward;
+                    if st.done() {
+                        account(&mut s, &st, &mut cov_sum);
+                        break;
+                    }
+                    o = st.obs;
+                }
+            }
         }
     }
     s.mean_return /= episodes.max(1) as f64;
@@ -369,6 +474,48 @@ pub fn evaluate(policy: &mut Policy, env_id: &str, env_cfg: &EnvConfig, episodes
         s.coverage = Some(cov_sum / episodes.max(1) as f64);
     }
     Ok(s)
+}
+
+/// Collects evaluated paths (and the scene) for trajectory.png, and records into rerun.
+#[derive(Default)]
+struct Watch {
+    paths: Vec<Path2>,
+    scene: Option<agvrl_sim::Scene>,
+    rec: Option<Recorder>,
+    /// Record only episodes below this index.
+    rec_episodes: usize,
+}
+
+impl Watch {
+    fn see(&mut self, v: &StepView<'_>) -> Result<()> {
+        if self.scene.is_none() {
+            self.scene = Some(v.sim.scene().clone());
+        }
+        if v.step == 0 {
+            self.paths.push(Path2 {
+                xy: Vec::new(),
+                collided: false,
+            });
+        }
+        if let Some(p) = self.paths.last_mut() {
+            let t = v.sim.base_pose().translation;
+            p.xy.push((t.x, t.y));
+            p.collided |= v.terminated;
+        }
+        if v.episode < self.rec_episodes
+            && let Some(r) = &mut self.rec
+        {
+            r.step(v)?;
+        }
+        Ok(())
+    }
+
+    fn plot(&self, path: &std::path::Path, title: &str) -> Result<bool> {
+        match &self.scene {
+            Some(scene) => plots::trajectory(path, scene, &self.paths, title).map(|_| true),
+            None => Ok(false),
+        }
+    }
 }
 
 pub fn eval(a: EvalArgs) -> Result<()> {
@@ -379,15 +526,121 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         .with_context(|| format!("{} is not a run directory", a.run.display()))?;
     let mut policy = Policy::load(&a.run.join(POLICY_FILE))
         .with_context(|| format!("loading {}", a.run.join(POLICY_FILE).display()))?;
+    let mut watch = Watch {
+        rec_episodes: a.episodes,
+        ..Watch::default()
+    };
+    if let Some(sink) = viz::sink_of(a.rerun.as_deref(), a.spawn_viewer) {
+        watch.rec = Some(Recorder::new(sink, &format!("{} eval", a.run.display()))?);
+    }
+    let env_id = a.env.clone().unwrap_or_else(|| cfg.env.clone());
     let s = evaluate(
         &mut policy,
-        &cfg.env,
+        &env_id,
         &cfg.eval_env_config(),
         a.episodes,
         cfg.seed + 2_000_000,
+        &mut |v| watch.see(v),
     )?;
     for l in s.lines() {
         println!("{l}");
     }
+    if let Some(r) = watch.rec.take()
+        && let Some(p) = r.finish()?
+    {
+        println!("rrd={}", p.display());
+    }
+    if let Some(p) = &a.plot {
+        if !watch.plot(p, &format!("{env_id} {}: deterministic evaluation", cfg.algo))? {
+            bail!("{env_id} has no map to draw");
+        }
+        println!("plot={}", p.display());
+    }
     Ok(())
+}
+
+/// Drive one episode (policy or random actions) into rerun.
+pub fn view(a: ViewArgs) -> Result<()> {
+    let (env_id, mut env_cfg, policy_path) = match &a.run {
+        Some(dir) => {
+            let cfg = RunConfig::load(&dir.join("config.toml"))
+                .with_context(|| format!("{} is not a run directory", dir.display()))?;
+            let p = a.policy.clone().unwrap_or_else(|| dir.join(POLICY_FILE));
+            (cfg.env.clone(), cfg.eval_env_config(), Some(p))
+        }
+        None => (
+            a.env.clone().unwrap_or_default(),
+            EnvConfig::default(),
+            a.policy.clone(),
+        ),
+    };
+    if let Some(n) = a.steps {
+        env_cfg.max_steps = n;
+    }
+    let mut env = make_sim_env(&env_id, &env_cfg)?.with_context(|| format!("{env_id} has no vehicle to view"))?;
+    let mut policy = match &policy_path {
+        Some(p) => {
+            let pol = Policy::load(p).with_context(|| format!("loading {}", p.display()))?;
+            pol.check_spaces(&env.observation_space(), &env.action_space())
+                .context("the policy does not fit this env")?;
+            Some(pol)
+        }
+        None => None,
+    };
+    let sink = viz::sink_of(a.rerun.as_deref(), a.spawn_viewer)
+        .unwrap_or_else(|| Sink::File(PathBuf::from(format!("view-{env_id}.rrd"))));
+    let mut rec = Recorder::new(sink, &format!("{env_id} view"))?;
+    let space = env.action_space();
+    let mut rng = RandomActions::new(a.seed);
+    let mut act = |o: &[f32]| -> Result<Vec<f32>> {
+        match &mut policy {
+            Some(p) => Ok(p.act(o, true)?),
+            None => Ok(rng.sample(&space.low, &space.high)),
+        }
+    };
+    let (ret, last) = drive(&mut env, a.seed, 0, &mut act, &mut |v| rec.step(v))?;
+    println!("env={env_id}");
+    println!(
+        "policy={}",
+        policy_path.map_or("random".into(), |p| p.display().to_string())
+    );
+    println!("steps={}", env.elapsed());
+    println!("return={ret:.2}");
+    println!("terminated={}", last.terminated);
+    if let Some(p) = rec.finish()? {
+        println!("rrd={}", p.display());
+        eprintln!("open it with: rerun {}", p.display());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use agvrl_envs::task::ImageChannels;
+
+    #[test]
+    fn camera_channels_in_the_env_give_both_learners_a_cnn_of_that_shape() {
+        let mut cfg = RunConfig::default();
+        image_spec_from_env(&mut cfg);
+        assert_eq!((cfg.ppo.image, cfg.sac.image), (None, None));
+
+        cfg.env_config.observation.image.channels = ImageChannels::DepthRgb;
+        cfg.env_config.observation.image.width = 64;
+        cfg.env_config.observation.image.height = 48;
+        cfg.sac.image = Some(agvrl_rl::ImageSpec {
+            features_dim: 128,
+            ..agvrl_rl::ImageSpec::new(1, 1, 1)
+        });
+        image_spec_from_env(&mut cfg);
+        let want = agvrl_rl::ImageSpec::new(4, 48, 64);
+        assert_eq!(cfg.ppo.image, Some(want));
+        assert_eq!(
+            cfg.sac.image,
+            Some(agvrl_rl::ImageSpec {
+                features_dim: 128,
+                ..want
+            })
+        );
+    }
 }

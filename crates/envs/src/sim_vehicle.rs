@@ -222,4 +222,8 @@ impl Vehicle for SimVehicle {
     fn map(&self) -> Option<&MapInfo> {
         Some(&self.map)
     }
+
+    fn sim(&self) -> Option<&agvrl_sim::Sim> {
+        Some(&self.sim)
+    }
 }

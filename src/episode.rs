@@ -1,0 +1,129 @@
+//! Driving episodes for evaluation and viewing, with a look into the simulator at every step
+//! (pose, scan, camera) for plots and rerun recordings.
+
+use agvrl_envs::task::Task;
+use agvrl_envs::wrappers::TimeLimit;
+use agvrl_envs::{Env, EnvConfig, SensorFrame, Step, TaskEnv, Vehicle, make, make_task, make_vehicle};
+use agvrl_sim::Sim;
+use anyhow::Result;
+
+/// A vehicle env as `agvrl_envs::make` builds it, with its concrete type kept so the
+/// simulator behind it can be inspected.
+pub type SimEnv = TimeLimit<TaskEnv<Box<dyn Vehicle>, Box<dyn Task>>>;
+
+/// Build vehicle env `id` like `agvrl_envs::make` does; `None` for envs without a vehicle.
+pub fn make_sim_env(id: &str, cfg: &EnvConfig) -> Result<Option<SimEnv>> {
+    if agvrl_envs::registry::scene_of(id).is_none() {
+        // Still validates the id (and names the valid ones).
+        make(id, cfg)?;
+        return Ok(None);
+    }
+    let vehicle = make_vehicle(id, cfg)?;
+    let task = make_task(id, cfg, vehicle.steering_limit_rad())?;
+    Ok(Some(TimeLimit::new(TaskEnv::new(vehicle, task), cfg.max_steps)))
+}
+
+/// One control step as viewers see it.
+pub struct StepView<'a> {
+    /// Episode index (from 0).
+    pub episode: usize,
+    /// Step within the episode; 0 is the state right after reset.
+    pub step: u64,
+    /// Reward of this step (0 after reset).
+    pub reward: f64,
+    /// What the vehicle sensed after the step.
+    pub frame: &'a SensorFrame,
+    /// The simulator (ground-truth pose, scene).
+    pub sim: &'a Sim,
+    /// Whether the episode ends here.
+    pub done: bool,
+    /// Whether it ended by termination (a collision).
+    pub terminated: bool,
+}
+
+/// Called at every step of every episode.
+pub type Observer<'a> = dyn FnMut(&StepView<'_>) -> Result<()> + 'a;
+
+/// Report the current state of `env` to `obs`.
+pub fn observe(
+    env: &SimEnv,
+    obs: &mut Observer<'_>,
+    episode: usize,
+    step: u64,
+    reward: f64,
+    done: bool,
+    terminated: bool,
+) -> Result<()> {
+    let inner = env.inner();
+    if let (Some(frame), Some(sim)) = (inner.last_frame(), inner.vehicle().sim()) {
+        obs(&StepView {
+            episode,
+            step,
+            reward,
+            frame,
+            sim,
+            done,
+            terminated,
+        })?;
+    }
+    Ok(())
+}
+
+/// Forward speed of the base, m/s.
+pub fn speed_mps(frame: &SensorFrame) -> f64 {
+    frame.imu.as_ref().map_or(0.0, |i| i.lin_vel_b[0])
+}
+
+/// Uniform random actions in a box (the `view` command without a policy), seeded.
+pub struct RandomActions {
+    state: u64,
+}
+
+impl RandomActions {
+    pub fn new(seed: u64) -> Self {
+        Self {
+            state: seed ^ 0x2545_f491_4f6c_dd1d,
+        }
+    }
+
+    pub fn sample(&mut self, low: &[f32], high: &[f32]) -> Vec<f32> {
+        low.iter()
+            .zip(high)
+            .map(|(&l, &h)| {
+                // SplitMix64: enough for exploration noise in a viewer.
+                self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+                let mut z = self.state;
+                z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+                z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+                let u = ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32;
+                l + u * (h - l)
+            })
+            .collect()
+    }
+}
+
+/// Drive one episode of `env` with `act`, reporting every step. Returns the return and the
+/// last step.
+pub fn drive(
+    env: &mut SimEnv,
+    seed: u64,
+    episode: usize,
+    act: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
+    obs: &mut Observer<'_>,
+) -> Result<(f64, Step)> {
+    let (mut o, _) = env.reset(Some(seed))?;
+    observe(env, obs, episode, 0, 0.0, false, false)?;
+    let mut ret = 0.0;
+    let mut k = 0;
+    loop {
+        let a = act(&o)?;
+        let st = env.step(&a)?;
+        k += 1;
+        ret += st.reward;
+        observe(env, obs, episode, k, st.reward, st.done(), st.terminated)?;
+        if st.done() {
+            return Ok((ret, st));
+        }
+        o = st.obs;
+    }
+}

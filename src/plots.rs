@@ -1,0 +1,290 @@
+//! PNG plots of a run: the learning curve and a top view of the evaluated paths.
+
+use agvrl_sim::Scene;
+use agvrl_sim::rapier3d::prelude::{Pose, SharedShape, Vector};
+use anyhow::{Context, Result, anyhow};
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+use std::path::Path;
+
+static FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
+
+fn ensure_font() -> Result<()> {
+    static DONE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let ok = *DONE.get_or_init(|| plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).is_ok());
+    ok.then_some(())
+        .ok_or_else(|| anyhow!("the embedded plot font did not load"))
+}
+
+/// Draw into an RGB buffer with plotters, then write it as a PNG through a temp file.
+fn render_png(
+    path: &Path,
+    (w, h): (u32, u32),
+    draw: impl FnOnce(DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>) -> Result<()>,
+) -> Result<()> {
+    ensure_font()?;
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
+        draw(root.clone())?;
+        root.present().map_err(|e| anyhow!("plot: {e}"))?;
+    }
+    let mut bytes = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut bytes, w, h);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut wr = enc.write_header().context("png header")?;
+        wr.write_image_data(&buf).context("png data")?;
+    }
+    crate::runs::write_atomic(path, &bytes)
+}
+
+/// `(step, mean return)` points of a metrics.csv.
+pub fn curve_of_csv(csv: &str) -> Vec<(f64, f64)> {
+    csv.lines()
+        .skip(1)
+        .filter_map(|l| {
+            let mut f = l.split(',');
+            let step = f.next()?.parse().ok()?;
+            let mean = f.nth(1)?.parse().ok()?;
+            Some((step, mean))
+        })
+        .collect()
+}
+
+/// The moving-average return against environment steps, like the paper's figures.
+pub fn learning_curve(path: &Path, points: &[(f64, f64)], title: &str) -> Result<()> {
+    render_png(path, (900, 560), |root| {
+        let e = |e: DrawingAreaErrorKind<_>| anyhow!("plot: {e}");
+        let (x1, mut y0, mut y1) = points.iter().fold((1.0f64, f64::INFINITY, f64::NEG_INFINITY), |a, p| {
+            (a.0.max(p.0), a.1.min(p.1), a.2.max(p.1))
+        });
+        if !y0.is_finite() {
+            (y0, y1) = (0.0, 1.0);
+        }
+        let pad = ((y1 - y0) * 0.05).max(1e-3);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 22))
+            .margin(16)
+            .x_label_area_size(44)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..x1, (y0 - pad)..(y1 + pad))
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("environment steps")
+            .y_desc("mean episode return (recent 100)")
+            .label_style(("sans-serif", 15))
+            .draw()
+            .map_err(e)?;
+        chart
+            .draw_series(LineSeries::new(points.iter().copied(), BLUE.stroke_width(2)))
+            .map_err(e)?;
+        if points.is_empty() {
+            root.draw(&Text::new(
+                "no episode finished during training",
+                (300, 280),
+                ("sans-serif", 18),
+            ))
+            .map_err(e)?;
+        }
+        Ok(())
+    })
+}
+
+/// An evaluated path: world (x, y) points and whether it ended in a collision.
+pub struct Path2 {
+    pub xy: Vec<(f32, f32)>,
+    pub collided: bool,
+}
+
+/// A filled footprint in the top view.
+enum Footprint {
+    Poly(Vec<(f32, f32)>),
+    Circle((f32, f32), f32),
+}
+
+fn footprints(shape: &SharedShape, pose: &Pose, out: &mut Vec<Footprint>) {
+    let xy = |v: Vector| (v.x, v.y);
+    if let Some(c) = shape.as_compound() {
+        for (p, s) in c.shapes() {
+            footprints(s, &(*pose * *p), out);
+        }
+    } else if let Some(b) = shape.as_cuboid() {
+        let h = b.half_extents;
+        let pts = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+            .iter()
+            .map(|&(sx, sy)| xy(*pose * Vector::new(sx * h.x, sy * h.y, 0.0)))
+            .collect();
+        out.push(Footprint::Poly(pts));
+    } else if let Some(c) = shape.as_cylinder()
+        && (pose.rotation * Vector::Y).z.abs() > 0.9
+    {
+        out.push(Footprint::Circle(xy(pose.translation), c.radius));
+    } else if let Some(b) = shape.as_ball() {
+        out.push(Footprint::Circle(xy(pose.translation), b.radius));
+    } else if let Some(c) = shape.as_convex_polyhedron() {
+        out.push(Footprint::Poly(hull(
+            c.points().iter().map(|p| xy(*pose * *p)).collect(),
+        )));
+    } else {
+        let a = shape.compute_aabb(pose);
+        let (lo, hi) = (a.mins, a.maxs);
+        out.push(Footprint::Poly(vec![
+            (lo.x, lo.y),
+            (hi.x, lo.y),
+            (hi.x, hi.y),
+            (lo.x, hi.y),
+        ]));
+    }
+}
+
+/// Convex hull of planar points (monotone chain).
+fn hull(mut p: Vec<(f32, f32)>) -> Vec<(f32, f32)> {
+    p.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: (f32, f32), a: (f32, f32), b: (f32, f32)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
+    let mut h: Vec<(f32, f32)> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = h.len();
+        let it: Box<dyn Iterator<Item = &(f32, f32)>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in it {
+            while h.len() >= start + 2 && cross(h[h.len() - 2], h[h.len() - 1], q) <= 0.0 {
+                h.pop();
+            }
+            h.push(q);
+        }
+        h.pop();
+    }
+    h
+}
+
+fn rgb(c: [f32; 3]) -> RGBColor {
+    let u = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    RGBColor(u(c[0]), u(c[1]), u(c[2]))
+}
+
+/// Top view of `scene` with the evaluated `paths` (start: circle, collision: cross).
+pub fn trajectory(path: &Path, scene: &Scene, paths: &[Path2], title: &str) -> Result<()> {
+    let g = &scene.file.ground;
+    let (hx, hy) = (g.size_m[0] / 2.0, g.size_m[1] / 2.0);
+    let span = hx.max(hy);
+    let size = ((820.0 * hx / span) as u32 + 80, (820.0 * hy / span) as u32 + 110);
+    render_png(path, size, |root| {
+        let e = |e: DrawingAreaErrorKind<_>| anyhow!("plot: {e}");
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(40)
+            .build_cartesian_2d(-hx..hx, -hy..hy)
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("x, m")
+            .y_desc("y, m")
+            .label_style(("sans-serif", 13))
+            .draw()
+            .map_err(e)?;
+        let ground = rgb(g.color).mix(0.35);
+        chart
+            .draw_series(std::iter::once(Rectangle::new([(-hx, -hy), (hx, hy)], ground.filled())))
+            .map_err(e)?;
+        for obj in &scene.objects {
+            for s in &obj.shapes {
+                let mut fp = Vec::new();
+                footprints(&s.shape, &s.pose, &mut fp);
+                let style = rgb(s.color).filled();
+                for f in fp {
+                    match f {
+                        Footprint::Poly(p) => {
+                            chart.draw_series(std::iter::once(Polygon::new(p, style))).map_err(e)?;
+                        }
+                        Footprint::Circle(c, r) => {
+                            // A circle in data units: a polygon keeps the radius in metres.
+                            let p = (0..24)
+                                .map(|k| {
+                                    let a = k as f32 * std::f32::consts::TAU / 24.0;
+                                    (c.0 + r * a.cos(), c.1 + r * a.sin())
+                                })
+                                .collect::<Vec<_>>();
+                            chart.draw_series(std::iter::once(Polygon::new(p, style))).map_err(e)?;
+                        }
+                    }
+                }
+            }
+        }
+        let palette = [BLUE, MAGENTA, CYAN, RGBColor(255, 140, 0), BLACK];
+        for (k, p) in paths.iter().enumerate() {
+            let c = palette[k % palette.len()];
+            chart
+                .draw_series(LineSeries::new(p.xy.iter().copied(), c.stroke_width(2)))
+                .map_err(e)?
+                .label(format!(
+                    "episode {}{}",
+                    k + 1,
+                    if p.collided { " (collision)" } else { "" }
+                ))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2)));
+            if let Some(&s) = p.xy.first() {
+                chart
+                    .draw_series(std::iter::once(Circle::new(s, 5, c.filled())))
+                    .map_err(e)?;
+            }
+            if p.collided
+                && let Some(&end) = p.xy.last()
+            {
+                chart
+                    .draw_series(std::iter::once(Cross::new(end, 8, RED.stroke_width(3))))
+                    .map_err(e)?;
+            }
+        }
+        if !paths.is_empty() {
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 13))
+                .draw()
+                .map_err(e)?;
+        }
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hull_of_a_square_with_inner_points() {
+        let h = hull(vec![
+            (0.0, 0.0),
+            (1.0, 0.0),
+            (0.5, 0.5),
+            (1.0, 1.0),
+            (0.0, 1.0),
+            (0.2, 0.7),
+        ]);
+        assert_eq!(h.len(), 4);
+        for c in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
+            assert!(h.contains(&c), "{c:?} missing from {h:?}");
+        }
+    }
+
+    #[test]
+    fn csv_curve_skips_rows_without_a_mean() {
+        let csv = "step,episodes,mean_return,policy_loss\n100,0,,0.1\n200,2,-3.5,0.2\n";
+        assert_eq!(curve_of_csv(csv), vec![(200.0, -3.5)]);
+    }
+}

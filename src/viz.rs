@@ -1,0 +1,358 @@
+//! Recordings for the rerun viewer: the scene, the vehicle and its path, LiDAR rays (red hits,
+//! green misses, as the paper's figure), camera images, and reward / speed / steering / throttle
+//! on a `step` timeline.
+
+use crate::episode::{StepView, speed_mps};
+use agvrl_sim::Sim;
+use agvrl_sim::rapier3d::prelude::{Pose, Rotation, SharedShape};
+use anyhow::{Context, Result};
+use rerun::RecordingStream;
+use std::path::{Path, PathBuf};
+
+/// Where a recording goes.
+pub enum Sink {
+    /// An .rrd file (written to a temp name, renamed on `finish`).
+    File(PathBuf),
+    /// A rerun viewer spawned from `rerun` on PATH.
+    Viewer,
+}
+
+/// Logs episodes into one recording.
+pub struct Recorder {
+    rec: RecordingStream,
+    file: Option<(PathBuf, PathBuf)>,
+    scene_logged: bool,
+    /// Semantic class id of each scene object (segmentation pixel value - 1).
+    class_of: Vec<u16>,
+    trail: Vec<[f32; 3]>,
+    step: i64,
+    /// Log camera images every this many steps (they are large).
+    pub image_every: u64,
+}
+
+fn q_of(r: Rotation) -> rerun::Quaternion {
+    rerun::Quaternion::from_xyzw([r.x, r.y, r.z, r.w])
+}
+
+fn color(c: [f32; 3]) -> rerun::Color {
+    let u = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    rerun::Color::from_rgb(u(c[0]), u(c[1]), u(c[2]))
+}
+
+/// rerun's cylinders stand on z, parry's on y.
+fn y_up_to_z_up(pose: &Pose) -> rerun::Quaternion {
+    q_of(pose.rotation * Rotation::from_rotation_x(-std::f32::consts::FRAC_PI_2))
+}
+
+impl Recorder {
+    /// Open a recording named `name`.
+    pub fn new(sink: Sink, name: &str) -> Result<Self> {
+        let builder = rerun::RecordingStreamBuilder::new("agvrl").recording_name(name);
+        let (rec, file) = match sink {
+            Sink::File(path) => {
+                let tmp = path.with_extension("rrd.tmp");
+                let rec = builder
+                    .save(&tmp)
+                    .with_context(|| format!("cannot write {}", tmp.display()))?;
+                (rec, Some((tmp, path)))
+            }
+            Sink::Viewer => (
+                builder
+                    .spawn()
+                    .context("cannot spawn the rerun viewer (install it: pip install rerun-sdk==0.36.3)")?,
+                None,
+            ),
+        };
+        rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+        Ok(Self {
+            rec,
+            file,
+            scene_logged: false,
+            class_of: Vec::new(),
+            trail: Vec::new(),
+            step: 0,
+            image_every: 3,
+        })
+    }
+
+    fn log_shape(&self, path: &str, shape: &SharedShape, pose: &Pose, c: [f32; 3]) -> Result<()> {
+        let t = pose.translation;
+        let center = [t.x, t.y, t.z];
+        if let Some(comp) = shape.as_compound() {
+            for (k, (p, s)) in comp.shapes().iter().enumerate() {
+                self.log_shape(&format!("{path}/{k}"), s, &(*pose * *p), c)?;
+            }
+        } else if let Some(b) = shape.as_cuboid() {
+            let h = b.half_extents;
+            self.rec.log_static(
+                path,
+                &rerun::Boxes3D::from_centers_and_half_sizes([center], [[h.x, h.y, h.z]])
+                    .with_quaternions([q_of(pose.rotation)])
+                    .with_colors([color(c)])
+                    .with_fill_mode(rerun::FillMode::Solid),
+            )?;
+        } else if let Some(cy) = shape.as_cylinder() {
+            self.rec.log_static(
+                path,
+                &rerun::Cylinders3D::from_lengths_and_radii([2.0 * cy.half_height], [cy.radius])
+                    .with_centers([center])
+                    .with_quaternions([y_up_to_z_up(pose)])
+                    .with_colors([color(c)])
+                    .with_fill_mode(rerun::FillMode::Solid),
+            )?;
+        } else if let Some(b) = shape.as_ball() {
+            self.rec.log_static(
+                path,
+                &rerun::Ellipsoids3D::from_centers_and_radii([center], [b.radius])
+                    .with_colors([color(c)])
+                    .with_fill_mode(rerun::FillMode::Solid),
+            )?;
+        } else if let Some(cv) = shape.as_convex_polyhedron() {
+            let (v, idx) = cv.to_trimesh();
+            self.mesh(path, v.into_iter().map(|p| *pose * p), idx, c)?;
+        } else if let Some(tm) = shape.as_trimesh() {
+            self.mesh(path, tm.vertices().iter().map(|p| *pose * *p), tm.indices().to_vec(), c)?;
+        } else {
+            let a = shape.compute_aabb(pose);
+            let (lo, hi) = (a.mins, a.maxs);
+            self.rec.log_static(
+                path,
+                &rerun::Boxes3D::from_mins_and_sizes([[lo.x, lo.y, lo.z]], [[hi.x - lo.x, hi.y - lo.y, hi.z - lo.z]])
+                    .with_colors([color(c)]),
+            )?;
+        }
+        Ok(())
+    }
+
+    fn mesh(
+        &self,
+        path: &str,
+        v: impl Iterator<Item = agvrl_sim::rapier3d::prelude::Vector>,
+        idx: Vec<[u32; 3]>,
+        c: [f32; 3],
+    ) -> Result<()> {
+        let pos: Vec<[f32; 3]> = v.map(|p| [p.x, p.y, p.z]).collect();
+        self.rec.log_static(
+            path,
+            &rerun::Mesh3D::new(pos)
+                .with_triangle_indices(idx)
+                .with_albedo_factor(color(c).0),
+        )?;
+        Ok(())
+    }
+
+    /// The static scene, the vehicle's body and the segmentation classes (once).
+    pub fn scene(&mut self, sim: &Sim) -> Result<()> {
+        if self.scene_logged {
+            return Ok(());
+        }
+        self.scene_logged = true;
+        let scene = sim.scene();
+        let g = &scene.file.ground;
+        self.rec.log_static(
+            "world/scene/ground",
+            &rerun::Boxes3D::from_centers_and_half_sizes(
+                [[0.0, 0.0, -0.01]],
+                [[g.size_m[0] / 2.0, g.size_m[1] / 2.0, 0.01]],
+            )
+            .with_colors([color(g.color)])
+            .with_fill_mode(rerun::FillMode::Solid),
+        )?;
+        let mut classes: Vec<&str> = scene.objects.iter().map(|o| o.class.as_str()).collect();
+        classes.sort_unstable();
+        classes.dedup();
+        self.class_of = scene
+            .objects
+            .iter()
+            .map(|o| classes.iter().position(|c| *c == o.class).map_or(0, |k| k as u16 + 1))
+            .collect();
+        let mut ctx = vec![(0u16, "ground/sky".to_string(), rerun::Rgba32::from_rgb(90, 90, 90))];
+        for (k, name) in classes.iter().enumerate() {
+            let c = scene
+                .objects
+                .iter()
+                .find(|o| o.class == *name)
+                .and_then(|o| o.shapes.first())
+                .map_or([0.5; 3], |s| s.color);
+            let col = color(c);
+            let [r, g, b, _] = col.to_array();
+            ctx.push((k as u16 + 1, name.to_string(), rerun::Rgba32::from_rgb(r, g, b)));
+        }
+        self.rec.log_static(
+            "camera/segmentation",
+            &rerun::AnnotationContext::new(ctx.iter().map(|(id, n, c)| (*id, n.as_str(), *c))),
+        )?;
+        for obj in &scene.objects {
+            for (k, s) in obj.shapes.iter().enumerate() {
+                self.log_shape(
+                    &format!("world/scene/{}_{}/{k}", obj.model, obj.id),
+                    &s.shape,
+                    &s.pose,
+                    s.color,
+                )?;
+            }
+        }
+        // The car in its own frame: a chassis spanning the wheels, and the wheels.
+        let v = sim.vehicle();
+        let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+        for w in &v.wheels {
+            lo = [lo[0].min(w.center_b.x), lo[1].min(w.center_b.y)];
+            hi = [hi[0].max(w.center_b.x), hi[1].max(w.center_b.y)];
+        }
+        if let Some(w) = v.wheels.first() {
+            let z = w.center_b.z + w.radius_m;
+            self.rec.log_static(
+                "world/vehicle/chassis",
+                &rerun::Boxes3D::from_centers_and_half_sizes(
+                    [[(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0, z]],
+                    [[
+                        (hi[0] - lo[0]) / 2.0 + w.radius_m,
+                        (hi[1] - lo[1]) / 2.0 - w.width_m / 2.0,
+                        0.04,
+                    ]],
+                )
+                .with_colors([rerun::Color::from_rgb(30, 90, 200)])
+                .with_fill_mode(rerun::FillMode::Solid),
+            )?;
+            let q = q_of(Rotation::from_rotation_x(-std::f32::consts::FRAC_PI_2));
+            self.rec.log_static(
+                "world/vehicle/wheels",
+                &rerun::Cylinders3D::from_lengths_and_radii(
+                    v.wheels.iter().map(|w| w.width_m),
+                    v.wheels.iter().map(|w| w.radius_m),
+                )
+                .with_centers(v.wheels.iter().map(|w| [w.center_b.x, w.center_b.y, w.center_b.z]))
+                .with_quaternions(v.wheels.iter().map(|_| q))
+                .with_colors([rerun::Color::from_rgb(30, 30, 30)])
+                .with_fill_mode(rerun::FillMode::Solid),
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Log one step (a new episode starts at `v.step == 0`).
+    pub fn step(&mut self, v: &StepView<'_>) -> Result<()> {
+        self.scene(v.sim)?;
+        let rec = &self.rec;
+        rec.set_time_sequence("step", self.step);
+        rec.set_time_sequence("episode", v.episode as i64);
+        self.step += 1;
+        let pose = v.sim.base_pose();
+        let t = pose.translation;
+        rec.log(
+            "world/vehicle",
+            &rerun::Transform3D::from_translation_rotation([t.x, t.y, t.z], q_of(pose.rotation)),
+        )?;
+        if v.step == 0 {
+            self.trail.clear();
+        }
+        self.trail.push([t.x, t.y, 0.02]);
+        // The whole trail every half second keeps the file linear in the episode length.
+        if v.step.is_multiple_of(15) || v.done {
+            rec.log(
+                "world/trajectory",
+                &rerun::LineStrips3D::new([self.trail.clone()]).with_colors([rerun::Color::from_rgb(255, 200, 0)]),
+            )?;
+        }
+        if let Some(scan) = &v.frame.scan {
+            let o = scan.origin_w;
+            let strips = scan.points_w.iter().map(|p| [o, *p]);
+            let colors = scan.hit.iter().map(|&h| {
+                if h {
+                    rerun::Color::from_rgb(255, 40, 40)
+                } else {
+                    rerun::Color::from_rgb(40, 220, 40)
+                }
+            });
+            rec.log(
+                "world/lidar/rays",
+                &rerun::LineStrips3D::new(strips).with_colors(colors).with_radii([0.004]),
+            )?;
+            let hits = scan
+                .points_w
+                .iter()
+                .zip(&scan.hit)
+                .filter(|(_, h)| **h)
+                .map(|(p, _)| *p);
+            rec.log(
+                "world/lidar/scan",
+                &rerun::Points3D::new(hits)
+                    .with_radii([0.03])
+                    .with_colors([rerun::Color::from_rgb(255, 40, 40)]),
+            )?;
+            rec.log("plots/min_range_m", &rerun::Scalars::single(scan.min_range() as f64))?;
+        }
+        if let Some(img) = &v.frame.image
+            && img.width > 0
+            && (v.step.is_multiple_of(self.image_every.max(1)) || v.done)
+        {
+            let res = [img.width, img.height];
+            rec.log("camera/rgb", &rerun::Image::from_rgb24(img.rgb.clone(), res))?;
+            let depth: Vec<u8> = img.depth_m.iter().flat_map(|d| d.to_le_bytes()).collect();
+            rec.log(
+                "camera/depth",
+                &rerun::DepthImage::from_data_type_and_bytes(depth, res, rerun::datatypes::ChannelDatatype::F32)
+                    .with_meter(1.0),
+            )?;
+            let seg: Vec<u8> = img
+                .segmentation
+                .iter()
+                .map(|&s| match s {
+                    0 => 0,
+                    id => self.class_of.get(id as usize - 1).copied().unwrap_or(0),
+                })
+                .flat_map(|c: u16| c.to_le_bytes())
+                .collect();
+            rec.log(
+                "camera/segmentation",
+                &rerun::SegmentationImage::new(
+                    seg,
+                    rerun::components::ImageFormat::segmentation(res, rerun::datatypes::ChannelDatatype::U16),
+                ),
+            )?;
+        }
+        let a = v.frame.applied;
+        rec.log("plots/reward", &rerun::Scalars::single(v.reward))?;
+        rec.log("plots/speed_mps", &rerun::Scalars::single(speed_mps(v.frame)))?;
+        rec.log("plots/steering_rad", &rerun::Scalars::single(a.steering_rad))?;
+        rec.log("plots/throttle", &rerun::Scalars::single(a.throttle))?;
+        if v.done {
+            let what = if v.terminated {
+                "terminated (collision)"
+            } else {
+                "time limit"
+            };
+            rec.log(
+                "log",
+                &rerun::TextLog::new(format!("episode {} ended at step {}: {what}", v.episode, v.step)),
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Flush; a file recording is renamed into place. Returns its path.
+    pub fn finish(self) -> Result<Option<PathBuf>> {
+        self.rec.flush_blocking().context("flushing the rerun recording")?;
+        let file = self.file.clone();
+        drop(self.rec);
+        match file {
+            Some((tmp, path)) => {
+                std::fs::rename(&tmp, &path).with_context(|| format!("renaming to {}", path.display()))?;
+                Ok(Some(path))
+            }
+            None => Ok(None),
+        }
+    }
+}
+
+/// Whether recordings can be made.
+pub const ENABLED: bool = true;
+
+/// `--rerun FILE` / `--spawn-viewer` as a sink.
+pub fn sink_of(file: Option<&Path>, spawn: bool) -> Option<Sink> {
+    match (file, spawn) {
+        (Some(f), _) => Some(Sink::File(f.to_path_buf())),
+        (None, true) => Some(Sink::Viewer),
+        (None, false) => None,
+    }
+}

@@ -1,0 +1,45 @@
+//! Stand-in for `viz.rs` when agvrl is built without the `rerun` feature: asking for a
+//! recording is an error that says how to get one.
+
+use crate::episode::StepView;
+use anyhow::{Result, bail};
+use std::path::{Path, PathBuf};
+
+/// Where a recording goes.
+pub enum Sink {
+    /// An .rrd file.
+    File(PathBuf),
+    /// A spawned viewer.
+    Viewer,
+}
+
+/// Never constructed without the feature.
+pub struct Recorder {
+    _private: (),
+}
+
+impl Recorder {
+    pub fn new(_sink: Sink, _name: &str) -> Result<Self> {
+        bail!("this agvrl was built without rerun; rebuild with the default features (cargo build --release)")
+    }
+
+    pub fn step(&mut self, _v: &StepView<'_>) -> Result<()> {
+        Ok(())
+    }
+
+    pub fn finish(self) -> Result<Option<PathBuf>> {
+        Ok(None)
+    }
+}
+
+/// Whether recordings can be made.
+pub const ENABLED: bool = false;
+
+/// `--rerun FILE` / `--spawn-viewer` as a sink.
+pub fn sink_of(file: Option<&Path>, spawn: bool) -> Option<Sink> {
+    match (file, spawn) {
+        (Some(f), _) => Some(Sink::File(f.to_path_buf())),
+        (None, true) => Some(Sink::Viewer),
+        (None, false) => None,
+    }
+}
