@@ -76,6 +76,8 @@ pub fn learning_curve(path: &Path, points: &[(f64, f64)], title: &str) -> Result
             .configure_mesh()
             .x_desc("environment steps")
             .y_desc("mean episode return (recent 100)")
+            .x_label_formatter(&|v| steps_label(*v))
+            .y_label_formatter(&|v| format!("{v:.0}"))
             .label_style(("sans-serif", 15))
             .draw()
             .map_err(e)?;
@@ -105,6 +107,9 @@ enum Footprint {
     Poly(Vec<(f32, f32)>),
     Circle((f32, f32), f32),
 }
+
+/// Shapes whose bottom is above this height (m) cannot touch the car.
+const OVERHEAD_M: f32 = 1.0;
 
 fn footprints(shape: &SharedShape, pose: &Pose, out: &mut Vec<Footprint>) {
     let xy = |v: Vector| (v.x, v.y);
@@ -177,6 +182,8 @@ fn rgb(c: [f32; 3]) -> RGBColor {
 pub fn trajectory(path: &Path, scene: &Scene, paths: &[Path2], title: &str) -> Result<()> {
     let g = &scene.file.ground;
     let (hx, hy) = (g.size_m[0] / 2.0, g.size_m[1] / 2.0);
+    // Boundary walls stand just outside the ground (0.5 m thick in AutoVRL's maps).
+    let (vx, vy) = (hx + 0.6, hy + 0.6);
     let span = hx.max(hy);
     let size = ((820.0 * hx / span) as u32 + 80, (820.0 * hy / span) as u32 + 110);
     render_png(path, size, |root| {
@@ -186,13 +193,15 @@ pub fn trajectory(path: &Path, scene: &Scene, paths: &[Path2], title: &str) -> R
             .margin(10)
             .x_label_area_size(30)
             .y_label_area_size(40)
-            .build_cartesian_2d(-hx..hx, -hy..hy)
+            .build_cartesian_2d(-vx..vx, -vy..vy)
             .map_err(e)?;
         chart
             .configure_mesh()
             .disable_mesh()
             .x_desc("x, m")
             .y_desc("y, m")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0}"))
             .label_style(("sans-serif", 13))
             .draw()
             .map_err(e)?;
@@ -200,11 +209,24 @@ pub fn trajectory(path: &Path, scene: &Scene, paths: &[Path2], title: &str) -> R
         chart
             .draw_series(std::iter::once(Rectangle::new([(-hx, -hy), (hx, hy)], ground.filled())))
             .map_err(e)?;
-        for obj in &scene.objects {
-            for s in &obj.shapes {
+        // Parts above the car (tree canopies) are drawn faint and first, so the trunks the car
+        // can hit stay visible under them.
+        let overhead = |s: &agvrl_sim::urdf::ShapeSpec| s.shape.compute_aabb(&s.pose).mins.z > OVERHEAD_M;
+        let layers = [true, false].map(|high| {
+            scene
+                .objects
+                .iter()
+                .flat_map(|o| &o.shapes)
+                .filter(move |s| overhead(s) == high)
+        });
+        for (layer, shapes) in layers.into_iter().enumerate() {
+            for s in shapes {
                 let mut fp = Vec::new();
                 footprints(&s.shape, &s.pose, &mut fp);
-                let style = rgb(s.color).filled();
+                let style = match layer {
+                    0 => rgb(s.color).mix(0.3).filled(),
+                    _ => rgb(s.color).filled(),
+                };
                 for f in fp {
                     match f {
                         Footprint::Poly(p) => {
@@ -262,9 +284,34 @@ pub fn trajectory(path: &Path, scene: &Scene, paths: &[Path2], title: &str) -> R
     })
 }
 
+/// 250000 -> "250k", 1500000 -> "1.5M".
+fn steps_label(v: f64) -> String {
+    let a = v.abs();
+    if a >= 1e6 {
+        format!("{}M", trim(v / 1e6))
+    } else if a >= 1e3 {
+        format!("{}k", trim(v / 1e3))
+    } else {
+        format!("{v:.0}")
+    }
+}
+
+fn trim(x: f64) -> String {
+    let s = format!("{x:.1}");
+    s.strip_suffix(".0").map(str::to_string).unwrap_or(s)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn step_labels_are_short() {
+        let got: Vec<_> = [0.0, 500.0, 20_000.0, 250_000.0, 1_500_000.0, 2e6]
+            .map(steps_label)
+            .into();
+        assert_eq!(got, ["0", "500", "20k", "250k", "1.5M", "2M"]);
+    }
 
     #[test]
     fn hull_of_a_square_with_inner_points() {

@@ -101,6 +101,10 @@ pub struct EvalArgs {
     /// trained on search-outdoor-20 run on search-urban-50); the run's env settings are kept.
     #[arg(long, value_name = "ID")]
     pub env: Option<String>,
+    /// Drive uniform random actions instead of the policy, on the same episodes: the baseline
+    /// the policy should beat (e.g. its coverage).
+    #[arg(long)]
+    pub random: bool,
 }
 
 #[derive(Args)]
@@ -126,6 +130,10 @@ pub struct ViewArgs {
     /// Stream to a rerun viewer started from `rerun` on your PATH instead of a file.
     #[arg(long)]
     pub spawn_viewer: bool,
+    /// Mount the vehicle camera (160x120, 80 degrees) and record its RGB, depth and
+    /// segmentation images.
+    #[arg(long)]
+    pub camera: bool,
 }
 
 struct Row {
@@ -328,7 +336,7 @@ fn run_learner(
         )?);
     }
     let summary = evaluate(
-        &mut policy,
+        Some(&mut policy),
         &cfg.env,
         &cfg.eval_env_config(),
         cfg.eval_episodes,
@@ -368,6 +376,8 @@ pub struct Summary {
     /// Subjects found / placed, summed over episodes, and the find times.
     pub subjects: (usize, usize, Vec<f64>),
     pub racing: bool,
+    /// Why each episode ended, in order.
+    pub ended: Vec<&'static str>,
 }
 
 impl Summary {
@@ -376,6 +386,7 @@ impl Summary {
             format!("mean_return={:.2}", self.mean_return),
             format!("episodes={}", self.episodes),
             format!("collisions={}", self.collisions),
+            format!("ended={}", self.ended.join(",")),
         ];
         if self.subjects.1 > 0 {
             v.push(format!("subjects_found={}/{}", self.subjects.0, self.subjects.1));
@@ -404,6 +415,15 @@ fn account(s: &mut Summary, st: &Step, cov_sum: &mut f64) {
     if st.terminated {
         s.collisions += 1;
     }
+    use agvrl_envs::api::TerminationCause as C;
+    s.ended.push(match (st.terminated, st.info.termination) {
+        (false, _) => "time_limit",
+        (true, Some(C::Contact)) => "contact",
+        (true, Some(C::TooClose)) => "too_close",
+        (true, Some(C::Flipped)) => "flipped",
+        (true, Some(C::OutOfBounds)) => "out_of_bounds",
+        (true, None) => "terminated",
+    });
     if let Some(r) = &st.info.racing {
         s.racing = true;
         s.laps += r.laps;
@@ -421,7 +441,7 @@ fn account(s: &mut Summary, st: &Step, cov_sum: &mut f64) {
 
 /// Deterministic evaluation; `obs` sees every step of vehicle envs.
 pub fn evaluate(
-    policy: &mut Policy,
+    mut policy: Option<&mut Policy>,
     env_id: &str,
     env_cfg: &EnvConfig,
     episodes: usize,
@@ -437,16 +457,27 @@ pub fn evaluate(
         coverage: None,
         subjects: (0, 0, Vec::new()),
         racing: false,
+        ended: Vec::new(),
     };
     let mut cov_sum = 0.0;
-    let check = |o: &agvrl_envs::BoxSpace, a: &agvrl_envs::BoxSpace, p: &Policy| {
-        p.check_spaces(o, a).context("the policy does not fit this env")
+    let check = |o: &agvrl_envs::BoxSpace, a: &agvrl_envs::BoxSpace, p: &Option<&mut Policy>| match p {
+        Some(p) => p.check_spaces(o, a).context("the policy does not fit this env"),
+        None => Ok(()),
+    };
+    // Without a policy: uniform random actions, the baseline a policy should beat.
+    let mut random = RandomActions::new(seed);
+    let mut act_of = |policy: &mut Option<&mut Policy>, space: &agvrl_envs::BoxSpace, o: &[f32]| -> Result<Vec<f32>> {
+        Ok(match policy {
+            Some(p) => p.act(o, true)?,
+            None => random.sample(&space.low, &space.high),
+        })
     };
     match make_sim_env(env_id, env_cfg)? {
         Some(mut env) => {
-            check(&env.observation_space(), &env.action_space(), policy)?;
+            check(&env.observation_space(), &env.action_space(), &policy)?;
+            let space = env.action_space();
             for k in 0..episodes {
-                let mut act = |o: &[f32]| Ok(policy.act(o, true)?);
+                let mut act = |o: &[f32]| act_of(&mut policy, &space, o);
                 let (ret, last) = drive(&mut env, seed + k as u64, k, &mut act, obs)?;
                 s.mean_return += ret;
                 account(&mut s, &last, &mut cov_sum);
@@ -454,11 +485,12 @@ pub fn evaluate(
         }
         None => {
             let mut env = make(env_id, env_cfg)?;
-            check(&env.observation_space(), &env.action_space(), policy)?;
+            check(&env.observation_space(), &env.action_space(), &policy)?;
+            let space = env.action_space();
             for k in 0..episodes {
                 let (mut o, _) = env.reset(Some(seed + k as u64))?;
                 loop {
-                    let st = env.step(&policy.act(&o, true)?)?;
+                    let st = env.step(&act_of(&mut policy, &space, &o)?)?;
                     s.mean_return += st.reward;
                     if st.done() {
                         account(&mut s, &st, &mut cov_sum);
@@ -524,8 +556,13 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     }
     let cfg = RunConfig::load(&a.run.join("config.toml"))
         .with_context(|| format!("{} is not a run directory", a.run.display()))?;
-    let mut policy = Policy::load(&a.run.join(POLICY_FILE))
-        .with_context(|| format!("loading {}", a.run.join(POLICY_FILE).display()))?;
+    let mut policy = match a.random {
+        true => None,
+        false => Some(
+            Policy::load(&a.run.join(POLICY_FILE))
+                .with_context(|| format!("loading {}", a.run.join(POLICY_FILE).display()))?,
+        ),
+    };
     let mut watch = Watch {
         rec_episodes: a.episodes,
         ..Watch::default()
@@ -535,13 +572,15 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     }
     let env_id = a.env.clone().unwrap_or_else(|| cfg.env.clone());
     let s = evaluate(
-        &mut policy,
+        policy.as_mut(),
         &env_id,
         &cfg.eval_env_config(),
         a.episodes,
         cfg.seed + 2_000_000,
         &mut |v| watch.see(v),
     )?;
+    println!("env={env_id}");
+    println!("policy={}", if a.random { "random" } else { POLICY_FILE });
     for l in s.lines() {
         println!("{l}");
     }
@@ -576,6 +615,9 @@ pub fn view(a: ViewArgs) -> Result<()> {
     };
     if let Some(n) = a.steps {
         env_cfg.max_steps = n;
+    }
+    if a.camera && env_cfg.camera.is_none() {
+        env_cfg.camera = Some(Default::default());
     }
     let mut env = make_sim_env(&env_id, &env_cfg)?.with_context(|| format!("{env_id} has no vehicle to view"))?;
     let mut policy = match &policy_path {

@@ -332,6 +332,25 @@ mod issue_5_cli {
             &["world/scene", "world/trajectory", "world/lidar/scan", "plots/speed_mps"],
         );
         assert!(png_summary(&png).2 >= 4);
+        // The same episodes on another scene with random actions: the baseline of the issue.
+        let o = agvrl(&[
+            "eval",
+            "--run",
+            run.to_str().unwrap(),
+            "--episodes",
+            "1",
+            "--env",
+            "search-urban-50",
+            "--random",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let out = stdout(&o);
+        for key in ["env=search-urban-50", "policy=random", "coverage="] {
+            assert!(out.contains(key), "{key} missing in:\n{out}");
+        }
+        let o = agvrl(&["eval", "--run", run.to_str().unwrap(), "--env", "pendulum"]);
+        assert!(!o.status.success(), "a search policy on the pendulum must be refused");
+        assert!(stderr(&o).contains("does not fit"), "{}", stderr(&o));
         // `view` without a policy drives random actions into a file.
         let view = d.join("view.rrd");
         let o = agvrl(&[
@@ -340,12 +359,22 @@ mod issue_5_cli {
             "racing-oval",
             "--steps",
             "40",
+            "--camera",
             "--rerun",
             view.to_str().unwrap(),
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
         assert!(stdout(&o).contains("policy=random"), "{}", stdout(&o));
-        rrd_check(&view, &["world/vehicle", "plots/throttle"]);
+        rrd_check(
+            &view,
+            &[
+                "world/vehicle",
+                "plots/throttle",
+                "camera/rgb",
+                "camera/depth",
+                "camera/segmentation",
+            ],
+        );
         // A policy for another env is refused in one line.
         let o = agvrl(&[
             "view",

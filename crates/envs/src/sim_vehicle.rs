@@ -77,6 +77,8 @@ impl Randomisation {
 
 /// Clearance kept between a random spawn and any obstacle, metres.
 const SPAWN_CLEARANCE_M: f32 = 1.2;
+/// Free range the LiDAR sees ahead of a random spawn in an open map, metres.
+pub const SPAWN_VIEW_M: f32 = 2.0;
 /// Coverage grid cell, metres.
 const CELL_M: f32 = 0.5;
 
@@ -194,11 +196,20 @@ impl Vehicle for SimVehicle {
         self.rng = StdRng::seed_from_u64(seed);
         let params = self.randomisation.draw(self.sim.nominal_params(), &mut self.rng);
         self.sim.set_params(params);
-        let pose = match self.spawn {
-            SpawnMode::Random => self.random_pose(),
-            SpawnMode::Fixed => self.sim.default_spawn(),
-        };
-        self.sim.reset(pose)?;
+        match self.spawn {
+            SpawnMode::Random => {
+                // A car spawned facing a rock it cannot steer around loses the episode before
+                // the policy acts: in open maps the LiDAR fan must see this much free space.
+                for attempt in 0.. {
+                    let pose = self.random_pose();
+                    self.sim.reset(pose)?;
+                    if self.map.track.is_some() || attempt == 100 || self.sim.lidar_scan().min_range() >= SPAWN_VIEW_M {
+                        break;
+                    }
+                }
+            }
+            SpawnMode::Fixed => self.sim.reset(self.sim.default_spawn())?,
+        }
         Ok(self.frame())
     }
 

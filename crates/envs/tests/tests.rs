@@ -125,6 +125,30 @@ mod issue_3_episodes {
     }
 
     #[test]
+    fn random_spawns_in_open_maps_face_free_space() {
+        for id in ["search-outdoor-20", "search-urban-20"] {
+            let mut v = make_vehicle(id, &quick_cfg()).unwrap();
+            let mut poses = std::collections::HashSet::new();
+            for seed in 0..60 {
+                let f = v.reset(seed).unwrap();
+                let scan = f.scan.unwrap();
+                assert!(
+                    scan.min_range() >= agvrl_envs::sim_vehicle::SPAWN_VIEW_M,
+                    "{id} seed {seed}: {} m ahead",
+                    scan.min_range()
+                );
+                let g = f.gps.unwrap();
+                poses.insert(((g.position_m[0] * 10.0) as i32, (g.position_m[1] * 10.0) as i32));
+            }
+            assert!(
+                poses.len() > 50,
+                "{id}: spawns must still spread ({} distinct)",
+                poses.len()
+            );
+        }
+    }
+
+    #[test]
     fn the_time_limit_truncates_without_terminating() {
         let mut env = make(
             "search-outdoor-20",
