@@ -25,6 +25,10 @@ pub struct RunConfig {
     pub n_envs: usize,
     /// Threads stepping the envs.
     pub threads: usize,
+    /// How many of the `n_envs` training envs drive on seeded procedural layouts of the env's
+    /// kind and size instead of its built-in map (layout randomisation; evaluation always uses
+    /// the map of `env_config`).
+    pub procedural_layouts: usize,
     /// Deterministic episodes evaluated after training.
     pub eval_episodes: usize,
     /// Time limit of evaluation episodes, control steps (default: the training limit).
@@ -46,6 +50,7 @@ impl Default for RunConfig {
             seed: 0,
             n_envs: 8,
             threads: 2,
+            procedural_layouts: 0,
             eval_episodes: 3,
             eval_max_steps: None,
             env_config: EnvConfig::default(),
@@ -84,12 +89,29 @@ impl RunConfig {
         if self.n_envs == 0 || self.threads == 0 || self.steps == 0 {
             bail!("steps, n_envs and threads must be at least 1");
         }
+        if self.procedural_layouts > self.n_envs {
+            bail!(
+                "procedural_layouts ({}) cannot exceed n_envs ({})",
+                self.procedural_layouts,
+                self.n_envs
+            );
+        }
         Ok(())
     }
 
     /// The fully resolved TOML (every default written out).
     pub fn to_toml(&self) -> Result<String> {
         Ok(toml::to_string_pretty(self)?)
+    }
+
+    /// Env settings of training env `i`: the last `procedural_layouts` envs get a layout seed
+    /// drawn from the run's seed and their index.
+    pub fn train_env_config(&self, i: usize) -> EnvConfig {
+        let mut cfg = self.env_config.clone();
+        if i + self.procedural_layouts >= self.n_envs {
+            cfg.layout_seed = Some(self.seed.wrapping_mul(1_000_003).wrapping_add(i as u64));
+        }
+        cfg
     }
 
     /// Env settings for evaluation episodes.

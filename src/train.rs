@@ -192,7 +192,7 @@ fn image_spec_from_env(cfg: &mut RunConfig) {
 
 fn vec_env(cfg: &RunConfig) -> Result<VecEnv<Box<dyn Env>>> {
     let envs = (0..cfg.n_envs)
-        .map(|_| make(&cfg.env, &cfg.env_config))
+        .map(|i| make(&cfg.env, &cfg.train_env_config(i)))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(VecEnv::new(envs, cfg.threads)?)
 }

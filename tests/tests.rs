@@ -237,6 +237,21 @@ mod issue_5_cli {
         assert!(e.contains("racing-moon") && e.contains("racing-oval"), "{e}");
         let o = agvrl(&["probe", "--env", "racing-oval", "--pose", "1,2"]);
         assert!(!o.status.success() && stderr(&o).contains("x,y,yaw"));
+        std::fs::write(&bad, "env = \"racing-oval\"\nn_envs = 2\nprocedural_layouts = 3\n").unwrap();
+        let o = agvrl(&[
+            "train",
+            "--config",
+            bad.to_str().unwrap(),
+            "--out",
+            d.join("r3").to_str().unwrap(),
+        ]);
+        assert!(!o.status.success());
+        assert!(
+            stderr(&o).contains("procedural_layouts (3) cannot exceed n_envs (2)"),
+            "{}",
+            stderr(&o)
+        );
+        assert_eq!(stderr(&o).trim().lines().count(), 1, "{}", stderr(&o));
     }
 
     #[test]
@@ -290,7 +305,7 @@ mod issue_5_cli {
         std::fs::write(
             &cfg,
             "env = \"search-outdoor-20\"\nalgo = \"ppo\"\nsteps = 256\nseed = 2\nn_envs = 2\nthreads = 1\n\
-             eval_episodes = 1\n[env_config]\nmax_steps = 60\n[ppo]\nn_steps = 128\nbatch_size = 64\nn_epochs = 1\n",
+             procedural_layouts = 1\neval_episodes = 1\n[env_config]\nmax_steps = 60\n[ppo]\nn_steps = 128\nbatch_size = 64\nn_epochs = 1\n",
         )
         .unwrap();
         let run = d.join("run");

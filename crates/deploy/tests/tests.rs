@@ -136,14 +136,19 @@ mod issue_7_ros2_loopback {
 
     /// A DDS domain no other test (or process) of this run uses: a random base per process,
     /// then one step per call.
+    /// A DDS domain of its own for each test: tests in this process step through domains from
+    /// one base (drawn once, so two tests never meet), and the base differs between processes.
     fn domain() -> u16 {
+        static BASE: std::sync::OnceLock<u16> = std::sync::OnceLock::new();
         static NEXT: AtomicU16 = AtomicU16::new(0);
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .subsec_nanos();
-        let base = (nanos ^ std::process::id().wrapping_mul(2_654_435_761)) % 150;
-        1 + ((base as u16 + 7 * NEXT.fetch_add(1, Ordering::Relaxed)) % 230)
+        let base = *BASE.get_or_init(|| {
+            let nanos = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .subsec_nanos();
+            ((nanos ^ std::process::id().wrapping_mul(2_654_435_761)) % 150) as u16
+        });
+        1 + ((base + 7 * NEXT.fetch_add(1, Ordering::Relaxed)) % 230)
     }
 
     fn ros_cfg(invalid: InvalidRay) -> Ros2Config {

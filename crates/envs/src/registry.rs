@@ -9,7 +9,7 @@ use crate::task::{CommonConfig, ObsConfig, Racing, Search, SearchReward};
 use crate::task_env::TaskEnv;
 use crate::wrappers::{NoiseConfig, Noisy, TimeLimit};
 use agvrl_sim::sensors::LidarConfig;
-use agvrl_sim::{ActionMapping, DynamicsMode, SceneSource, SimConfig};
+use agvrl_sim::{ActionMapping, DynamicsMode, SceneKind, SceneSource, SimConfig};
 use serde::{Deserialize, Serialize};
 
 /// Ids `make` knows.
@@ -56,6 +56,10 @@ pub struct EnvConfig {
     pub randomisation: Randomisation,
     /// Time limit, control steps (truncation).
     pub max_steps: u64,
+    /// Drive on a seeded procedural layout of the env's kind and size (same object families
+    /// and densities) instead of its built-in map: layout randomisation for training. `None`
+    /// (the default) is the built-in map.
+    pub layout_seed: Option<u64>,
 }
 
 impl Default for EnvConfig {
@@ -75,6 +79,7 @@ impl Default for EnvConfig {
             noise: NoiseConfig::default(),
             randomisation: Randomisation::default(),
             max_steps: 1000,
+            layout_seed: None,
         }
     }
 }
@@ -132,14 +137,32 @@ fn unknown(id: &str) -> EnvError {
     }
 }
 
+/// The generator family and inner half size of a built-in scene, for procedural layouts.
+fn procedural_of(scene: &str) -> (SceneKind, f32) {
+    match scene {
+        "outdoor-20" => (SceneKind::Outdoor, 10.0),
+        "outdoor-50" => (SceneKind::Outdoor, 25.0),
+        "urban-20" => (SceneKind::Urban, 10.0),
+        "urban-50" => (SceneKind::Urban, 25.0),
+        _ => (SceneKind::Track, 0.0),
+    }
+}
+
 /// The vehicle of env `id` (no task), for tools that drive a vehicle directly.
 pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvError> {
     let scene = scene_of(id).ok_or_else(|| unknown(id))?;
+    let source = match cfg.layout_seed {
+        None => SceneSource::Builtin(scene.into()),
+        Some(seed) => {
+            let (kind, half_m) = procedural_of(scene);
+            SceneSource::Procedural { kind, seed, half_m }
+        }
+    };
     if cfg.max_steps == 0 {
         return Err(EnvError::Config("max_steps must be at least 1".into()));
     }
     let sim = SimConfig {
-        scene: SceneSource::Builtin(scene.into()),
+        scene: source,
         vehicle: cfg.vehicle.clone(),
         mode: cfg.dynamics,
         substeps: cfg.substeps,

@@ -3,14 +3,17 @@
 //! the last one of the episode that ended.
 //!
 //! Threads: the envs are split into `threads` contiguous chunks; the caller's thread steps the
-//! first, and each other chunk lives on a persistent worker thread. A step costs tens of
-//! microseconds, so handing work over must cost far less: workers spin briefly for the next
-//! command before they park (on this class of machine a park/unpark round trip took ~100 us,
-//! which ate the whole gain of a second core with a sleeping thread pool).
+//! first and each other chunk belongs to a persistent worker thread. A thread that finishes its
+//! chunk takes over the unclaimed envs at the ends of the others (a per-env claim), so one slow
+//! step (a reset, a crowded scan) does not leave a core idle. A step costs tens of microseconds,
+//! so handing work over must cost far less: workers spin briefly for the next command before
+//! they park (on this class of machine a park/unpark round trip took ~100 us, which ate the
+//! whole gain of a second core with a sleeping thread pool).
 
 use crate::Env;
 use crate::api::{BoxSpace, EnvError, EpisodeSummary, Info, Step};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::ops::Range;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -34,6 +37,43 @@ struct Slot<E> {
     env: E,
     ret: f64,
     len: u64,
+    out: Option<Result<(Vec<f32>, Step), EnvError>>,
+}
+
+impl<E: Env> Slot<E> {
+    fn run(&mut self, index: usize, cmd: &Cmd, act_dim: usize) -> Result<(Vec<f32>, Step), EnvError> {
+        match cmd {
+            Cmd::Reset(seed) => {
+                self.ret = 0.0;
+                self.len = 0;
+                let (obs, info) = self.env.reset(seed.map(|x| x.wrapping_add(index as u64)))?;
+                let st = Step {
+                    obs: obs.clone(),
+                    reward: 0.0,
+                    terminated: false,
+                    truncated: false,
+                    info,
+                };
+                Ok((obs, st))
+            }
+            Cmd::Step(actions) => {
+                let mut st = self.env.step(&actions[index * act_dim..(index + 1) * act_dim])?;
+                self.ret += st.reward;
+                self.len += 1;
+                if st.done() {
+                    st.info.episode = Some(EpisodeSummary {
+                        ret: self.ret,
+                        len: self.len,
+                    });
+                    let (obs, _) = self.env.reset(None)?;
+                    st.info.final_obs = Some(std::mem::replace(&mut st.obs, obs));
+                    self.ret = 0.0;
+                    self.len = 0;
+                }
+                Ok((Vec::new(), st))
+            }
+        }
+    }
 }
 
 enum Cmd {
@@ -41,80 +81,50 @@ enum Cmd {
     Step(Vec<f32>),
 }
 
-type Out = Result<Vec<(Vec<f32>, Step)>, EnvError>;
-
-/// A chunk of envs and what to do with it.
-struct Chunk<E> {
-    first: usize,
+/// What every thread sees: the envs, which round each was last claimed in, and the command.
+struct Shared<E> {
+    slots: Vec<Mutex<Slot<E>>>,
+    claimed: Vec<AtomicU64>,
+    /// Contiguous env ranges, one per thread; thread 0 is the caller's.
+    chunks: Vec<Range<usize>>,
     act_dim: usize,
-    slots: Vec<Slot<E>>,
+    round: AtomicU64,
+    finished: AtomicUsize,
+    cmd: Mutex<(u64, Option<Arc<Cmd>>)>,
+    quit: AtomicBool,
 }
 
-impl<E: Env> Chunk<E> {
-    fn run(&mut self, cmd: Cmd) -> Out {
-        match cmd {
-            Cmd::Reset(seed) => self
-                .slots
-                .iter_mut()
-                .enumerate()
-                .map(|(i, s)| {
-                    s.ret = 0.0;
-                    s.len = 0;
-                    let (obs, info) = s.env.reset(seed.map(|x| x.wrapping_add((self.first + i) as u64)))?;
-                    let st = Step {
-                        obs: obs.clone(),
-                        reward: 0.0,
-                        terminated: false,
-                        truncated: false,
-                        info,
-                    };
-                    Ok((obs, st))
-                })
-                .collect(),
-            Cmd::Step(actions) => self
-                .slots
-                .iter_mut()
-                .zip(actions.chunks(self.act_dim))
-                .map(|(s, a)| {
-                    let mut st = s.env.step(a)?;
-                    s.ret += st.reward;
-                    s.len += 1;
-                    if st.done() {
-                        st.info.episode = Some(EpisodeSummary { ret: s.ret, len: s.len });
-                        let (obs, _) = s.env.reset(None)?;
-                        st.info.final_obs = Some(std::mem::replace(&mut st.obs, obs));
-                        s.ret = 0.0;
-                        s.len = 0;
-                    }
-                    Ok((Vec::new(), st))
-                })
-                .collect(),
+impl<E: Env> Shared<E> {
+    /// Step this thread's own chunk in order, then help with the others from their ends, so a
+    /// thread that finishes early takes over the last envs of a slower one without moving envs
+    /// between cores in the common case.
+    fn work(&self, thread: usize, round: u64, cmd: &Cmd) {
+        let n = self.chunks.len();
+        for i in self.chunks[thread].clone() {
+            self.try_run(i, round, cmd);
         }
+        for k in 1..n {
+            for i in self.chunks[(thread + k) % n].clone().rev() {
+                self.try_run(i, round, cmd);
+            }
+        }
+    }
+
+    fn try_run(&self, i: usize, round: u64, cmd: &Cmd) {
+        if self.claimed[i]
+            .compare_exchange(round - 1, round, Ordering::AcqRel, Ordering::Relaxed)
+            .is_err()
+        {
+            return;
+        }
+        if let Ok(mut slot) = self.slots[i].lock() {
+            slot.out = Some(slot.run(i, cmd, self.act_dim));
+        }
+        self.finished.fetch_add(1, Ordering::Release);
     }
 }
 
-#[derive(Default)]
-struct Mailbox {
-    cmd: Option<Cmd>,
-    out: Option<Out>,
-}
-
-struct Shared {
-    posted: AtomicU64,
-    done: AtomicU64,
-    quit: AtomicBool,
-    mail: Mutex<Mailbox>,
-}
-
-struct Worker {
-    /// Index of the worker's first env, and how many it steps.
-    first: usize,
-    len: usize,
-    shared: Arc<Shared>,
-    handle: Option<JoinHandle<()>>,
-}
-
-/// How long a worker spins for its next command before parking.
+/// How long a thread spins for its next command before parking.
 const SPIN: Duration = Duration::from_micros(300);
 
 fn wait_until(flag: impl Fn() -> bool, park: bool) {
@@ -133,8 +143,8 @@ fn wait_until(flag: impl Fn() -> bool, park: bool) {
 /// Envs that step together. Env `i` is seeded with `seed + i` on `reset(Some(seed))`, so the
 /// results do not depend on the number of threads.
 pub struct VecEnv<E: Env> {
-    local: Chunk<E>,
-    workers: Vec<Worker>,
+    shared: Arc<Shared<E>>,
+    workers: Vec<JoinHandle<()>>,
     n_envs: usize,
     obs_dim: usize,
     act_dim: usize,
@@ -163,30 +173,35 @@ impl<E: Env + 'static> VecEnv<E> {
         let n_envs = envs.len();
         let act_dim = act_space.dim();
         let threads = threads.clamp(1, n_envs);
-        let mut chunks: Vec<Chunk<E>> = Vec::new();
-        let mut it = envs.into_iter();
-        let mut first = 0;
+        let mut chunks = Vec::with_capacity(threads);
+        let mut start = 0;
         for t in 0..threads {
             let size = n_envs / threads + usize::from(t < n_envs % threads);
-            let slots = it
-                .by_ref()
-                .take(size)
-                .map(|env| Slot { env, ret: 0.0, len: 0 })
-                .collect();
-            chunks.push(Chunk { first, act_dim, slots });
-            first += size;
+            chunks.push(start..start + size);
+            start += size;
         }
-        let mut chunks = chunks.into_iter();
-        let local = chunks.next().ok_or_else(|| EnvError::Config("no envs".into()))?;
+        let shared = Arc::new(Shared {
+            slots: envs
+                .into_iter()
+                .map(|env| {
+                    Mutex::new(Slot {
+                        env,
+                        ret: 0.0,
+                        len: 0,
+                        out: None,
+                    })
+                })
+                .collect(),
+            claimed: (0..n_envs).map(|_| AtomicU64::new(0)).collect(),
+            chunks,
+            act_dim,
+            round: AtomicU64::new(0),
+            finished: AtomicUsize::new(0),
+            cmd: Mutex::new((0, None)),
+            quit: AtomicBool::new(false),
+        });
         let mut workers = Vec::new();
-        for mut chunk in chunks {
-            let (first, len) = (chunk.first, chunk.slots.len());
-            let shared = Arc::new(Shared {
-                posted: AtomicU64::new(0),
-                done: AtomicU64::new(0),
-                quit: AtomicBool::new(false),
-                mail: Mutex::new(Mailbox::default()),
-            });
+        for t in 1..threads {
             let sh = shared.clone();
             let handle = std::thread::Builder::new()
                 .name("agvrl-vecenv".into())
@@ -194,34 +209,24 @@ impl<E: Env + 'static> VecEnv<E> {
                     let mut seen = 0u64;
                     loop {
                         wait_until(
-                            || sh.posted.load(Ordering::Acquire) > seen || sh.quit.load(Ordering::Acquire),
+                            || sh.round.load(Ordering::Acquire) > seen || sh.quit.load(Ordering::Acquire),
                             true,
                         );
                         if sh.quit.load(Ordering::Acquire) {
                             return;
                         }
-                        seen += 1;
-                        let cmd = sh.mail.lock().map(|mut m| m.cmd.take()).unwrap_or(None);
-                        let out = match cmd {
-                            Some(c) => chunk.run(c),
-                            None => Err(EnvError::Config("VecEnv worker got no command".into())),
+                        let Ok((round, Some(cmd))) = sh.cmd.lock().map(|c| (c.0, c.1.clone())) else {
+                            return;
                         };
-                        if let Ok(mut m) = sh.mail.lock() {
-                            m.out = Some(out);
-                        }
-                        sh.done.store(seen, Ordering::Release);
+                        seen = round;
+                        sh.work(t, round, &cmd);
                     }
                 })
                 .map_err(|e| EnvError::Config(format!("spawning a VecEnv thread: {e}")))?;
-            workers.push(Worker {
-                first,
-                len,
-                shared,
-                handle: Some(handle),
-            });
+            workers.push(handle);
         }
         Ok(Self {
-            local,
+            shared,
             workers,
             n_envs,
             obs_dim: obs_space.dim(),
@@ -256,33 +261,44 @@ impl<E: Env> VecEnv<E> {
 
     /// Threads stepping the envs (the caller's included).
     pub fn threads(&self) -> usize {
-        1 + self.workers.len()
+        self.shared.chunks.len()
     }
 
-    /// Run `cmd_of(chunk_first, chunk_len)` on every chunk, the local one on this thread.
-    fn run_all(&mut self, cmd_of: impl Fn(usize, usize) -> Cmd) -> Result<Vec<(Vec<f32>, Step)>, EnvError> {
-        for w in &self.workers {
-            if let Ok(mut m) = w.shared.mail.lock() {
-                m.cmd = Some(cmd_of(w.first, w.len));
-            }
-            w.shared.posted.fetch_add(1, Ordering::Release);
-            if let Some(h) = &w.handle {
-                h.thread().unpark();
-            }
+    /// Run `cmd` on every env once, on all threads; results in env order.
+    fn run_all(&mut self, cmd: Cmd) -> Result<Vec<(Vec<f32>, Step)>, EnvError> {
+        let sh = &self.shared;
+        let cmd = Arc::new(cmd);
+        let round = {
+            let mut c = sh
+                .cmd
+                .lock()
+                .map_err(|_| EnvError::Config("VecEnv lock poisoned".into()))?;
+            // Every env of the last round is done, so no thread still counts into `finished`.
+            sh.finished.store(0, Ordering::Relaxed);
+            c.0 += 1;
+            c.1 = Some(cmd.clone());
+            sh.round.store(c.0, Ordering::Release);
+            c.0
+        };
+        for h in &self.workers {
+            h.thread().unpark();
         }
-        let mut out = self.local.run(cmd_of(0, self.local.slots.len()))?;
-        for w in &self.workers {
-            let target = w.shared.posted.load(Ordering::Acquire);
-            wait_until(|| w.shared.done.load(Ordering::Acquire) >= target, false);
-            let got = w.shared.mail.lock().ok().and_then(|mut m| m.out.take());
-            out.extend(got.ok_or_else(|| EnvError::Config("VecEnv worker lost its result".into()))??);
-        }
-        Ok(out)
+        sh.work(0, round, &cmd);
+        wait_until(|| sh.finished.load(Ordering::Acquire) >= self.n_envs, false);
+        sh.slots
+            .iter()
+            .map(|s| {
+                s.lock()
+                    .ok()
+                    .and_then(|mut s| s.out.take())
+                    .ok_or_else(|| EnvError::Config("VecEnv lost a result".into()))?
+            })
+            .collect()
     }
 
     /// Reset every env; env `i` gets `seed + i`. Returns `n_envs * obs_dim` observations.
     pub fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f32>, Vec<Info>), EnvError> {
-        let out = self.run_all(|_, _| Cmd::Reset(seed))?;
+        let out = self.run_all(Cmd::Reset(seed))?;
         let mut obs = Vec::with_capacity(self.n_envs * self.obs_dim);
         let mut infos = Vec::with_capacity(self.n_envs);
         for (o, st) in out {
@@ -301,8 +317,7 @@ impl<E: Env> VecEnv<E> {
                 got: actions.len(),
             });
         }
-        let d = self.act_dim;
-        let steps = self.run_all(|first, len| Cmd::Step(actions[first * d..(first + len) * d].to_vec()))?;
+        let steps = self.run_all(Cmd::Step(actions.to_vec()))?;
         let mut out = VecStep {
             obs: Vec::with_capacity(n * self.obs_dim),
             rewards: Vec::with_capacity(n),
@@ -323,12 +338,10 @@ impl<E: Env> VecEnv<E> {
 
 impl<E: Env> Drop for VecEnv<E> {
     fn drop(&mut self) {
-        for w in &mut self.workers {
-            w.shared.quit.store(true, Ordering::Release);
-            if let Some(h) = w.handle.take() {
-                h.thread().unpark();
-                let _ = h.join();
-            }
+        self.shared.quit.store(true, Ordering::Release);
+        for h in self.workers.drain(..) {
+            h.thread().unpark();
+            let _ = h.join();
         }
     }
 }

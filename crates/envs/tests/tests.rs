@@ -149,6 +149,30 @@ mod issue_3_episodes {
     }
 
     #[test]
+    fn layout_seeds_give_other_maps_of_the_same_kind() {
+        let scan_at_origin = |id: &str, layout_seed: Option<u64>| {
+            let cfg = EnvConfig {
+                layout_seed,
+                spawn: agvrl_envs::sim_vehicle::SpawnMode::Fixed,
+                max_steps: 60,
+                ..quick_cfg()
+            };
+            let mut env = make(id, &cfg).unwrap();
+            check_env(env.as_mut(), 150).unwrap_or_else(|e| panic!("{id} {layout_seed:?}: {e}"));
+            make_vehicle(id, &cfg).unwrap().reset(0).unwrap().scan.unwrap().ranges
+        };
+        for id in ["search-outdoor-20", "search-urban-50"] {
+            let a = scan_at_origin(id, Some(1));
+            assert_eq!(a, scan_at_origin(id, Some(1)), "{id}: a layout seed is deterministic");
+            assert_ne!(a, scan_at_origin(id, Some(2)), "{id}: another seed, another layout");
+            assert!(
+                a.iter().any(|&r| r < 12.0),
+                "{id}: the car sees something from the origin"
+            );
+        }
+    }
+
+    #[test]
     fn the_time_limit_truncates_without_terminating() {
         let mut env = make(
             "search-outdoor-20",
@@ -265,33 +289,42 @@ mod issue_3_vec_and_noise {
 
     #[test]
     fn vec_env_equals_serial_stepping_for_any_thread_count() {
+        const N: usize = 5;
         let cfg = EnvConfig {
             max_steps: 40,
             ..quick_cfg()
         };
         let mk = || {
-            (0..3)
+            (0..N)
                 .map(|_| make("search-urban-20", &cfg).unwrap())
                 .collect::<Vec<_>>()
         };
         let mut v1 = VecEnv::new(mk(), 1).unwrap();
+        // 2 and 3 threads over 5 envs: uneven chunks, and threads take over each other's envs.
         let mut v2 = VecEnv::new(mk(), 2).unwrap();
+        let mut v3 = VecEnv::new(mk(), 3).unwrap();
         let mut serial = mk();
         let (o1, _) = v1.reset(Some(10)).unwrap();
         let (o2, _) = v2.reset(Some(10)).unwrap();
+        let (o3, _) = v3.reset(Some(10)).unwrap();
         let mut os: Vec<f32> = Vec::new();
         for (i, e) in serial.iter_mut().enumerate() {
             os.extend(e.reset(Some(10 + i as u64)).unwrap().0);
         }
         assert_eq!(o1, o2);
+        assert_eq!(o1, o3);
         assert_eq!(o1, os);
         let mut saw_done = false;
         for t in 0..100 {
-            let a = actions(3, t);
+            let a = actions(N, t);
             let s1 = v1.step(&a).unwrap();
             let s2 = v2.step(&a).unwrap();
+            let s3 = v3.step(&a).unwrap();
             assert_eq!(s1.obs, s2.obs);
+            assert_eq!(s1.obs, s3.obs);
             assert_eq!(s1.rewards, s2.rewards);
+            assert_eq!(s1.rewards, s3.rewards);
+            assert_eq!(s1.terminated, s3.terminated);
             for (i, e) in serial.iter_mut().enumerate() {
                 let st = e.step(&a[i * 2..i * 2 + 2]).unwrap();
                 assert_eq!(st.reward, s1.rewards[i]);
