@@ -3,10 +3,14 @@
 //! racing policy (configs/default.toml).
 
 mod config;
+// Without rerun, nothing reads what only recordings use.
+#[cfg_attr(not(feature = "rerun"), allow(dead_code))]
 mod episode;
 mod plots;
 mod probe;
 mod runs;
+#[cfg_attr(not(feature = "rerun"), allow(dead_code))]
+mod sink;
 mod train;
 #[cfg_attr(not(feature = "rerun"), path = "viz_off.rs")]
 mod viz;

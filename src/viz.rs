@@ -7,15 +7,9 @@ use agvrl_sim::Sim;
 use agvrl_sim::rapier3d::prelude::{Pose, Rotation, SharedShape};
 use anyhow::{Context, Result};
 use rerun::RecordingStream;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-/// Where a recording goes.
-pub enum Sink {
-    /// An .rrd file (written to a temp name, renamed on `finish`).
-    File(PathBuf),
-    /// A rerun viewer spawned from `rerun` on PATH.
-    Viewer,
-}
+pub use crate::sink::{Sink, sink_of};
 
 /// Logs episodes into one recording.
 pub struct Recorder {
@@ -347,12 +341,3 @@ impl Recorder {
 
 /// Whether recordings can be made.
 pub const ENABLED: bool = true;
-
-/// `--rerun FILE` / `--spawn-viewer` as a sink.
-pub fn sink_of(file: Option<&Path>, spawn: bool) -> Option<Sink> {
-    match (file, spawn) {
-        (Some(f), _) => Some(Sink::File(f.to_path_buf())),
-        (None, true) => Some(Sink::Viewer),
-        (None, false) => None,
-    }
-}

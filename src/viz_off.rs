@@ -3,15 +3,9 @@
 
 use crate::episode::StepView;
 use anyhow::{Result, bail};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-/// Where a recording goes.
-pub enum Sink {
-    /// An .rrd file.
-    File(PathBuf),
-    /// A spawned viewer.
-    Viewer,
-}
+pub use crate::sink::{Sink, sink_of};
 
 /// Never constructed without the feature.
 pub struct Recorder {
@@ -34,12 +28,3 @@ impl Recorder {
 
 /// Whether recordings can be made.
 pub const ENABLED: bool = false;
-
-/// `--rerun FILE` / `--spawn-viewer` as a sink.
-pub fn sink_of(file: Option<&Path>, spawn: bool) -> Option<Sink> {
-    match (file, spawn) {
-        (Some(f), _) => Some(Sink::File(f.to_path_buf())),
-        (None, true) => Some(Sink::Viewer),
-        (None, false) => None,
-    }
-}
