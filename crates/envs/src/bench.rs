@@ -7,11 +7,14 @@ use crate::{ENV_IDS, Env, VecEnv, make};
 use agvrl_sim::bench::{median_s, wander};
 use agvrl_sim::{SceneSource, Sim, SimConfig};
 use std::hint::black_box;
+use std::time::Instant;
+
+fn action_elem(t: usize, k: usize) -> f32 {
+    ((((t * 7919 + k * 104_729) % 2001) as f32) / 1000.0) - 1.0
+}
 
 fn actions(t: usize, n: usize, dim: usize) -> Vec<f32> {
-    (0..n * dim)
-        .map(|k| ((((t * 7919 + k * 104_729) % 2001) as f32) / 1000.0) - 1.0)
-        .collect()
+    (0..n * dim).map(|k| action_elem(t, k)).collect()
 }
 
 fn env_rate(env: &mut dyn Env, steps: usize, reps: usize) -> f64 {
@@ -85,40 +88,158 @@ pub fn run(quick: bool) -> Vec<String> {
         ("search-outdoor-50", 16),
         ("pendulum", 8),
     ] {
-        let mut rates = Vec::new();
-        for threads in [1, 2] {
-            let Ok(envs) = (0..n_envs)
-                .map(|_| make(id, &crate::EnvConfig::default()))
-                .collect::<Result<Vec<_>, _>>()
-            else {
-                continue;
-            };
-            let Ok(mut v) = VecEnv::new(envs, threads) else {
-                continue;
-            };
-            let dim = v.action_space().dim();
-            let _ = v.reset(Some(0));
-            // Whole rounds, at least 2,000 env steps: the speed-up is a ratio of medians.
-            let rounds = steps.max(2000) / n_envs;
-            let mut t = 0;
-            let s = median_s(reps, || {
-                for _ in 0..rounds {
-                    t += 1;
-                    black_box(v.step(&actions(t, n_envs, dim)).ok());
-                }
-            });
-            let rate = (rounds * n_envs) as f64 / s;
-            rates.push(rate);
-            out.push(format!(
-                "env={id} n_envs={n_envs} threads={threads} vec_steps_per_s={rate:.0} reps={reps}"
-            ));
-        }
-        if let [one, two] = rates[..] {
-            out.push(format!(
-                "env={id} n_envs={n_envs} vec_speedup_2_threads={:.2}",
-                two / one
-            ));
-        }
+        out.extend(vec_figures(id, n_envs, steps, if quick { 3 } else { 9 }));
     }
     out
+}
+
+/// `n` fresh envs of `id`, reset with seeds `0..n`.
+fn envs_of(id: &str, n: usize) -> Option<Vec<Box<dyn Env>>> {
+    (0..n)
+        .map(|i| {
+            let mut e = make(id, &crate::EnvConfig::default()).ok()?;
+            e.reset(Some(i as u64)).ok()?;
+            Some(e)
+        })
+        .collect()
+}
+
+/// Step `envs` for `rounds` rounds on the calling thread, env `i` with VecEnv's actions for env
+/// `i % period`, resetting ended episodes as VecEnv does.
+fn drive(envs: &mut [Box<dyn Env>], period: usize, rounds: usize) {
+    let mut a = Vec::new();
+    let dim = envs.first().map_or(0, |e| e.action_space().dim());
+    for t in 0..rounds {
+        for (i, e) in envs.iter_mut().enumerate() {
+            a.clear();
+            a.extend((0..dim).map(|j| action_elem(t, (i % period) * dim + j)));
+            match e.step(&a) {
+                Ok(st) if st.done() => {
+                    let _ = e.reset(None);
+                }
+                Ok(st) => {
+                    black_box(st);
+                }
+                Err(_) => {
+                    let _ = e.reset(None);
+                }
+            }
+        }
+    }
+}
+
+/// VecEnv on 1 and 2 threads, and beside it the ceiling of this machine: two threads that never
+/// synchronise against one thread doing the same work. The four runs alternate in every
+/// repetition and each speed-up is the median of per-repetition ratios, so a neighbour's load
+/// that comes and goes hits both sides of a ratio alike. Copies of an env share its seed and
+/// actions and so drive the same episodes: a step's cost depends on the episode's phase (a fast
+/// car costs ~40 % more than one just spawned), and each ratio compares equal work.
+/// `vec_efficiency` is the share of the ceiling VecEnv keeps (its per-step barrier and result
+/// assembly cost the rest).
+fn vec_figures(id: &str, n_envs: usize, steps: usize, reps: usize) -> Vec<String> {
+    // The ceiling's threads each step a copy of the first half of the envs, the single thread
+    // both copies: equal work on each side and the same memory as VecEnv's.
+    let half = (n_envs / 2).max(1);
+    let (Some(e1), Some(e2), Some(mut f1), Some(f1b), Some(mut f2), Some(mut f3)) = (
+        envs_of(id, n_envs),
+        envs_of(id, n_envs),
+        envs_of(id, half),
+        envs_of(id, half),
+        envs_of(id, half),
+        envs_of(id, half),
+    ) else {
+        return Vec::new();
+    };
+    let (Ok(mut v1), Ok(mut v2)) = (VecEnv::new(e1, 1), VecEnv::new(e2, 2)) else {
+        return Vec::new();
+    };
+    f1.extend(f1b);
+    let dim = v1.action_space().dim();
+    let _ = v1.reset(Some(0));
+    let _ = v2.reset(Some(0));
+    // Whole rounds, at least 2,000 env steps per run.
+    let rounds = steps.max(2000) / n_envs;
+    let acts: Vec<Vec<f32>> = (0..rounds).map(|t| actions(t, n_envs, dim)).collect();
+    let timed = |f: &mut dyn FnMut()| {
+        let t0 = Instant::now();
+        f();
+        t0.elapsed().as_secs_f64()
+    };
+    let mut t = [Vec::new(), Vec::new(), Vec::new(), Vec::new()];
+    for rep in 0..=reps {
+        let s = [
+            timed(&mut || {
+                for a in &acts {
+                    black_box(v1.step(a).ok());
+                }
+            }),
+            timed(&mut || {
+                for a in &acts {
+                    black_box(v2.step(a).ok());
+                }
+            }),
+            timed(&mut || drive(&mut f1, half, rounds)),
+            timed(&mut || {
+                std::thread::scope(|sc| {
+                    sc.spawn(|| drive(&mut f3, half, rounds));
+                    drive(&mut f2, half, rounds);
+                });
+            }),
+        ];
+        // The first repetition warms caches and the worker thread up.
+        if rep > 0 {
+            for (v, x) in t.iter_mut().zip(s) {
+                v.push(x);
+            }
+        }
+    }
+    let med = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let ratio = |a: usize, b: usize| med(t[a].iter().zip(&t[b]).map(|(x, y)| x / y).collect());
+    let (vec_speedup, free_speedup) = (ratio(0, 1), ratio(2, 3));
+    let steps_run = (rounds * n_envs) as f64;
+    vec![
+        format!(
+            "env={id} n_envs={n_envs} threads=1 vec_steps_per_s={:.0} reps={reps}",
+            steps_run / med(t[0].clone())
+        ),
+        format!(
+            "env={id} n_envs={n_envs} threads=2 vec_steps_per_s={:.0} reps={reps}",
+            steps_run / med(t[1].clone())
+        ),
+        format!(
+            "env={id} n_envs={n_envs} vec_speedup_2_threads={vec_speedup:.2} \
+             free_speedup_2_threads={free_speedup:.2} vec_efficiency={:.2}",
+            vec_speedup / free_speedup
+        ),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::vec_figures;
+
+    #[test]
+    fn vec_figures_report_rates_speedups_and_efficiency() {
+        let lines = vec_figures("pendulum", 4, 200, 2);
+        assert_eq!(lines.len(), 3, "{lines:?}");
+        let value = |key: &str| -> f64 {
+            let kv = lines
+                .iter()
+                .flat_map(|l| l.split(' '))
+                .find(|kv| kv.starts_with(&format!("{key}=")))
+                .unwrap_or_else(|| panic!("no {key} in {lines:?}"));
+            kv[key.len() + 1..].parse().unwrap()
+        };
+        for key in ["vec_speedup_2_threads", "free_speedup_2_threads", "vec_efficiency"] {
+            let v = value(key);
+            assert!(v.is_finite() && v > 0.0, "{key}={v}");
+        }
+        let eff = value("vec_efficiency");
+        let ratio = value("vec_speedup_2_threads") / value("free_speedup_2_threads");
+        assert!((eff - ratio).abs() < 0.02, "{eff} vs {ratio}");
+        assert!(lines[0].contains("threads=1 vec_steps_per_s=") && lines[1].contains("threads=2"));
+    }
 }
