@@ -4,7 +4,7 @@
 
 use crate::registry::scene_of;
 use crate::{ENV_IDS, Env, VecEnv, make};
-use agvrl_sim::bench::{median_s, wander};
+use agvrl_sim::bench::wander;
 use agvrl_sim::{SceneSource, Sim, SimConfig};
 use std::hint::black_box;
 use std::time::Instant;
@@ -17,67 +17,96 @@ fn actions(t: usize, n: usize, dim: usize) -> Vec<f32> {
     (0..n * dim).map(|k| action_elem(t, k)).collect()
 }
 
-fn env_rate(env: &mut dyn Env, steps: usize, reps: usize) -> f64 {
-    let dim = env.action_space().dim();
-    let _ = env.reset(Some(0));
-    let mut t = 0;
-    let mut run = |n: usize| {
+/// Steps `env` with the bench's actions, resetting ended episodes.
+struct EnvRun<'a> {
+    env: &'a mut dyn Env,
+    dim: usize,
+    t: usize,
+}
+
+impl EnvRun<'_> {
+    fn run(&mut self, n: usize) {
         for _ in 0..n {
-            t += 1;
-            let a = actions(t, 1, dim);
-            match env.step(&a) {
+            self.t += 1;
+            let a = actions(self.t, 1, self.dim);
+            match self.env.step(&a) {
                 Ok(st) if st.done() => {
-                    let _ = env.reset(None);
+                    let _ = self.env.reset(None);
                 }
                 Ok(st) => {
                     black_box(st);
                 }
                 Err(_) => {
-                    let _ = env.reset(None);
+                    let _ = self.env.reset(None);
                 }
             }
         }
-    };
-    run(steps / 5);
-    steps as f64 / median_s(reps, || run(steps))
+    }
+}
+
+fn timed_s(f: impl FnOnce()) -> f64 {
+    let t0 = Instant::now();
+    f();
+    t0.elapsed().as_secs_f64()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }
 
 /// Env figures. `quick` shortens the runs.
 pub fn run(quick: bool) -> Vec<String> {
-    let reps = if quick { 3 } else { 5 };
+    let reps = if quick { 3 } else { 7 };
     let steps = if quick { 200 } else { 2000 };
     let mut out = Vec::new();
     for id in ENV_IDS {
         let Ok(mut env) = make(id, &crate::EnvConfig::default()) else {
             continue;
         };
-        let rate = env_rate(env.as_mut(), steps, reps);
-        let mut line = format!("env={id} steps_per_s={rate:.0}");
-        if let Some(scene) = scene_of(id) {
-            // The same steps on the bare simulator (physics + one LiDAR scan).
-            let mut sim = Sim::new(SimConfig {
+        let dim = env.action_space().dim();
+        let _ = env.reset(Some(0));
+        let mut er = EnvRun {
+            env: env.as_mut(),
+            dim,
+            t: 0,
+        };
+        er.run(steps / 5);
+        // The same number of steps on the bare simulator (physics + one LiDAR scan), timed in
+        // turn with the env's in every repetition so that both see the same machine.
+        let mut sim = scene_of(id).and_then(|scene| {
+            Sim::new(SimConfig {
                 scene: SceneSource::Builtin(scene.into()),
                 ..SimConfig::default()
             })
-            .ok();
+            .ok()
+        });
+        let mut x = 0.37;
+        let (mut env_s, mut sim_s) = (Vec::new(), Vec::new());
+        for _ in 0..reps {
+            env_s.push(timed_s(|| er.run(steps)));
             if let Some(sim) = sim.as_mut() {
                 let spawn = sim.default_spawn();
-                let mut x = 0.37;
-                let sim_rate = steps as f64
-                    / median_s(reps, || {
-                        for _ in 0..steps {
-                            if sim.steps() > 150 || !sim.contacts().is_empty() {
-                                let _ = sim.reset(spawn);
-                            }
-                            let _ = sim.step(wander(&mut x));
-                            black_box(sim.lidar_scan());
+                sim_s.push(timed_s(|| {
+                    for _ in 0..steps {
+                        if sim.steps() > 150 || !sim.contacts().is_empty() {
+                            let _ = sim.reset(spawn);
                         }
-                    });
-                line.push_str(&format!(
-                    " sim_steps_per_s={sim_rate:.0} task_overhead_pct={:.1}",
-                    100.0 * (sim_rate / rate - 1.0)
-                ));
+                        let _ = sim.step(wander(&mut x));
+                        black_box(sim.lidar_scan());
+                    }
+                }));
             }
+        }
+        let rate = steps as f64 / median(env_s.clone());
+        let mut line = format!("env={id} steps_per_s={rate:.0}");
+        if !sim_s.is_empty() {
+            let overhead = median(env_s.iter().zip(&sim_s).map(|(e, s)| e / s).collect());
+            line.push_str(&format!(
+                " sim_steps_per_s={:.0} task_overhead_pct={:.1}",
+                steps as f64 / median(sim_s),
+                100.0 * (overhead - 1.0)
+            ));
         }
         out.push(format!("{line} reps={reps}"));
     }
@@ -160,26 +189,21 @@ fn vec_figures(id: &str, n_envs: usize, steps: usize, reps: usize) -> Vec<String
     // Whole rounds, at least 2,000 env steps per run.
     let rounds = steps.max(2000) / n_envs;
     let acts: Vec<Vec<f32>> = (0..rounds).map(|t| actions(t, n_envs, dim)).collect();
-    let timed = |f: &mut dyn FnMut()| {
-        let t0 = Instant::now();
-        f();
-        t0.elapsed().as_secs_f64()
-    };
     let mut t = [Vec::new(), Vec::new(), Vec::new(), Vec::new()];
     for rep in 0..=reps {
         let s = [
-            timed(&mut || {
+            timed_s(|| {
                 for a in &acts {
                     black_box(v1.step(a).ok());
                 }
             }),
-            timed(&mut || {
+            timed_s(|| {
                 for a in &acts {
                     black_box(v2.step(a).ok());
                 }
             }),
-            timed(&mut || drive(&mut f1, half, rounds)),
-            timed(&mut || {
+            timed_s(|| drive(&mut f1, half, rounds)),
+            timed_s(|| {
                 std::thread::scope(|sc| {
                     sc.spawn(|| drive(&mut f3, half, rounds));
                     drive(&mut f2, half, rounds);
@@ -193,21 +217,17 @@ fn vec_figures(id: &str, n_envs: usize, steps: usize, reps: usize) -> Vec<String
             }
         }
     }
-    let med = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    let ratio = |a: usize, b: usize| med(t[a].iter().zip(&t[b]).map(|(x, y)| x / y).collect());
+    let ratio = |a: usize, b: usize| median(t[a].iter().zip(&t[b]).map(|(x, y)| x / y).collect());
     let (vec_speedup, free_speedup) = (ratio(0, 1), ratio(2, 3));
     let steps_run = (rounds * n_envs) as f64;
     vec![
         format!(
             "env={id} n_envs={n_envs} threads=1 vec_steps_per_s={:.0} reps={reps}",
-            steps_run / med(t[0].clone())
+            steps_run / median(t[0].clone())
         ),
         format!(
             "env={id} n_envs={n_envs} threads=2 vec_steps_per_s={:.0} reps={reps}",
-            steps_run / med(t[1].clone())
+            steps_run / median(t[1].clone())
         ),
         format!(
             "env={id} n_envs={n_envs} vec_speedup_2_threads={vec_speedup:.2} \
