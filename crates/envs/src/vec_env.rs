@@ -8,7 +8,8 @@
 //! step (a reset, a crowded scan) does not leave a core idle. A step costs tens of microseconds,
 //! so handing work over must cost far less: workers spin briefly for the next command before
 //! they park (on this class of machine a park/unpark round trip took ~100 us, which ate the
-//! whole gain of a second core with a sleeping thread pool).
+//! whole gain of a second core with a sleeping thread pool). Rounds cheaper than handing one
+//! over (tiny envs like pendulum) run on the caller's thread alone.
 
 use crate::Env;
 use crate::api::{BoxSpace, EnvError, EpisodeSummary, Info, Step};
@@ -98,31 +99,44 @@ impl<E: Env> Shared<E> {
     /// Step this thread's own chunk in order, then help with the others from their ends, so a
     /// thread that finishes early takes over the last envs of a slower one without moving envs
     /// between cores in the common case.
-    fn work(&self, thread: usize, round: u64, cmd: &Cmd) {
+    /// Returns how many envs this thread stepped.
+    fn work(&self, thread: usize, round: u64, cmd: &Cmd) -> usize {
         let n = self.chunks.len();
+        let mut done = 0;
         for i in self.chunks[thread].clone() {
-            self.try_run(i, round, cmd);
+            done += usize::from(self.try_run(i, round, cmd));
         }
         for k in 1..n {
             for i in self.chunks[(thread + k) % n].clone().rev() {
-                self.try_run(i, round, cmd);
+                done += usize::from(self.try_run(i, round, cmd));
             }
         }
+        done
     }
 
-    fn try_run(&self, i: usize, round: u64, cmd: &Cmd) {
+    fn try_run(&self, i: usize, round: u64, cmd: &Cmd) -> bool {
         if self.claimed[i]
             .compare_exchange(round - 1, round, Ordering::AcqRel, Ordering::Relaxed)
             .is_err()
         {
-            return;
+            return false;
         }
+        self.run_one(i, cmd);
+        self.finished.fetch_add(1, Ordering::Release);
+        true
+    }
+
+    fn run_one(&self, i: usize, cmd: &Cmd) {
         if let Ok(mut slot) = self.slots[i].lock() {
             slot.out = Some(slot.run(i, cmd, self.act_dim));
         }
-        self.finished.fetch_add(1, Ordering::Release);
     }
 }
+
+/// Below this much work per round (all envs, one thread) the caller's thread steps every env
+/// itself: handing a round over costs a few microseconds, more than tiny envs (pendulum, 0.3 us a
+/// step) save on a second core.
+const SOLO_BELOW: Duration = Duration::from_micros(25);
 
 /// How long a thread spins for its next command before parking.
 const SPIN: Duration = Duration::from_micros(300);
@@ -151,6 +165,8 @@ pub struct VecEnv<E: Env> {
     obs_space: BoxSpace,
     act_space: BoxSpace,
     dt_s: f64,
+    /// Estimated time of one round on one thread, from the last round.
+    round_cost: Duration,
 }
 
 impl<E: Env + 'static> VecEnv<E> {
@@ -234,6 +250,7 @@ impl<E: Env + 'static> VecEnv<E> {
             obs_space,
             act_space,
             dt_s,
+            round_cost: Duration::MAX,
         })
     }
 }
@@ -267,6 +284,15 @@ impl<E: Env> VecEnv<E> {
     /// Run `cmd` on every env once, on all threads; results in env order.
     fn run_all(&mut self, cmd: Cmd) -> Result<Vec<(Vec<f32>, Step)>, EnvError> {
         let sh = &self.shared;
+        if self.workers.is_empty() || self.round_cost < SOLO_BELOW {
+            // Results do not depend on which thread steps an env, so this changes speed only.
+            let t0 = Instant::now();
+            for i in 0..self.n_envs {
+                sh.run_one(i, &cmd);
+            }
+            self.round_cost = t0.elapsed();
+            return self.collect();
+        }
         let cmd = Arc::new(cmd);
         let round = {
             let mut c = sh
@@ -283,9 +309,16 @@ impl<E: Env> VecEnv<E> {
         for h in &self.workers {
             h.thread().unpark();
         }
-        sh.work(0, round, &cmd);
+        let t0 = Instant::now();
+        let done = sh.work(0, round, &cmd);
+        self.round_cost = t0.elapsed() * self.n_envs as u32 / done.max(1) as u32;
         wait_until(|| sh.finished.load(Ordering::Acquire) >= self.n_envs, false);
-        sh.slots
+        self.collect()
+    }
+
+    fn collect(&self) -> Result<Vec<(Vec<f32>, Step)>, EnvError> {
+        self.shared
+            .slots
             .iter()
             .map(|s| {
                 s.lock()

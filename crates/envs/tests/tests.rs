@@ -347,6 +347,34 @@ mod issue_3_vec_and_noise {
     }
 
     #[test]
+    fn vec_env_of_tiny_envs_on_two_threads_equals_one_thread() {
+        // Pendulum rounds are too short to hand over: the caller's thread steps them alone,
+        // after a first round on both threads; results must not change either way.
+        let mk = || {
+            (0..8)
+                .map(|_| make("pendulum", &EnvConfig::default()).unwrap())
+                .collect::<Vec<_>>()
+        };
+        let mut v1 = VecEnv::new(mk(), 1).unwrap();
+        let mut v2 = VecEnv::new(mk(), 2).unwrap();
+        assert_eq!(v1.reset(Some(3)).unwrap().0, v2.reset(Some(3)).unwrap().0);
+        let mut ended = 0;
+        for t in 0..450 {
+            // One torque per env.
+            let a: Vec<f32> = actions(4, t).iter().map(|x| x * 2.0).collect();
+            let (s1, s2) = (v1.step(&a).unwrap(), v2.step(&a).unwrap());
+            assert_eq!(s1.obs, s2.obs);
+            assert_eq!(s1.rewards, s2.rewards);
+            assert_eq!(s1.truncated, s2.truncated);
+            ended += s1.truncated.iter().filter(|&&x| x).count();
+            for (i1, i2) in s1.infos.iter().zip(&s2.infos) {
+                assert_eq!(i1.final_obs, i2.final_obs);
+            }
+        }
+        assert_eq!(ended, 16, "two 200-step time limits per env");
+    }
+
+    #[test]
     fn noise_is_seeded_and_changes_observations() {
         let run = |cfg: &EnvConfig| {
             let mut env = make("search-outdoor-20", cfg).unwrap();
