@@ -219,15 +219,18 @@ mod issue_5_cli {
     #[test]
     fn bad_inputs_fail_with_a_one_line_error() {
         let d = tmp("bad");
-        let bad = d.join("bad.toml");
-        std::fs::write(&bad, "env = \"racing-oval\"\nlearning_rat = 0.1\n").unwrap();
-        let o = agvrl(&[
-            "train",
-            "--config",
-            bad.to_str().unwrap(),
-            "--out",
-            d.join("r").to_str().unwrap(),
-        ]);
+        let train_with = |config: &str, out: &str| {
+            let bad = d.join("bad.toml");
+            std::fs::write(&bad, config).unwrap();
+            agvrl(&[
+                "train",
+                "--config",
+                bad.to_str().unwrap(),
+                "--out",
+                d.join(out).to_str().unwrap(),
+            ])
+        };
+        let o = train_with("env = \"racing-oval\"\nlearning_rat = 0.1\n", "r");
         assert!(!o.status.success());
         assert!(stderr(&o).contains("learning_rat"), "{}", stderr(&o));
         assert_eq!(stderr(&o).trim().lines().count(), 1, "{}", stderr(&o));
@@ -237,14 +240,7 @@ mod issue_5_cli {
         assert!(e.contains("racing-moon") && e.contains("racing-oval"), "{e}");
         let o = agvrl(&["probe", "--env", "racing-oval", "--pose", "1,2"]);
         assert!(!o.status.success() && stderr(&o).contains("x,y,yaw"));
-        std::fs::write(&bad, "env = \"racing-oval\"\nn_envs = 2\nprocedural_layouts = 3\n").unwrap();
-        let o = agvrl(&[
-            "train",
-            "--config",
-            bad.to_str().unwrap(),
-            "--out",
-            d.join("r3").to_str().unwrap(),
-        ]);
+        let o = train_with("env = \"racing-oval\"\nn_envs = 2\nprocedural_layouts = 3\n", "r3");
         assert!(!o.status.success());
         assert!(
             stderr(&o).contains("procedural_layouts (3) cannot exceed n_envs (2)"),

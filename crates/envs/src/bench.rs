@@ -7,6 +7,7 @@ use crate::{ENV_IDS, Env, VecEnv, make};
 use agvrl_sim::bench::wander;
 use agvrl_sim::{SceneSource, Sim, SimConfig};
 use std::hint::black_box;
+use std::ops::Range;
 use std::time::Instant;
 
 fn action_elem(t: usize, k: usize) -> f32 {
@@ -15,33 +16,6 @@ fn action_elem(t: usize, k: usize) -> f32 {
 
 fn actions(t: usize, n: usize, dim: usize) -> Vec<f32> {
     (0..n * dim).map(|k| action_elem(t, k)).collect()
-}
-
-/// Steps `env` with the bench's actions, resetting ended episodes.
-struct EnvRun<'a> {
-    env: &'a mut dyn Env,
-    dim: usize,
-    t: usize,
-}
-
-impl EnvRun<'_> {
-    fn run(&mut self, n: usize) {
-        for _ in 0..n {
-            self.t += 1;
-            let a = actions(self.t, 1, self.dim);
-            match self.env.step(&a) {
-                Ok(st) if st.done() => {
-                    let _ = self.env.reset(None);
-                }
-                Ok(st) => {
-                    black_box(st);
-                }
-                Err(_) => {
-                    let _ = self.env.reset(None);
-                }
-            }
-        }
-    }
 }
 
 fn timed_s(f: impl FnOnce()) -> f64 {
@@ -64,14 +38,14 @@ pub fn run(quick: bool) -> Vec<String> {
         let Ok(mut env) = make(id, &crate::EnvConfig::default()) else {
             continue;
         };
-        let dim = env.action_space().dim();
         let _ = env.reset(Some(0));
-        let mut er = EnvRun {
-            env: env.as_mut(),
-            dim,
-            t: 0,
+        let env = std::slice::from_mut(&mut env);
+        let mut t = 1;
+        let mut run = |n: usize| {
+            drive(env, 1, t..t + n);
+            t += n;
         };
-        er.run(steps / 5);
+        run(steps / 5);
         // The same number of steps on the bare simulator (physics + one LiDAR scan), timed in
         // turn with the env's in every repetition so that both see the same machine.
         let mut sim = scene_of(id).and_then(|scene| {
@@ -84,7 +58,7 @@ pub fn run(quick: bool) -> Vec<String> {
         let mut x = 0.37;
         let (mut env_s, mut sim_s) = (Vec::new(), Vec::new());
         for _ in 0..reps {
-            env_s.push(timed_s(|| er.run(steps)));
+            env_s.push(timed_s(|| run(steps)));
             if let Some(sim) = sim.as_mut() {
                 let spawn = sim.default_spawn();
                 sim_s.push(timed_s(|| {
@@ -133,12 +107,12 @@ fn envs_of(id: &str, n: usize) -> Option<Vec<Box<dyn Env>>> {
         .collect()
 }
 
-/// Step `envs` for `rounds` rounds on the calling thread, env `i` with VecEnv's actions for env
+/// Step `envs` through `rounds` on the calling thread, env `i` with VecEnv's actions for env
 /// `i % period`, resetting ended episodes as VecEnv does.
-fn drive(envs: &mut [Box<dyn Env>], period: usize, rounds: usize) {
+fn drive(envs: &mut [Box<dyn Env>], period: usize, rounds: Range<usize>) {
     let mut a = Vec::new();
     let dim = envs.first().map_or(0, |e| e.action_space().dim());
-    for t in 0..rounds {
+    for t in rounds {
         for (i, e) in envs.iter_mut().enumerate() {
             a.clear();
             a.extend((0..dim).map(|j| action_elem(t, (i % period) * dim + j)));
@@ -202,11 +176,11 @@ fn vec_figures(id: &str, n_envs: usize, steps: usize, reps: usize) -> Vec<String
                     black_box(v2.step(a).ok());
                 }
             }),
-            timed_s(|| drive(&mut f1, half, rounds)),
+            timed_s(|| drive(&mut f1, half, 0..rounds)),
             timed_s(|| {
                 std::thread::scope(|sc| {
-                    sc.spawn(|| drive(&mut f3, half, rounds));
-                    drive(&mut f2, half, rounds);
+                    sc.spawn(|| drive(&mut f3, half, 0..rounds));
+                    drive(&mut f2, half, 0..rounds);
                 });
             }),
         ];
