@@ -538,7 +538,7 @@ impl Scene {
                     let x = rng.random_range(-half_m + sx / 2.0..half_m - sx / 2.0);
                     let side = if rng.random::<bool>() { 1.0 } else { -1.0 };
                     let y_lo = road_half + 1.0 + sy / 2.0;
-                    if y_lo > half_m - sy / 2.0 {
+                    if y_lo >= half_m - sy / 2.0 {
                         continue;
                     }
                     let y = side * rng.random_range(y_lo..half_m - sy / 2.0);
