@@ -13,8 +13,11 @@ pub const DEFAULT_TOML: &str = include_str!("../configs/default.toml");
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct RunConfig {
-    /// Env id.
+    /// Env id (evaluation; training too unless `train_envs` is set).
     pub env: String,
+    /// Env ids the training envs cycle through (env `i` drives `train_envs[i % len]`); all
+    /// must share `env`'s spaces. Empty: every training env is `env`.
+    pub train_envs: Vec<String>,
     /// `ppo` or `sac`.
     pub algo: String,
     /// Environment steps to train.
@@ -45,6 +48,7 @@ impl Default for RunConfig {
     fn default() -> Self {
         Self {
             env: "racing-oval".into(),
+            train_envs: Vec::new(),
             algo: "ppo".into(),
             steps: 100_000,
             seed: 0,
@@ -83,6 +87,17 @@ impl RunConfig {
                 agvrl_envs::ENV_IDS.join(", ")
             );
         }
+        for id in &self.train_envs {
+            if !agvrl_envs::ENV_IDS.contains(&id.as_str()) {
+                bail!(
+                    "unknown env id '{id}' in train_envs; valid ids: {}",
+                    agvrl_envs::ENV_IDS.join(", ")
+                );
+            }
+        }
+        if self.env_config.held_out {
+            bail!("env_config.held_out is for evaluation only: training never draws held-out episodes");
+        }
         if self.algo != "ppo" && self.algo != "sac" {
             bail!("unknown algo '{}'; use ppo or sac", self.algo);
         }
@@ -105,19 +120,33 @@ impl RunConfig {
     }
 
     /// Env settings of training env `i`: the last `procedural_layouts` envs get a layout seed
-    /// drawn from the run's seed and their index.
+    /// drawn from the run's seed and their index (redrawn every episode with
+    /// `env_config.new_layout_each_episode`); the others drive the built-in map.
     pub fn train_env_config(&self, i: usize) -> EnvConfig {
         let mut cfg = self.env_config.clone();
         if i + self.procedural_layouts >= self.n_envs {
             cfg.layout_seed = Some(self.seed.wrapping_mul(1_000_003).wrapping_add(i as u64));
+        } else {
+            cfg.new_layout_each_episode = false;
         }
         cfg
     }
 
-    /// Env settings for evaluation episodes.
+    /// Env id of training env `i`.
+    pub fn train_env_id(&self, i: usize) -> &str {
+        match self.train_envs.len() {
+            0 => &self.env,
+            n => &self.train_envs[i % n],
+        }
+    }
+
+    /// Env settings for evaluation episodes: the built-in map, held-out seeds.
     pub fn eval_env_config(&self) -> EnvConfig {
         EnvConfig {
             max_steps: self.eval_max_steps.unwrap_or(self.env_config.max_steps),
+            layout_seed: None,
+            new_layout_each_episode: false,
+            held_out: true,
             ..self.env_config.clone()
         }
     }

@@ -20,7 +20,10 @@ pub fn make_sim_env(id: &str, cfg: &EnvConfig) -> Result<Option<SimEnv>> {
     }
     let vehicle = make_vehicle(id, cfg)?;
     let task = make_task(id, cfg, vehicle.steering_limit_rad())?;
-    Ok(Some(TimeLimit::new(TaskEnv::new(vehicle, task), cfg.max_steps)))
+    Ok(Some(TimeLimit::new(
+        TaskEnv::new(vehicle, task).with_held_out(cfg.held_out),
+        cfg.max_steps,
+    )))
 }
 
 /// One control step as viewers see it.

@@ -82,9 +82,29 @@ learner!(Sac<Box<dyn Env>>);
 
 #[derive(Args)]
 pub struct EvalArgs {
-    /// A run directory written by `agvrl train`.
+    /// A run directory written by `agvrl train` (its policy, env and env settings).
+    #[arg(long, required_unless_present = "policy", conflicts_with = "policy")]
+    pub run: Option<PathBuf>,
+    /// A policy file; env and env settings come from FILE.toml beside it when present (a run's
+    /// config.toml, as shipped in assets/policies), else --env with the default settings.
     #[arg(long)]
-    pub run: PathBuf,
+    pub policy: Option<PathBuf>,
+    /// Base of the evaluation episodes' seeds: episode k resets with seed S + k, drawn from the
+    /// held-out half of the seed space that training never uses (default: the run's seed +
+    /// 2,000,000, or 0 for --policy).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Maps: builtin (the env's own map) or procedural (a new held-out layout of the env's kind
+    /// and size every episode, never one a training run drew).
+    #[arg(long, default_value = "builtin", value_parser = ["builtin", "procedural"])]
+    pub layouts: String,
+    /// Env preset applied on top of the policy's env settings: sim2real adds sensor noise,
+    /// latency and domain randomisation.
+    #[arg(long, value_parser = ["sim2real"])]
+    pub preset: Option<String>,
+    /// Episode length limit, control steps (default: the run's evaluation limit).
+    #[arg(long)]
+    pub max_steps: Option<u64>,
     /// Number of deterministic episodes.
     #[arg(long, default_value_t = 5)]
     pub episodes: usize,
@@ -192,7 +212,7 @@ fn image_spec_from_env(cfg: &mut RunConfig) {
 
 fn vec_env(cfg: &RunConfig) -> Result<VecEnv<Box<dyn Env>>> {
     let envs = (0..cfg.n_envs)
-        .map(|i| make(&cfg.env, &cfg.train_env_config(i)))
+        .map(|i| make(cfg.train_env_id(i), &cfg.train_env_config(i)))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(VecEnv::new(envs, cfg.threads)?)
 }
@@ -327,6 +347,7 @@ fn run_learner(
     let mut policy = Policy::load(&policy_path)?;
     let mut watch = Watch {
         rec_episodes: 1,
+        plot_episodes: usize::MAX,
         ..Watch::default()
     };
     if viz::ENABLED && agvrl_envs::registry::scene_of(&cfg.env).is_some() {
@@ -516,6 +537,8 @@ struct Watch {
     rec: Option<Recorder>,
     /// Record only episodes below this index.
     rec_episodes: usize,
+    /// Draw only the paths of episodes below this index.
+    plot_episodes: usize,
 }
 
 impl Watch {
@@ -523,13 +546,15 @@ impl Watch {
         if self.scene.is_none() {
             self.scene = Some(v.sim.scene().clone());
         }
-        if v.step == 0 {
+        if v.step == 0 && v.episode < self.plot_episodes {
             self.paths.push(Path2 {
                 xy: Vec::new(),
                 collided: false,
             });
         }
-        if let Some(p) = self.paths.last_mut() {
+        if v.episode < self.plot_episodes
+            && let Some(p) = self.paths.last_mut()
+        {
             let t = v.sim.base_pose().translation;
             p.xy.push((t.x, t.y));
             p.collided |= v.terminated;
@@ -550,37 +575,113 @@ impl Watch {
     }
 }
 
+/// Where `agvrl eval` takes its policy and settings from.
+struct EvalSource {
+    policy_path: PathBuf,
+    env: Option<String>,
+    env_config: EnvConfig,
+    algo: String,
+    seed: u64,
+}
+
+fn eval_source(a: &EvalArgs) -> Result<EvalSource> {
+    if let Some(dir) = &a.run {
+        let cfg = RunConfig::load(&dir.join("config.toml"))
+            .with_context(|| format!("{} is not a run directory", dir.display()))?;
+        return Ok(EvalSource {
+            policy_path: dir.join(POLICY_FILE),
+            env: Some(cfg.env.clone()),
+            env_config: cfg.eval_env_config(),
+            algo: cfg.algo.clone(),
+            seed: cfg.seed + 2_000_000,
+        });
+    }
+    let Some(path) = &a.policy else {
+        bail!("give --run DIR or --policy FILE");
+    };
+    let sidecar = path.with_extension("toml");
+    let (env, env_config, algo) = if sidecar.exists() {
+        let cfg = RunConfig::load(&sidecar).with_context(|| format!("reading {}", sidecar.display()))?;
+        (Some(cfg.env.clone()), cfg.eval_env_config(), cfg.algo.clone())
+    } else {
+        let cfg = EnvConfig {
+            held_out: true,
+            ..EnvConfig::default()
+        };
+        (None, cfg, "policy".to_string())
+    };
+    Ok(EvalSource {
+        policy_path: path.clone(),
+        env,
+        env_config,
+        algo,
+        seed: 0,
+    })
+}
+
 pub fn eval(a: EvalArgs) -> Result<()> {
     if a.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
-    let cfg = RunConfig::load(&a.run.join("config.toml"))
-        .with_context(|| format!("{} is not a run directory", a.run.display()))?;
+    let src = eval_source(&a)?;
     let mut policy = match a.random {
         true => None,
-        false => Some(
-            Policy::load(&a.run.join(POLICY_FILE))
-                .with_context(|| format!("loading {}", a.run.join(POLICY_FILE).display()))?,
-        ),
+        false => {
+            Some(Policy::load(&src.policy_path).with_context(|| format!("loading {}", src.policy_path.display()))?)
+        }
     };
+    let env_id = a
+        .env
+        .clone()
+        .or(src.env.clone())
+        .context("--env is needed: the policy has no FILE.toml beside it naming its env")?;
+    let mut env_cfg = src.env_config.clone();
+    env_cfg.held_out = true;
+    if a.layouts == "procedural" {
+        if agvrl_envs::registry::scene_of(&env_id).is_none_or(|s| s == "oval") {
+            bail!("--layouts procedural needs a search env (outdoor or urban)");
+        }
+        env_cfg.layout_seed = Some(0);
+        env_cfg.new_layout_each_episode = true;
+    }
+    if a.preset.as_deref() == Some("sim2real") {
+        let s2r = EnvConfig::sim2real();
+        env_cfg.noise = s2r.noise;
+        env_cfg.randomisation = s2r.randomisation;
+    }
+    if let Some(n) = a.max_steps {
+        if n == 0 {
+            bail!("--max-steps must be at least 1");
+        }
+        env_cfg.max_steps = n;
+    }
+    let seed = a.seed.unwrap_or(src.seed);
     let mut watch = Watch {
         rec_episodes: a.episodes,
+        // Every episode of procedural layouts drives another map: draw the first one only.
+        plot_episodes: if a.layouts == "procedural" { 1 } else { usize::MAX },
         ..Watch::default()
     };
     if let Some(sink) = viz::sink_of(a.rerun.as_deref(), a.spawn_viewer) {
-        watch.rec = Some(Recorder::new(sink, &format!("{} eval", a.run.display()))?);
+        watch.rec = Some(Recorder::new(sink, &format!("{} eval", src.policy_path.display()))?);
     }
-    let env_id = a.env.clone().unwrap_or_else(|| cfg.env.clone());
-    let s = evaluate(
-        policy.as_mut(),
-        &env_id,
-        &cfg.eval_env_config(),
-        a.episodes,
-        cfg.seed + 2_000_000,
-        &mut |v| watch.see(v),
-    )?;
+    let s = evaluate(policy.as_mut(), &env_id, &env_cfg, a.episodes, seed, &mut |v| {
+        watch.see(v)
+    })?;
     println!("env={env_id}");
-    println!("policy={}", if a.random { "random" } else { POLICY_FILE });
+    println!(
+        "policy={}",
+        if a.random {
+            "random".to_string()
+        } else if a.run.is_some() {
+            POLICY_FILE.to_string()
+        } else {
+            src.policy_path.display().to_string()
+        }
+    );
+    println!("seed={seed}");
+    println!("layouts={}", a.layouts);
+    println!("preset={}", a.preset.as_deref().unwrap_or("none"));
     for l in s.lines() {
         println!("{l}");
     }
@@ -590,7 +691,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         println!("rrd={}", p.display());
     }
     if let Some(p) = &a.plot {
-        if !watch.plot(p, &format!("{env_id} {}: deterministic evaluation", cfg.algo))? {
+        if !watch.plot(p, &format!("{env_id} {}: deterministic evaluation", src.algo))? {
             bail!("{env_id} has no map to draw");
         }
         println!("plot={}", p.display());

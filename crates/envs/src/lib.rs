@@ -16,6 +16,7 @@
 pub mod api;
 pub mod bench;
 pub mod check;
+pub mod heldout;
 pub mod pendulum;
 pub mod registry;
 pub mod sim_vehicle;

@@ -60,6 +60,13 @@ pub struct EnvConfig {
     /// and densities) instead of its built-in map: layout randomisation for training. `None`
     /// (the default) is the built-in map.
     pub layout_seed: Option<u64>,
+    /// With `layout_seed`: draw a new procedural layout at every reset, from the episode seed,
+    /// instead of keeping one layout for the env's life.
+    pub new_layout_each_episode: bool,
+    /// Draw episode seeds and procedural layouts from the evaluation half of the seed space
+    /// (see `heldout`): evaluation sets it, training never does, so the two never share an
+    /// episode or a layout.
+    pub held_out: bool,
 }
 
 impl Default for EnvConfig {
@@ -80,6 +87,8 @@ impl Default for EnvConfig {
             randomisation: Randomisation::default(),
             max_steps: 1000,
             layout_seed: None,
+            new_layout_each_episode: false,
+            held_out: false,
         }
     }
 }
@@ -155,11 +164,20 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
         None => SceneSource::Builtin(scene.into()),
         Some(seed) => {
             let (kind, half_m) = procedural_of(scene);
-            SceneSource::Procedural { kind, seed, half_m }
+            SceneSource::Procedural {
+                kind,
+                seed: crate::heldout::split(seed, cfg.held_out),
+                half_m,
+            }
         }
     };
     if cfg.max_steps == 0 {
         return Err(EnvError::Config("max_steps must be at least 1".into()));
+    }
+    if cfg.new_layout_each_episode && cfg.layout_seed.is_none() {
+        return Err(EnvError::Config(
+            "new_layout_each_episode needs layout_seed (a procedural map to redraw)".into(),
+        ));
     }
     let sim = SimConfig {
         scene: source,
@@ -172,7 +190,8 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
         subject_seed: cfg.subject_seed,
         ..SimConfig::default()
     };
-    let v = SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?;
+    let v =
+        SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?.with_new_layout_each_episode(cfg.new_layout_each_episode);
     Ok(if cfg.noise.is_off() {
         Box::new(v)
     } else {
@@ -219,5 +238,8 @@ pub fn make(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
     }
     let vehicle = make_vehicle(id, cfg)?;
     let task = make_task(id, cfg, vehicle.steering_limit_rad())?;
-    Ok(Box::new(TimeLimit::new(TaskEnv::new(vehicle, task), cfg.max_steps)))
+    Ok(Box::new(TimeLimit::new(
+        TaskEnv::new(vehicle, task).with_held_out(cfg.held_out),
+        cfg.max_steps,
+    )))
 }

@@ -2,7 +2,7 @@
 //! randomisation.
 
 use crate::api::{Control, EnvError, MapInfo, SensorFrame, Vehicle};
-use agvrl_sim::{PlanarPose, Sim, SimConfig, VehicleParams};
+use agvrl_sim::{PlanarPose, SceneSource, Sim, SimConfig, VehicleParams};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -89,50 +89,85 @@ pub struct SimVehicle {
     randomisation: Randomisation,
     map: MapInfo,
     rng: StdRng,
+    new_layout_each_episode: bool,
+}
+
+/// Free cells, track and subjects of a built world.
+fn map_of(sim: &Sim) -> MapInfo {
+    let half = sim.scene().half_extent_m();
+    let track = sim.scene().file.track.as_ref().map(|t| t.oval());
+    let mut free_cells = Vec::new();
+    let (nx, ny) = ((2.0 * half[0] / CELL_M) as i32, (2.0 * half[1] / CELL_M) as i32);
+    for i in 0..nx {
+        for j in 0..ny {
+            let (x, y) = (
+                -half[0] + (i as f32 + 0.5) * CELL_M,
+                -half[1] + (j as f32 + 0.5) * CELL_M,
+            );
+            let on_track = track
+                .map(|t| t.lateral_offset_m(x, y).abs() < 0.5 * (t.outer_radius_m - t.inner_radius_m))
+                .unwrap_or(true);
+            if on_track && sim.free_at(x, y, 0.5 * CELL_M) {
+                free_cells.push([x, y]);
+            }
+        }
+    }
+    let subjects = sim
+        .scene()
+        .objects
+        .iter()
+        .filter(|o| o.class == "person")
+        .map(|o| o.id)
+        .collect();
+    MapInfo {
+        half_extent_m: half,
+        track,
+        free_cells,
+        cell_m: CELL_M,
+        subjects,
+    }
 }
 
 impl SimVehicle {
     /// Build the simulation once; episodes only move the vehicle.
     pub fn new(cfg: SimConfig, spawn: SpawnMode, randomisation: Randomisation) -> Result<Self, EnvError> {
         let sim = Sim::new(cfg)?;
-        let half = sim.scene().half_extent_m();
-        let track = sim.scene().file.track.as_ref().map(|t| t.oval());
-        let mut free_cells = Vec::new();
-        let (nx, ny) = ((2.0 * half[0] / CELL_M) as i32, (2.0 * half[1] / CELL_M) as i32);
-        for i in 0..nx {
-            for j in 0..ny {
-                let (x, y) = (
-                    -half[0] + (i as f32 + 0.5) * CELL_M,
-                    -half[1] + (j as f32 + 0.5) * CELL_M,
-                );
-                let on_track = track
-                    .map(|t| t.lateral_offset_m(x, y).abs() < 0.5 * (t.outer_radius_m - t.inner_radius_m))
-                    .unwrap_or(true);
-                if on_track && sim.free_at(x, y, 0.5 * CELL_M) {
-                    free_cells.push([x, y]);
-                }
-            }
-        }
-        let subjects = sim
-            .scene()
-            .objects
-            .iter()
-            .filter(|o| o.class == "person")
-            .map(|o| o.id)
-            .collect();
         Ok(Self {
-            map: MapInfo {
-                half_extent_m: half,
-                track,
-                free_cells,
-                cell_m: CELL_M,
-                subjects,
-            },
+            map: map_of(&sim),
             sim,
             spawn,
             randomisation,
             rng: StdRng::seed_from_u64(0),
+            new_layout_each_episode: false,
         })
+    }
+
+    /// On a procedural scene, draw a new layout of the same kind and size at every reset, from
+    /// the episode seed (in its half of the seed space, see [`crate::heldout`]).
+    pub fn with_new_layout_each_episode(mut self, on: bool) -> Self {
+        self.new_layout_each_episode = on;
+        self
+    }
+
+    /// Rebuild the world on the layout of `episode_seed` when layouts change per episode.
+    fn relayout(&mut self, episode_seed: u64) -> Result<(), EnvError> {
+        if !self.new_layout_each_episode {
+            return Ok(());
+        }
+        let SceneSource::Procedural { kind, half_m, .. } = self.sim.config().scene else {
+            return Ok(());
+        };
+        let cfg = SimConfig {
+            scene: SceneSource::Procedural {
+                kind,
+                seed: crate::heldout::layout_of_episode(episode_seed),
+                half_m,
+            },
+            ..self.sim.config().clone()
+        };
+        self.sim = Sim::new(cfg)?;
+        self.map = map_of(&self.sim);
+        Ok(())
     }
 
     /// The simulator (read-only).
@@ -193,6 +228,7 @@ impl SimVehicle {
 
 impl Vehicle for SimVehicle {
     fn reset(&mut self, seed: u64) -> Result<SensorFrame, EnvError> {
+        self.relayout(seed)?;
         self.rng = StdRng::seed_from_u64(seed);
         let params = self.randomisation.draw(self.sim.nominal_params(), &mut self.rng);
         self.sim.set_params(params);

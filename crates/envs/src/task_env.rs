@@ -13,6 +13,7 @@ pub struct TaskEnv<V, T> {
     rng: StdRng,
     ready: bool,
     last: Option<SensorFrame>,
+    held_out: Option<bool>,
 }
 
 impl<V: Vehicle, T: Task> TaskEnv<V, T> {
@@ -24,7 +25,15 @@ impl<V: Vehicle, T: Task> TaskEnv<V, T> {
             rng: StdRng::seed_from_u64(0),
             ready: false,
             last: None,
+            held_out: None,
         }
+    }
+
+    /// Draw every episode seed from the evaluation half of the seed space (`true`) or the
+    /// training half (`false`); see [`crate::heldout`]. Unset, seeds are used as drawn.
+    pub fn with_held_out(mut self, held_out: bool) -> Self {
+        self.held_out = Some(held_out);
+        self
     }
 
     /// The vehicle.
@@ -61,7 +70,10 @@ impl<V: Vehicle, T: Task> Env for TaskEnv<V, T> {
         if let Some(s) = seed {
             self.rng = StdRng::seed_from_u64(s);
         }
-        let episode_seed: u64 = self.rng.random();
+        let mut episode_seed: u64 = self.rng.random();
+        if let Some(h) = self.held_out {
+            episode_seed = crate::heldout::split(episode_seed, h);
+        }
         let frame = self.vehicle.reset(episode_seed)?;
         self.task.needs().check(&frame)?;
         self.task.reset(&frame, self.vehicle.map());

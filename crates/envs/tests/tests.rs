@@ -173,6 +173,60 @@ mod issue_3_episodes {
     }
 
     #[test]
+    fn a_new_layout_each_episode_comes_from_the_episode_seed_and_its_half() {
+        // The map a reset builds, seen as the free cells of the coverage grid.
+        let free = |v: &mut Box<dyn agvrl_envs::Vehicle>, seed: u64| {
+            v.reset(seed).unwrap();
+            v.map().unwrap().free_cells.clone()
+        };
+        let cfg = EnvConfig {
+            layout_seed: Some(5),
+            new_layout_each_episode: true,
+            ..quick_cfg()
+        };
+        let mut v = make_vehicle("search-urban-20", &cfg).unwrap();
+        let a = free(&mut v, 1);
+        assert_ne!(a, free(&mut v, 2), "another episode, another map");
+        assert_eq!(a, free(&mut v, 1), "the episode seed decides the map");
+        let held = agvrl_envs::heldout::split(1, true);
+        assert_ne!(a, free(&mut v, held), "the held-out half draws other maps");
+        // A fixed layout seed maps into the half the config asks for.
+        let fixed = |held_out| {
+            let cfg = EnvConfig {
+                layout_seed: Some(5),
+                held_out,
+                ..quick_cfg()
+            };
+            free(&mut make_vehicle("search-outdoor-20", &cfg).unwrap(), 0)
+        };
+        assert_ne!(fixed(false), fixed(true));
+        let bad = EnvConfig {
+            new_layout_each_episode: true,
+            ..quick_cfg()
+        };
+        assert!(
+            make_vehicle("search-outdoor-20", &bad).is_err(),
+            "nothing to redraw without layout_seed"
+        );
+    }
+
+    #[test]
+    fn held_out_episodes_differ_from_training_episodes_of_the_same_seed() {
+        let first_obs = |held_out| {
+            let cfg = EnvConfig {
+                held_out,
+                ..quick_cfg()
+            };
+            let mut env = make("search-outdoor-20", &cfg).unwrap();
+            (0..8u64).map(|s| env.reset(Some(s)).unwrap().0).collect::<Vec<_>>()
+        };
+        let (train, eval) = (first_obs(false), first_obs(true));
+        for (t, e) in train.iter().zip(&eval) {
+            assert_ne!(t, e, "a seed gives a training episode and a different held-out one");
+        }
+    }
+
+    #[test]
     fn the_time_limit_truncates_without_terminating() {
         let mut env = make(
             "search-outdoor-20",

@@ -104,6 +104,12 @@ fn policy_and_env(a: &Args) -> Result<(Option<PathBuf>, String, EnvConfig)> {
     if let Some(e) = &a.env {
         env = e.clone();
     }
+    // A run config's per-episode layouts belong to its procedural training envs; the car
+    // drives the env's own map.
+    let mut cfg = cfg;
+    if cfg.layout_seed.is_none() {
+        cfg.new_layout_each_episode = false;
+    }
     Ok((policy, env, cfg))
 }
 

@@ -57,6 +57,10 @@ pub struct RewardTerms {
     pub collision: f64,
     /// Extra penalty for crawling (AutoVRL's outdoor-50 only).
     pub slow: f64,
+    /// Graded penalty for driving close to an obstacle (the `safe` search reward).
+    pub proximity: f64,
+    /// Reward for newly covered ground (the `safe` search reward).
+    pub coverage: f64,
 }
 
 /// Racing progress, reported every step of a racing task.

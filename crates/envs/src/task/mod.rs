@@ -335,16 +335,17 @@ pub fn min_range_m(frame: &SensorFrame) -> f64 {
         .min(1e6) as f64
 }
 
-/// Termination by `common_termination`, charging the collision penalty once.
+/// Termination by `common_termination`, charging `penalty` once as the collision term.
 pub fn terminate(
     terms: &mut RewardTerms,
     frame: &SensorFrame,
     map: Option<&MapInfo>,
     threshold_m: f32,
+    penalty: f64,
 ) -> Option<TerminationCause> {
     let t = common_termination(frame, map, threshold_m);
     if t.is_some() && terms.collision == 0.0 {
-        terms.collision = reward::PENALTY;
+        terms.collision = penalty;
     }
     t
 }

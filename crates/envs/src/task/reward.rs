@@ -15,16 +15,45 @@ pub enum SearchReward {
     /// The paper's cases: -50 if d < 1.0, else 2.0 if 2.0 < d < 2.5, else
     /// 0.005 d^2 + 5 T^2 - 2 delta^2.
     PaperCases,
+    /// agvrl's shaped form for collision-free exploration: 0.5 T^2 - 0.1 (delta / 0.36)^2
+    /// + 0.5 per newly covered 0.5 m cell - (1 - d) / 0.4 when d < 1.0 (0 at 1 m, -1 at the
+    /// 0.6 m termination), and -20 once on a collision. AutoVRL's forms charge -50 on every
+    /// step under 1 m but only once for ending the episode, so a car that came within 1 m of
+    /// an obstacle scores best by crashing at once; here recovering always costs less than a
+    /// collision, and driving over new ground beats circling.
+    Safe,
 }
+
+impl SearchReward {
+    /// The penalty charged once when an episode ends by a collision.
+    pub fn collision_penalty(self) -> f64 {
+        match self {
+            Self::AutovrlCode | Self::PaperCases => PENALTY,
+            Self::Safe => SAFE_COLLISION,
+        }
+    }
+}
+
+/// The `safe` form's collision penalty.
+pub const SAFE_COLLISION: f64 = -20.0;
 
 /// Penalty of a collision, and of AutoVRL's outdoor-50 crawl.
 pub const PENALTY: f64 = -50.0;
 
-/// R_search for one step. `slow_penalty`: AutoVRL's outdoor-50 adds -50 when T < 0.1.
-pub fn search(form: SearchReward, d: f64, t: f64, delta: f64, slow_penalty: bool) -> RewardTerms {
+/// R_search for one step. `slow_penalty`: AutoVRL's outdoor-50 adds -50 when T < 0.1;
+/// `new_cells`: coverage cells first reached this step (used by `Safe` only).
+pub fn search(form: SearchReward, d: f64, t: f64, delta: f64, slow_penalty: bool, new_cells: usize) -> RewardTerms {
     let mut r = RewardTerms::default();
     let band = d > 2.0 && d < 2.5;
     match form {
+        SearchReward::Safe => {
+            r.throttle = 0.5 * t * t;
+            r.steering = -0.1 * (delta / 0.36).powi(2);
+            r.coverage = 0.5 * new_cells as f64;
+            if d < 1.0 {
+                r.proximity = -((1.0 - d) / 0.4).min(1.0);
+            }
+        }
         SearchReward::AutovrlCode => {
             r.clearance = 0.005 * d * d;
             r.throttle = 5.0 * t * t;
@@ -48,7 +77,8 @@ pub fn search(form: SearchReward, d: f64, t: f64, delta: f64, slow_penalty: bool
             }
         }
     }
-    if slow_penalty && t < 0.1 {
+    // The crawl penalty is AutoVRL's; the safe form must be free to slow down near obstacles.
+    if slow_penalty && t < 0.1 && form != SearchReward::Safe {
         r.slow = PENALTY;
     }
     r
@@ -73,7 +103,14 @@ pub fn racing(d: f64, t: f64, delta: f64) -> RewardTerms {
 impl RewardTerms {
     /// Sum of the terms.
     pub fn total(&self) -> f64 {
-        self.throttle + self.steering + self.clearance + self.band + self.collision + self.slow
+        self.throttle
+            + self.steering
+            + self.clearance
+            + self.band
+            + self.collision
+            + self.slow
+            + self.proximity
+            + self.coverage
     }
 }
 
@@ -84,22 +121,35 @@ mod tests {
     #[test]
     fn autovrl_code_form_by_hand() {
         // d = 2.2 (band), T = 0.5, delta = 0.1: 0.005*4.84 + 1.25 - 0.02 + 2 = 3.2542
-        let r = search(SearchReward::AutovrlCode, 2.2, 0.5, 0.1, false).total();
+        let r = search(SearchReward::AutovrlCode, 2.2, 0.5, 0.1, false, 0).total();
         assert!((r - 3.2542).abs() < 1e-12, "{r}");
         // d = 0.7 (terminal too), T = 1, delta = -0.36: 0.00245 + 5 - 0.2592 - 50 = -45.25675
-        let r = search(SearchReward::AutovrlCode, 0.7, 1.0, -0.36, false).total();
+        let r = search(SearchReward::AutovrlCode, 0.7, 1.0, -0.36, false, 0).total();
         assert!((r + 45.25675).abs() < 1e-12, "{r}");
         // d = 5, T = 0.05 with outdoor-50's crawl penalty: 0.125 + 0.0125 - 0 - 50
-        let r = search(SearchReward::AutovrlCode, 5.0, 0.05, 0.0, true).total();
+        let r = search(SearchReward::AutovrlCode, 5.0, 0.05, 0.0, true, 0).total();
         assert!((r + 49.8625).abs() < 1e-12, "{r}");
     }
 
     #[test]
     fn paper_case_form_by_hand() {
-        assert_eq!(search(SearchReward::PaperCases, 2.2, 0.5, 0.1, false).total(), 2.0);
-        assert_eq!(search(SearchReward::PaperCases, 0.7, 1.0, 0.3, false).total(), -50.0);
-        let r = search(SearchReward::PaperCases, 3.0, 0.5, 0.1, false).total();
+        assert_eq!(search(SearchReward::PaperCases, 2.2, 0.5, 0.1, false, 0).total(), 2.0);
+        assert_eq!(search(SearchReward::PaperCases, 0.7, 1.0, 0.3, false, 0).total(), -50.0);
+        let r = search(SearchReward::PaperCases, 3.0, 0.5, 0.1, false, 0).total();
         assert!((r - (0.045 + 1.25 - 0.02)).abs() < 1e-12, "{r}");
+    }
+
+    #[test]
+    fn safe_form_by_hand() {
+        // d = 0.8, T = 1, delta = 0.18, 2 new cells: 0.5 - 0.025 + 1.0 - 0.5 = 0.975
+        let r = search(SearchReward::Safe, 0.8, 1.0, 0.18, false, 2);
+        assert!((r.total() - 0.975).abs() < 1e-12, "{r:?}");
+        assert_eq!(r.collision, 0.0);
+        // Far from everything: no proximity term; at 0.5 m the term saturates at -1.
+        assert_eq!(search(SearchReward::Safe, 3.0, 0.0, 0.0, true, 0).total(), 0.0);
+        assert_eq!(search(SearchReward::Safe, 0.5, 0.0, 0.0, false, 0).proximity, -1.0);
+        // Ten steps of the worst proximity cost less than the collision.
+        assert!(10.0 * -1.0 > SearchReward::Safe.collision_penalty());
     }
 
     #[test]

@@ -208,8 +208,7 @@ impl Task for Search {
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
         let d = min_range_m(frame);
         let c = frame.applied;
-        let mut terms = reward::search(self.cfg.reward, d, c.throttle, c.steering_rad, self.cfg.slow_penalty);
-        let termination = terminate(&mut terms, frame, map, self.cfg.terminate_below_m);
+        let covered_before = self.n_covered;
         if let Some(g) = &frame.gps {
             let xy = [g.position_m[0], g.position_m[1]];
             if let Some(p) = self.last_xy {
@@ -218,6 +217,22 @@ impl Task for Search {
             self.last_xy = Some(xy);
             self.cover(xy[0] as f32, xy[1] as f32);
         }
+        let new_cells = self.n_covered - covered_before;
+        let mut terms = reward::search(
+            self.cfg.reward,
+            d,
+            c.throttle,
+            c.steering_rad,
+            self.cfg.slow_penalty,
+            new_cells,
+        );
+        let termination = terminate(
+            &mut terms,
+            frame,
+            map,
+            self.cfg.terminate_below_m,
+            self.cfg.reward.collision_penalty(),
+        );
         self.look(frame, map);
         Outcome {
             terms,
