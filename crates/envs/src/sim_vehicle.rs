@@ -77,8 +77,11 @@ impl Randomisation {
 
 /// Clearance kept between a random spawn and any obstacle, metres.
 const SPAWN_CLEARANCE_M: f32 = 1.2;
-/// Free range the LiDAR sees ahead of a random spawn in an open map, metres.
+/// Free range the LiDAR sees ahead of a random spawn in an open map, metres...
 pub const SPAWN_VIEW_M: f32 = 2.0;
+/// ...within this half-angle of straight ahead (AutoVRL's 90 degree fan), whatever the
+/// LiDAR's own field of view, so every LiDAR setup draws the same spawns.
+const SPAWN_VIEW_HALF_RAD: f32 = std::f32::consts::FRAC_PI_4;
 /// Coverage grid cell, metres.
 const CELL_M: f32 = 0.5;
 
@@ -239,7 +242,10 @@ impl Vehicle for SimVehicle {
                 for attempt in 0.. {
                     let pose = self.random_pose();
                     self.sim.reset(pose)?;
-                    if self.map.track.is_some() || attempt == 100 || self.sim.lidar_scan().min_range() >= SPAWN_VIEW_M {
+                    if self.map.track.is_some()
+                        || attempt == 100
+                        || self.sim.lidar_scan().min_range_within(SPAWN_VIEW_HALF_RAD) >= SPAWN_VIEW_M
+                    {
                         break;
                     }
                 }

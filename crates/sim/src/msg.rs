@@ -75,6 +75,17 @@ impl LaserScan {
     pub fn min_range(&self) -> f32 {
         self.ranges.iter().copied().fold(self.range_max, f32::min)
     }
+
+    /// Smallest range among the rays within `half_width_rad` of straight ahead, metres
+    /// (`range_max` when none is).
+    pub fn min_range_within(&self, half_width_rad: f32) -> f32 {
+        self.ranges
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| (self.angle_min + *i as f32 * self.angle_increment).abs() <= half_width_rad + 1e-6)
+            .map(|(_, r)| *r)
+            .fold(self.range_max, f32::min)
+    }
 }
 
 /// A drive command (like `ackermann_msgs/AckermannDrive`, in AutoVRL's throttle form).
@@ -176,5 +187,40 @@ impl OvalTrack {
             let cy = if y > 0.0 { h } else { -h };
             (x * x + (y - cy).powi(2)).sqrt() - r
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sensors::LidarConfig;
+
+    fn scan(fov_deg: f32, n: usize) -> LaserScan {
+        let (angle_min, angle_increment) = LidarConfig {
+            n_rays: n,
+            fov_deg,
+            ..LidarConfig::default()
+        }
+        .angles();
+        // Ray i reads 1 + i metres, so the nearest ray of a window is its first.
+        LaserScan {
+            angle_min,
+            angle_increment,
+            range_max: 500.0,
+            ranges: (0..n).map(|i| 1.0 + i as f32).collect(),
+            ..LaserScan::default()
+        }
+    }
+
+    #[test]
+    fn min_range_within_a_window_sees_only_its_rays() {
+        let quarter = std::f32::consts::FRAC_PI_4;
+        // AutoVRL's 90 degree fan lies wholly within +-45 degrees.
+        let s = scan(90.0, 100);
+        assert_eq!(s.min_range_within(quarter), s.min_range());
+        // Of 271 rays over 270 degrees (one per degree), +-45 degrees starts at ray 90.
+        let s = scan(270.0, 271);
+        assert_eq!(s.min_range(), 1.0);
+        assert_eq!(s.min_range_within(quarter), 91.0);
     }
 }

@@ -158,7 +158,7 @@ fn run() -> Result<()> {
 #[cfg(feature = "ros2")]
 fn drive_ros2(a: &Args, env: &str, env_cfg: &EnvConfig, policy: Policy, drive: DriveConfig) -> Result<()> {
     let cfg = ros2_config(a)?;
-    cfg.check_lidar(env_cfg.lidar.n_rays, env_cfg.lidar.range_max_m)?;
+    cfg.check_lidar(&env_cfg.lidar)?;
     let task = make_task(env, env_cfg, cfg.drive.steering_limit_rad)?;
     let vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime)?;
     drive_loop(a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?)

@@ -249,14 +249,55 @@ impl Ros2Config {
         }
     }
 
-    /// Error unless the scan mapping gives the rays the env's task was trained on.
-    pub fn check_lidar(&self, n_rays: usize, range_max_m: f32) -> Result<(), DeployError> {
-        if self.scan.n_rays != n_rays || self.scan.range_max_m != range_max_m {
+    /// Error unless the scan mapping gives the rays the env's task was trained on: as many,
+    /// as far, over the same field of view.
+    pub fn check_lidar(&self, lidar: &agvrl_sim::sensors::LidarConfig) -> Result<(), DeployError> {
+        let s = &self.scan;
+        let (a0, inc) = lidar.angles();
+        let span = inc * (lidar.n_rays.max(1) - 1) as f32;
+        let same_window = (s.angle_min_rad - a0).abs() < 1e-3 && (s.angle_max_rad - (a0 + span)).abs() < 1e-3;
+        if s.n_rays != lidar.n_rays || s.range_max_m != lidar.range_max_m || !same_window {
             return Err(DeployError::Config(format!(
-                "scan mapping gives {} rays up to {} m; the policy's task expects {n_rays} rays up to {range_max_m} m",
-                self.scan.n_rays, self.scan.range_max_m
+                "scan mapping gives {} rays from {:.4} to {:.4} rad up to {} m; the policy's task expects {} rays \
+                 from {a0:.4} to {:.4} rad up to {} m",
+                s.n_rays,
+                s.angle_min_rad,
+                s.angle_max_rad,
+                s.range_max_m,
+                lidar.n_rays,
+                a0 + span,
+                lidar.range_max_m
             )));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use agvrl_sim::sensors::LidarConfig;
+
+    #[test]
+    fn the_scan_window_must_match_the_policys_lidar() {
+        let cfg = Ros2Config::default();
+        cfg.check_lidar(&LidarConfig::default())
+            .expect("the default mapping is the default LiDAR");
+        let wide = LidarConfig {
+            fov_deg: 270.0,
+            ..LidarConfig::default()
+        };
+        let e = cfg.check_lidar(&wide).unwrap_err().to_string();
+        assert!(e.contains("2.3562"), "names the expected window: {e}");
+        let mut c = cfg.clone();
+        c.scan.angle_min_rad = -135f32.to_radians();
+        c.scan.angle_max_rad = 135f32.to_radians();
+        c.check_lidar(&wide)
+            .expect("a 270 degree window for a 270 degree LiDAR");
+        let more = LidarConfig {
+            n_rays: 101,
+            ..LidarConfig::default()
+        };
+        assert!(cfg.check_lidar(&more).is_err());
     }
 }
