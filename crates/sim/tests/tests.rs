@@ -75,6 +75,11 @@ mod issue_2_dynamics {
             let v = s.forward_speed_mps() as f64;
             let wr = w * s.vehicle().drive_radius_m() as f64;
             assert!((v - wr).abs() / wr < 0.05, "{mode:?}: ground speed {v} vs w r {wr}");
+            let top = s.vehicle().top_speed_mps() as f64;
+            assert!(
+                (v - top).abs() / top < 0.05,
+                "{mode:?}: ground speed {v} vs top speed {top}"
+            );
             let imu = s.imu();
             assert!(
                 imu.lin_vel_b[1].abs() < 0.05 * v,

@@ -170,18 +170,49 @@ impl Default for ScanMapping {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DriveMapping {
-    /// Speed commanded at full throttle, m/s.
-    pub max_speed_mps: f32,
+    /// Speed commanded at full throttle, m/s. Unset (the default): the trained vehicle's top
+    /// speed, so a car that follows the command drives as fast as the policy learned to.
+    pub max_speed_mps: Option<f32>,
     /// Steering limit of the virtual centre wheel, rad (the trained vehicle's).
     pub steering_limit_rad: f64,
 }
 
 impl Default for DriveMapping {
-    /// xtenth_car: 0.36 rad steering.
+    /// xtenth_car: 0.36 rad steering; full throttle at the trained vehicle's top speed.
     fn default() -> Self {
         Self {
-            max_speed_mps: 4.0,
+            max_speed_mps: None,
             steering_limit_rad: 0.36,
+        }
+    }
+}
+
+/// xtenth_car's top speed, m/s: full throttle for a mapping not yet given a vehicle.
+pub const XTENTH_TOP_SPEED_MPS: f32 = 1.79;
+
+/// A `max_speed_mps` further than this fraction from the trained top speed is warned about.
+pub const SPEED_TOLERANCE: f32 = 0.1;
+
+impl DriveMapping {
+    /// Speed commanded at full throttle, m/s.
+    pub fn full_throttle_mps(&self) -> f32 {
+        self.max_speed_mps.unwrap_or(XTENTH_TOP_SPEED_MPS)
+    }
+
+    /// Take the trained vehicle's top speed for full throttle unless the car's TOML set one;
+    /// returns a warning when the set one differs from it by more than `SPEED_TOLERANCE`.
+    pub fn for_trained_top_speed(&mut self, top_speed_mps: f32) -> Option<String> {
+        match self.max_speed_mps {
+            None => {
+                self.max_speed_mps = Some(top_speed_mps);
+                None
+            }
+            Some(v) if (v / top_speed_mps - 1.0).abs() > SPEED_TOLERANCE => Some(format!(
+                "drive.max_speed_mps = {v} m/s, but the policy was trained on a car whose top speed is \
+                 {top_speed_mps:.2} m/s: full throttle will drive {:.1}x as fast as in training",
+                v / top_speed_mps
+            )),
+            Some(_) => None,
         }
     }
 }
@@ -235,7 +266,7 @@ impl Ros2Config {
                 "qos depth must be at least 1",
             ),
             (
-                self.drive.max_speed_mps > 0.0 && self.drive.max_speed_mps.is_finite(),
+                self.drive.max_speed_mps.is_none_or(|v| v > 0.0 && v.is_finite()),
                 "drive.max_speed_mps must be positive",
             ),
             (
@@ -299,5 +330,29 @@ mod tests {
             ..LidarConfig::default()
         };
         assert!(cfg.check_lidar(&more).is_err());
+    }
+
+    #[test]
+    fn full_throttle_comes_from_the_trained_vehicle_unless_set() {
+        let mut m = DriveMapping::default();
+        assert_eq!(m.for_trained_top_speed(1.5), None);
+        assert_eq!(m.full_throttle_mps(), 1.5);
+        let mut m = DriveMapping {
+            max_speed_mps: Some(1.6),
+            ..DriveMapping::default()
+        };
+        assert_eq!(m.for_trained_top_speed(1.5), None, "within 10 %");
+        assert_eq!(m.full_throttle_mps(), 1.6, "an explicit value is kept");
+        let mut m = DriveMapping {
+            max_speed_mps: Some(4.0),
+            ..DriveMapping::default()
+        };
+        let w = m.for_trained_top_speed(1.79).expect("2.2x is warned about");
+        assert!(w.contains("2.2x"), "{w}");
+        assert!(Ros2Config::from_toml("[drive]\nmax_speed_mps = -1.0\n").is_err());
+        // The fallback is xtenth_car's model top speed.
+        let v = agvrl_envs::make_vehicle("racing-oval", &agvrl_envs::EnvConfig::default()).unwrap();
+        let top = v.sim().unwrap().vehicle().top_speed_mps();
+        assert!((top - XTENTH_TOP_SPEED_MPS).abs() < 0.01, "{top}");
     }
 }

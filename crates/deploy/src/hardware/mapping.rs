@@ -179,7 +179,7 @@ pub fn drive_command(c: Control, m: &DriveMapping, stamp_s: f64, frame_id: &str)
         header: header(stamp_s, frame_id),
         drive: msg::AckermannDrive {
             steering_angle: c.steering_rad as f32,
-            speed: (c.throttle as f32) * m.max_speed_mps,
+            speed: (c.throttle as f32) * m.full_throttle_mps(),
             ..msg::AckermannDrive::default()
         },
     }
@@ -198,7 +198,7 @@ pub fn clip(c: Control, m: &DriveMapping) -> Control {
 pub fn control_of(d: &msg::AckermannDrive, m: &DriveMapping) -> Control {
     clip(
         Control {
-            throttle: (d.speed / m.max_speed_mps) as f64,
+            throttle: (d.speed / m.full_throttle_mps()) as f64,
             steering_rad: d.steering_angle as f64,
         },
         m,

@@ -286,6 +286,19 @@ impl VehicleModel {
         }
     }
 
+    /// Top speed of the drive model on flat ground, m/s: the steady wheel speed at full
+    /// throttle times the driven wheels' radius (tyre slip makes the simulated car about 2 %
+    /// slower).
+    pub fn top_speed_mps(&self) -> f32 {
+        let d = self.spec.drive;
+        let model = crate::vehicle::actuation::DriveModel {
+            c_t: d.c_t,
+            c_d: d.c_d,
+            c_r: d.c_r,
+        };
+        model.steady_state(1.0) as f32 * self.drive_radius_m()
+    }
+
     /// Height of the base frame above flat ground when the car rests on its wheels, metres.
     pub fn rest_height_m(&self) -> f32 {
         self.wheels
