@@ -409,12 +409,133 @@ mod issue_5_cli {
             assert!(h.contains(opt), "train --help lacks {opt}:\n{h}");
         }
         let h = stdout(&agvrl(&["eval", "--help"]));
-        for opt in ["--run", "--episodes", "--rerun", "--spawn-viewer"] {
+        for opt in [
+            "--run",
+            "--policy",
+            "--env",
+            "--episodes",
+            "--seed",
+            "--random",
+            "--layouts",
+            "--preset",
+            "--rerun",
+            "--spawn-viewer",
+        ] {
             assert!(h.contains(opt), "eval --help lacks {opt}:\n{h}");
         }
         let h = stdout(&agvrl(&["view", "--help"]));
         for opt in ["--env", "--policy", "--rerun", "--spawn-viewer"] {
             assert!(h.contains(opt), "view --help lacks {opt}:\n{h}");
         }
+    }
+
+    fn key<'a>(out: &'a str, k: &str) -> &'a str {
+        out.lines()
+            .find_map(|l| l.strip_prefix(k).and_then(|r| r.strip_prefix('=')))
+            .unwrap_or_else(|| panic!("{k}= missing in:\n{out}"))
+    }
+
+    #[test]
+    fn shipped_search_policy_drives_held_out_outdoor_episodes_without_a_termination() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let policy = root.join("assets/policies/search.agvrl");
+        let o = agvrl(&[
+            "eval",
+            "--policy",
+            policy.to_str().unwrap(),
+            "--env",
+            "search-outdoor-20",
+            "--episodes",
+            "3",
+            "--seed",
+            "7",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let out = stdout(&o);
+        assert_eq!(key(&out, "episodes"), "3");
+        assert_eq!(key(&out, "ended"), "time_limit,time_limit,time_limit", "{out}");
+        assert_eq!(key(&out, "collisions"), "0");
+        let cov: f64 = key(&out, "coverage").parse().unwrap();
+        assert!(cov > 0.2, "coverage {cov}");
+        // The same policy fits every search scene's spaces.
+        for env in ["search-urban-20", "search-outdoor-50", "search-urban-50"] {
+            let o = agvrl(&[
+                "eval",
+                "--policy",
+                policy.to_str().unwrap(),
+                "--env",
+                env,
+                "--episodes",
+                "1",
+                "--layouts",
+                "procedural",
+            ]);
+            assert!(o.status.success(), "{env}: {}", stderr(&o));
+        }
+    }
+
+    #[test]
+    fn eval_of_a_policy_file_draws_its_episodes_from_the_seed_and_the_layout_option() {
+        let d = tmp("evalpolicy");
+        let cfg = d.join("search.toml");
+        std::fs::write(
+            &cfg,
+            "env = \"search-urban-20\"\nalgo = \"ppo\"\nsteps = 128\nseed = 3\nn_envs = 1\nthreads = 1\n\
+             eval_episodes = 1\n[env_config]\nmax_steps = 30\n[ppo]\nn_steps = 128\nbatch_size = 64\nn_epochs = 1\n",
+        )
+        .unwrap();
+        let run = d.join("run");
+        let o = agvrl(&[
+            "train",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--out",
+            run.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        // A policy with its run config beside it, as the shipped ones are.
+        let policy = d.join("p.agvrl");
+        std::fs::copy(run.join("policy.agvrl"), &policy).unwrap();
+        std::fs::copy(run.join("config.toml"), d.join("p.toml")).unwrap();
+        let ev = |extra: &[&str]| {
+            let mut args = vec!["eval", "--policy", policy.to_str().unwrap(), "--episodes", "3"];
+            args.extend_from_slice(extra);
+            let o = agvrl(&args);
+            assert!(o.status.success(), "{extra:?}: {}", stderr(&o));
+            stdout(&o)
+        };
+        let a = ev(&["--seed", "11"]);
+        assert_eq!(key(&a, "env"), "search-urban-20", "the env comes from p.toml");
+        assert_eq!(key(&a, "seed"), "11");
+        assert_eq!(a, ev(&["--seed", "11"]), "same seed, same episodes");
+        assert_ne!(key(&a, "mean_return"), key(&ev(&["--seed", "12"]), "mean_return"));
+        let p = ev(&["--seed", "11", "--layouts", "procedural"]);
+        assert_eq!(key(&p, "layouts"), "procedural");
+        assert_ne!(
+            key(&a, "coverage"),
+            key(&p, "coverage"),
+            "procedural maps differ from the built-in one"
+        );
+        let n = ev(&["--seed", "11", "--preset", "sim2real"]);
+        assert_eq!(key(&n, "preset"), "sim2real");
+        assert_ne!(key(&a, "mean_return"), key(&n, "mean_return"));
+        let r = ev(&["--seed", "11", "--random"]);
+        assert_eq!(key(&r, "policy"), "random");
+        // Without a FILE.toml the env must be named.
+        std::fs::remove_file(d.join("p.toml")).unwrap();
+        let o = agvrl(&["eval", "--policy", policy.to_str().unwrap()]);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains("--env"), "{}", stderr(&o));
+        let o = agvrl(&[
+            "eval",
+            "--policy",
+            policy.to_str().unwrap(),
+            "--env",
+            "search-outdoor-50",
+            "--episodes",
+            "1",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let _ = std::fs::remove_dir_all(&d);
     }
 }
