@@ -34,8 +34,8 @@ mod tests {
             assert!(is_held_out(split(s, true)));
             assert!(!is_held_out(split(s, false)));
             assert_ne!(split(s, true), split(s, false));
-            assert_eq!(is_held_out(layout_of_episode(split(s, true))), true);
-            assert_eq!(is_held_out(layout_of_episode(split(s, false))), false);
+            assert!(is_held_out(layout_of_episode(split(s, true))));
+            assert!(!is_held_out(layout_of_episode(split(s, false))));
         }
         // Different episodes get different layouts.
         assert_ne!(layout_of_episode(1), layout_of_episode(2));

@@ -15,9 +15,9 @@ pub enum SearchReward {
     /// The paper's cases: -50 if d < 1.0, else 2.0 if 2.0 < d < 2.5, else
     /// 0.005 d^2 + 5 T^2 - 2 delta^2.
     PaperCases,
-    /// agvrl's shaped form for collision-free exploration: 0.5 T^2 - 0.1 (delta / 0.36)^2
-    /// + 0.5 per newly covered 0.5 m cell - (1 - d) / 0.4 when d < 1.0 (0 at 1 m, -1 at the
-    /// 0.6 m termination), and -20 once on a collision. AutoVRL's forms charge -50 on every
+    /// agvrl's shaped form for collision-free exploration: 0.5 T^2, minus 0.1 (delta / 0.36)^2,
+    /// plus 0.5 per newly covered 0.5 m cell, minus (1 - d) / 0.4 when d < 1.0 (0 at 1 m, 1 at
+    /// the 0.6 m termination), and -20 once on a collision. AutoVRL's forms charge -50 on every
     /// step under 1 m but only once for ending the episode, so a car that came within 1 m of
     /// an obstacle scores best by crashing at once; here recovering always costs less than a
     /// collision, and driving over new ground beats circling.
@@ -149,7 +149,8 @@ mod tests {
         assert_eq!(search(SearchReward::Safe, 3.0, 0.0, 0.0, true, 0).total(), 0.0);
         assert_eq!(search(SearchReward::Safe, 0.5, 0.0, 0.0, false, 0).proximity, -1.0);
         // Ten steps of the worst proximity cost less than the collision.
-        assert!(10.0 * -1.0 > SearchReward::Safe.collision_penalty());
+        let worst = search(SearchReward::Safe, 0.0, 0.0, 0.0, false, 0).proximity;
+        assert!(10.0 * worst > SearchReward::Safe.collision_penalty());
     }
 
     #[test]
