@@ -28,10 +28,25 @@ pub struct DriveConfig {
     /// A frame older than this many control periods is stale.
     pub max_age_periods: f64,
     /// Hold the rate with the wall clock (hardware): ticks start on fixed deadlines and a
-    /// frame's age is measured by the wall clock since the first frame; off: run as fast as
-    /// the vehicle allows and advance the loop's clock one period per tick (a simulated or
-    /// lockstep vehicle keeps its own time).
+    /// frame's age is the wall clock now minus its stamp (stamps that look like dates must lie
+    /// within `max_clock_skew_s` of the wall clock at start; smaller stamps are taken as a
+    /// clock that started with the run, as a simulator's); off: run as fast as the vehicle
+    /// allows and advance the loop's clock one period per tick (a simulated or lockstep
+    /// vehicle keeps its own time).
     pub realtime: bool,
+    /// Largest gap between the first frame's date stamp and the wall clock, seconds.
+    pub max_clock_skew_s: f64,
+}
+
+/// Stamps above this many seconds are dates (after 2001-09-09), checked against the wall clock.
+pub const DATE_STAMP_S: f64 = 1e9;
+
+/// Seconds since the Unix epoch by the system clock.
+pub fn wall_clock_s() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0)
 }
 
 impl Default for DriveConfig {
@@ -40,6 +55,7 @@ impl Default for DriveConfig {
             rate_hz: 30.0,
             max_age_periods: 2.0,
             realtime: false,
+            max_clock_skew_s: 0.5,
         }
     }
 }
@@ -92,7 +108,8 @@ pub struct DriveLoop<V, T> {
     ticks: u64,
     clock_s: f64,
     start: Instant,
-    start_stamp_s: f64,
+    /// Real time: the wall clock minus this is "now" on the frames' clock.
+    wall_offset_s: f64,
 }
 
 impl<V: Vehicle, T: Task> DriveLoop<V, T> {
@@ -105,6 +122,22 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
         let frame = vehicle.reset(seed).map_err(|e| DeployError::Vehicle(e.to_string()))?;
         task.reset(&frame, vehicle.map());
         let clock_s = frame.stamp_s;
+        let wall = wall_clock_s();
+        let wall_offset_s = if frame.stamp_s > DATE_STAMP_S {
+            let skew = wall - frame.stamp_s;
+            if cfg.realtime && skew.abs() > cfg.max_clock_skew_s {
+                return Err(DeployError::Vehicle(format!(
+                    "the first sensor frame is stamped {skew:.3} s {} the wall clock (limit {} s): \
+                     synchronise the car's clock with this computer's (chrony, NTP) or check that its \
+                     sensors are live",
+                    if skew > 0.0 { "behind" } else { "ahead of" },
+                    cfg.max_clock_skew_s
+                )));
+            }
+            0.0
+        } else {
+            wall - frame.stamp_s
+        };
         Ok(Self {
             vehicle,
             task,
@@ -113,7 +146,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             ticks: 0,
             clock_s,
             start: Instant::now(),
-            start_stamp_s: frame.stamp_s,
+            wall_offset_s,
         })
     }
 
@@ -163,7 +196,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
         // Timed from here: checks, observation and inference (not the vehicle's wait).
         let t0 = Instant::now();
         let now_s = if self.cfg.realtime {
-            self.start_stamp_s + self.start.elapsed().as_secs_f64()
+            wall_clock_s() - self.wall_offset_s
         } else {
             self.clock_s
         };

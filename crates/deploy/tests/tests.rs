@@ -206,6 +206,61 @@ mod issue_7_ros2_loopback {
     }
 
     #[test]
+    fn a_late_drive_reader_does_not_delay_the_stop_on_a_frozen_scan_in_real_time() {
+        // The car's drive reader joins 1.5 s after its sensors; its scans stop later on.
+        let faults = Faults {
+            drive_reader_from: 45,
+            mute_scan_from: 110,
+            ..Faults::default()
+        };
+        let cfg = ros_cfg(InvalidRay::Stop);
+        let env_cfg = EnvConfig::default();
+        let mut robot = SimRobot::new("racing-oval", &env_cfg, cfg.clone(), 0, faults).unwrap();
+        let h = robot.handle();
+        let th = std::thread::spawn(move || robot.run(Pace::Realtime, 0));
+        let v = Ros2Vehicle::new(cfg.clone(), false).unwrap();
+        let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
+        let policy = Policy::load(&agvrl_deploy::bench::shipped_policy()).unwrap();
+        let drive = DriveConfig {
+            realtime: true,
+            ..DriveConfig::default()
+        };
+        let mut lp = DriveLoop::new(v, task, policy, drive, 0).unwrap();
+        let mut ticks = Vec::new();
+        // Until ten stops in a row (or 8 s): the scans have frozen and the loop holds the car.
+        while ticks.len() < 240 {
+            ticks.push(lp.tick().unwrap());
+            let n = ticks.len();
+            if n > 10
+                && ticks[n - 10..]
+                    .iter()
+                    .all(|t| matches!(t.event, Some(Event::Stale { .. })))
+            {
+                break;
+            }
+        }
+        h.stop();
+        th.join().unwrap().unwrap();
+        assert!(
+            ticks[0].stamp_s > 1e9,
+            "real-time robot stamps are dates: {}",
+            ticks[0].stamp_s
+        );
+        let frozen = ticks.last().unwrap().stamp_s;
+        let on_frozen: Vec<_> = ticks.iter().filter(|t| t.stamp_s == frozen).collect();
+        let driven = on_frozen.iter().filter(|t| t.event.is_none()).count();
+        assert!(driven <= 3, "{driven} commands went out on the last scan");
+        match on_frozen.iter().find_map(|t| t.event.clone()) {
+            Some(Event::Stale { age_s }) => assert!(age_s < 0.2, "the stop saw an age of {age_s} s"),
+            e => panic!("no stale stop on the frozen scan: {e:?}"),
+        }
+        assert!(
+            ticks.iter().filter(|t| t.event.is_none()).count() >= 20,
+            "the car drove before the scans stopped"
+        );
+    }
+
+    #[test]
     fn muted_scans_stop_the_car_over_dds_within_two_periods() {
         let faults = Faults {
             mute_scan_from: 30,

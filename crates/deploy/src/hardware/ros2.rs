@@ -254,8 +254,9 @@ impl Ros2Vehicle {
 }
 
 impl Vehicle for Ros2Vehicle {
-    /// Wait for a full sensor set and a subscriber on the drive topic (`startup_timeout_s`);
-    /// nothing is published, so a car stays as it is.
+    /// Wait for a full sensor set and a subscriber on the drive topic (`startup_timeout_s`),
+    /// then for a sensor set newer than the one in hand; nothing is published, so a car stays
+    /// as it is.
     fn reset(&mut self, _seed: u64) -> Result<SensorFrame, EnvError> {
         let timeout = Duration::from_secs_f64(self.cfg.startup_timeout_s);
         let t0 = Instant::now();
@@ -282,6 +283,16 @@ impl Vehicle for Ros2Vehicle {
                 )));
             }
             let _ = self.poll.poll(&mut self.events, Some(Duration::from_millis(5)));
+        }
+        if !self.lockstep {
+            // The set in hand may be as old as the wait for the subscriber: start from a newer
+            // one (a car whose sensors stopped meanwhile starts stale, and is stopped). In
+            // lockstep the robot re-sends its set unchanged until the first command.
+            let before = self.stamps().unwrap_or(f64::NEG_INFINITY);
+            let left = timeout
+                .saturating_sub(t0.elapsed())
+                .max(Duration::from_secs_f64(self.cfg.fresh_timeout_s));
+            self.wait_newer(before, left);
         }
         self.applied = Control::default();
         self.awaiting = false;

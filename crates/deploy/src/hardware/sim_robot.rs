@@ -43,6 +43,9 @@ pub struct Faults {
     pub nan_ticks: Range<u64>,
     /// Which rays.
     pub nan_rays: Range<usize>,
+    /// The robot's drive reader joins only after this many ticks (a car whose motor node
+    /// starts after its sensors); real-time pace only.
+    pub drive_reader_from: u64,
 }
 
 impl Default for Faults {
@@ -51,6 +54,7 @@ impl Default for Faults {
             mute_scan_from: u64::MAX,
             nan_ticks: 0..0,
             nan_rays: 0..0,
+            drive_reader_from: 0,
         }
     }
 }
@@ -100,7 +104,9 @@ pub struct SimRobot {
     cfg: Ros2Config,
     vehicle: Box<dyn Vehicle>,
     task: Box<dyn Task>,
-    _node: Node,
+    node: Node,
+    /// Added to simulated time in the published stamps (wall-clock epoch time in real time).
+    stamp_offset_s: f64,
     scan: Publisher<msg::LaserScan>,
     imu: Option<Publisher<msg::Imu>>,
     odom: Option<Publisher<msg::Odometry>>,
@@ -158,19 +164,19 @@ impl SimRobot {
         let imu = opt(&mut node, &t.imu, IMU_TYPE, q)?;
         let odom = opt(&mut node, &t.odom, ODOM_TYPE, q)?;
         let navsat = opt(&mut node, &t.navsat, NAVSAT_TYPE, q)?;
-        let mut drive = subscribe(&mut node, &t.drive, DRIVE_TYPE, cfg.qos.drive)?;
         let poll = Poll::new().map_err(|e| DeployError::Vehicle(format!("poll: {e}")))?;
-        if let Some(d) = drive.as_mut() {
-            poll.registry()
-                .register(d, Token(0), Interest::READABLE)
-                .map_err(|e| DeployError::Vehicle(format!("poll: {e}")))?;
-        }
+        let drive = if faults.drive_reader_from == 0 {
+            drive_reader(&mut node, &cfg, &poll)?
+        } else {
+            None
+        };
         let handle = RobotHandle::default();
         Ok(Self {
             cfg,
             vehicle,
             task,
-            _node: node,
+            node,
+            stamp_offset_s: 0.0,
             scan,
             imu,
             odom,
@@ -199,11 +205,12 @@ impl SimRobot {
         let f = &self.frame;
         let t = &self.cfg.topics;
         let tick = (f.stamp_s / self.vehicle.control_period_s()).round() as u64;
+        let stamp_s = f.stamp_s + self.stamp_offset_s;
         let pub_err = |name: &str, e: String| DeployError::Vehicle(format!("publishing {name}: {e}"));
         if let Some(s) = &f.scan
             && tick < self.faults.mute_scan_from
         {
-            let mut m = mapping::scan_msg(s, f.stamp_s, "laser", self.vehicle.control_period_s() as f32);
+            let mut m = mapping::scan_msg(s, stamp_s, "laser", self.vehicle.control_period_s() as f32);
             if self.faults.nan_ticks.contains(&tick) {
                 for i in self.faults.nan_rays.clone() {
                     if let Some(r) = m.ranges.get_mut(i) {
@@ -214,15 +221,15 @@ impl SimRobot {
             self.scan.publish(m).map_err(|e| pub_err(&t.scan, e.to_string()))?;
         }
         if let (Some(p), Some(i)) = (&self.imu, &f.imu) {
-            p.publish(mapping::imu_msg(i, f.stamp_s, &t.frame_id))
+            p.publish(mapping::imu_msg(i, stamp_s, &t.frame_id))
                 .map_err(|e| pub_err(&t.imu, e.to_string()))?;
         }
         if let (Some(p), Some(i), Some(g)) = (&self.odom, &f.imu, &f.gps) {
-            p.publish(mapping::odom_msg(g, i, f.stamp_s, &t.frame_id))
+            p.publish(mapping::odom_msg(g, i, stamp_s, &t.frame_id))
                 .map_err(|e| pub_err(&t.odom, e.to_string()))?;
         }
         if let (Some(p), Some(geo)) = (&self.navsat, f.gps.as_ref().and_then(|g| g.geodetic)) {
-            p.publish(mapping::navsat_msg(&geo, f.stamp_s, "gps"))
+            p.publish(mapping::navsat_msg(&geo, stamp_s, "gps"))
                 .map_err(|e| pub_err(&t.navsat, e.to_string()))?;
         }
         Ok(())
@@ -270,6 +277,12 @@ impl SimRobot {
     pub fn run(&mut self, pace: Pace, max_ticks: u64) -> Result<(), DeployError> {
         let period = self.vehicle.control_period_s();
         let done = |h: &RobotHandle| h.stop.load(Ordering::Relaxed) || (max_ticks > 0 && h.stats().ticks >= max_ticks);
+        // In real time the stamps are the wall clock's, as a car's are (ROS tools read them as
+        // dates); in lockstep they are simulated time.
+        self.stamp_offset_s = match pace {
+            Pace::Realtime => crate::run_loop::wall_clock_s() - self.frame.stamp_s,
+            Pace::Lockstep => 0.0,
+        };
         self.publish()?;
         match pace {
             Pace::Lockstep => {
@@ -299,6 +312,9 @@ impl SimRobot {
                     while let Some(left) = deadline.checked_duration_since(Instant::now()) {
                         let _ = self.poll.poll(&mut self.events, Some(left));
                     }
+                    if self.drive.is_none() && u64::from(k) > self.faults.drive_reader_from {
+                        self.drive = drive_reader(&mut self.node, &self.cfg, &self.poll)?;
+                    }
                     let cmds = self.commands();
                     if let Some(c) = cmds.last() {
                         held = *c;
@@ -312,4 +328,19 @@ impl SimRobot {
         }
         Ok(())
     }
+}
+
+/// The robot's subscription to the drive topic, registered with `poll`.
+fn drive_reader(
+    node: &mut Node,
+    cfg: &Ros2Config,
+    poll: &Poll,
+) -> Result<Option<Subscription<msg::AckermannDriveStamped>>, DeployError> {
+    let mut drive = subscribe(node, &cfg.topics.drive, DRIVE_TYPE, cfg.qos.drive)?;
+    if let Some(d) = drive.as_mut() {
+        poll.registry()
+            .register(d, Token(0), Interest::READABLE)
+            .map_err(|e| DeployError::Vehicle(format!("poll: {e}")))?;
+    }
+    Ok(drive)
 }
