@@ -261,6 +261,59 @@ mod issue_7_ros2_loopback {
     }
 
     #[test]
+    fn a_drive_reader_of_another_type_is_no_reader_and_startup_names_it() {
+        use ros2_client::{Context, ContextOptions, MessageTypeName, Name, NodeName, NodeOptions, QosProfile};
+        #[derive(serde::Deserialize)]
+        struct Twist {
+            _linear: [f64; 3],
+            _angular: [f64; 3],
+        }
+        let mut cfg = ros_cfg(InvalidRay::Stop);
+        cfg.startup_timeout_s = 3.0;
+        // A car with sensors but no drive reader of its own...
+        let faults = Faults {
+            drive_reader_from: u64::MAX,
+            ..Faults::default()
+        };
+        let env_cfg = EnvConfig::default();
+        let mut robot = SimRobot::new("racing-oval", &env_cfg, cfg.clone(), 0, faults).unwrap();
+        let h = robot.handle();
+        let th = std::thread::spawn(move || robot.run(Pace::Realtime, 0));
+        // ...and a geometry_msgs/Twist reader on the drive topic.
+        let ctx = Context::with_options(ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
+        let mut node = ctx
+            .new_node(
+                NodeName::new("/", "twist_car").unwrap(),
+                NodeOptions::new().enable_rosout(false),
+            )
+            .unwrap();
+        let qos = QosProfile::default();
+        let topic = node
+            .create_topic(
+                &Name::parse(&cfg.topics.drive).unwrap(),
+                MessageTypeName::new("geometry_msgs", "Twist"),
+                &qos,
+            )
+            .unwrap();
+        let _twist = node.create_subscription::<Twist>(&topic, None).unwrap();
+        let v = Ros2Vehicle::new(cfg.clone(), false).unwrap();
+        let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
+        let policy = Policy::load(&agvrl_deploy::bench::shipped_policy()).unwrap();
+        let drive = DriveConfig {
+            realtime: true,
+            ..DriveConfig::default()
+        };
+        let e = match DriveLoop::new(v, task, policy, drive, 0) {
+            Ok(_) => panic!("started with nobody able to read the commands"),
+            Err(e) => e.to_string(),
+        };
+        h.stop();
+        th.join().unwrap().unwrap();
+        assert!(e.contains("geometry_msgs::msg::dds_::Twist_"), "{e}");
+        assert!(e.contains("ackermann_msgs::msg::dds_::AckermannDriveStamped_"), "{e}");
+    }
+
+    #[test]
     fn muted_scans_stop_the_car_over_dds_within_two_periods() {
         let faults = Faults {
             mute_scan_from: 30,

@@ -49,14 +49,33 @@ pub(crate) fn qos(q: TopicQos) -> QosProfile {
 /// A node on `cfg.domain_id`. RustDDS also announces itself to the localhost discovery ports,
 /// so two processes on one host find each other without multicast (a container's `lo`).
 pub(crate) fn node(cfg: &Ros2Config, name: &str) -> Result<Node, DeployError> {
+    node_in_context(cfg, name).map(|(_, n)| n)
+}
+
+/// A node on `cfg.domain_id`, with its context (for discovery queries).
+fn node_in_context(cfg: &Ros2Config, name: &str) -> Result<(Context, Node), DeployError> {
     let ctx =
         Context::with_options(ContextOptions::new().domain_id(cfg.domain_id)).map_err(|e| dds_err("participant", e))?;
     let name = NodeName::new("/", name).map_err(|e| DeployError::Config(format!("node name '{name}': {e:?}")))?;
-    ctx.new_node(
-        name,
-        NodeOptions::new().enable_rosout(false).start_parameter_services(false),
-    )
-    .map_err(|e| dds_err("node", format!("{e:?}")))
+    let node = ctx
+        .new_node(
+            name,
+            NodeOptions::new().enable_rosout(false).start_parameter_services(false),
+        )
+        .map_err(|e| dds_err("node", format!("{e:?}")))?;
+    Ok((ctx, node))
+}
+
+/// The DDS type name of ROS type `ty`.
+fn dds_type(ty: (&str, &str)) -> String {
+    format!("{}::msg::dds_::{}_", ty.0, ty.1)
+}
+
+/// A reader that discovery found on a topic.
+#[derive(Clone, Debug, PartialEq)]
+struct FoundReader {
+    dds_type: String,
+    reliable: bool,
 }
 
 /// The topic `name` of ROS type `ty`.
@@ -124,6 +143,7 @@ struct Latest {
 pub struct Ros2Vehicle {
     cfg: Ros2Config,
     lockstep: bool,
+    ctx: Context,
     node: Node,
     scan: Option<Subscription<msg::LaserScan>>,
     imu: Option<Subscription<msg::Imu>>,
@@ -143,7 +163,7 @@ impl Ros2Vehicle {
     /// Join domain `cfg.domain_id` and create the subscriptions and the drive publisher.
     pub fn new(cfg: Ros2Config, lockstep: bool) -> Result<Self, DeployError> {
         cfg.validate().map_err(DeployError::Config)?;
-        let mut node = node(&cfg, &cfg.node_name)?;
+        let (ctx, mut node) = node_in_context(&cfg, &cfg.node_name)?;
         let (t, q) = (&cfg.topics, cfg.qos.sensors);
         let mut scan = subscribe(&mut node, &t.scan, SCAN_TYPE, q)?;
         let mut imu = subscribe(&mut node, &t.imu, IMU_TYPE, q)?;
@@ -168,6 +188,7 @@ impl Ros2Vehicle {
         Ok(Self {
             cfg,
             lockstep,
+            ctx,
             node,
             scan,
             imu,
@@ -187,6 +208,31 @@ impl Ros2Vehicle {
     /// Messages that failed to decode so far.
     pub fn bad_messages(&self) -> u64 {
         self.bad_messages
+    }
+
+    /// Readers of the drive topic that discovery has found so far.
+    fn drive_readers(&self) -> Vec<FoundReader> {
+        let dds_name = format!("rt/{}", self.cfg.topics.drive.trim_start_matches('/'));
+        self.ctx
+            .domain_participant()
+            .discovered_readers()
+            .iter()
+            .map(|r| &r.subscription_topic_data)
+            .filter(|d| *d.topic_name() == dds_name)
+            .map(|d| FoundReader {
+                dds_type: d.type_name().clone(),
+                reliable: matches!(
+                    d.qos().reliability(),
+                    Some(ros2_client::dds::rustdds::policy::Reliability::Reliable { .. })
+                ),
+            })
+            .collect()
+    }
+
+    /// Whether `r` can read our commands: the same type, and no reliable reader of a
+    /// best-effort writer.
+    fn can_read(&self, r: &FoundReader) -> bool {
+        r.dds_type == dds_type(DRIVE_TYPE) && !(r.reliable && self.cfg.qos.drive.reliability == Reliability::BestEffort)
     }
 
     fn drain(&mut self) {
@@ -274,12 +320,41 @@ impl Vehicle for Ros2Vehicle {
                 self.cfg.domain_id
             )));
         }
-        // A command sent before its reader is matched would be lost; wait for one.
-        while self.node.subscription_count(&self.cfg.topics.drive) == 0 {
+        // A command sent before its reader is matched would be lost; wait for one that can
+        // read it (a reader of another type or an incompatible QoS is no reader).
+        loop {
+            let found = self.drive_readers();
+            if found.iter().any(|r| self.can_read(r)) && self.node.subscription_count(&self.cfg.topics.drive) > 0 {
+                break;
+            }
             if t0.elapsed() > timeout {
+                let d = &self.cfg.topics.drive;
+                let what = if found.is_empty() {
+                    "nobody subscribes".to_string()
+                } else {
+                    let list: Vec<String> = found
+                        .iter()
+                        .map(|r| {
+                            format!(
+                                "{} ({})",
+                                r.dds_type,
+                                if r.reliable { "reliable" } else { "best effort" }
+                            )
+                        })
+                        .collect();
+                    format!(
+                        "no reader can take {} ({}) on: found {}",
+                        dds_type(DRIVE_TYPE),
+                        match self.cfg.qos.drive.reliability {
+                            Reliability::BestEffort => "best effort",
+                            Reliability::Reliable => "reliable",
+                        },
+                        list.join(", ")
+                    )
+                };
                 return Err(EnvError::Vehicle(format!(
-                    "nobody subscribes {} within {} s (domain {})",
-                    self.cfg.topics.drive, self.cfg.startup_timeout_s, self.cfg.domain_id
+                    "{what} {d} within {} s (domain {})",
+                    self.cfg.startup_timeout_s, self.cfg.domain_id
                 )));
             }
             let _ = self.poll.poll(&mut self.events, Some(Duration::from_millis(5)));
