@@ -90,7 +90,7 @@ fn tiny_config(dir: &Path) -> PathBuf {
     p
 }
 
-mod issue_5_cli {
+mod cli {
     use super::*;
 
     #[test]

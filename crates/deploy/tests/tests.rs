@@ -128,7 +128,7 @@ fn a_policy_for_another_task_refuses_to_start() {
 
 /// ROS 2 over DDS on loopback: the sim-backed robot in a thread, the drive loop here.
 #[cfg(feature = "ros2")]
-mod issue_7_ros2_loopback {
+mod ros2_loopback {
     use super::*;
     use agvrl_deploy::hardware::config::{InvalidRay, Reliability};
     use agvrl_deploy::hardware::{Faults, Pace, RobotHandle, Ros2Config, Ros2Vehicle, SimRobot};
@@ -163,25 +163,37 @@ mod issue_7_ros2_loopback {
         c
     }
 
-    /// Run `f` on a drive loop (shipped policy, lockstep ROS 2 vehicle) against a robot with
-    /// `faults`; the robot stops afterwards.
-    fn with_robot<R>(
+    type Loop = DriveLoop<Ros2Vehicle, Box<dyn agvrl_envs::task::Task>>;
+
+    /// Run `f` on the start of a drive loop (shipped policy, ROS 2 vehicle, both sides at
+    /// `pace`) against a robot with `faults`; the robot stops afterwards.
+    fn with_robot_at<R>(
+        pace: Pace,
         cfg: Ros2Config,
         faults: Faults,
-        f: impl FnOnce(&mut DriveLoop<Ros2Vehicle, Box<dyn agvrl_envs::task::Task>>, &RobotHandle) -> R,
+        f: impl FnOnce(Result<Loop, DeployError>, &RobotHandle) -> R,
     ) -> R {
         let env_cfg = EnvConfig::default();
         let mut robot = SimRobot::new("racing-oval", &env_cfg, cfg.clone(), 0, faults).unwrap();
         let h = robot.handle();
-        let th = std::thread::spawn(move || robot.run(Pace::Lockstep, 0));
-        let v = Ros2Vehicle::new(cfg.clone(), true).unwrap();
+        let th = std::thread::spawn(move || robot.run(pace, 0));
+        let realtime = pace == Pace::Realtime;
+        let v = Ros2Vehicle::new(cfg.clone(), !realtime).unwrap();
         let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
         let policy = Policy::load(&agvrl_deploy::bench::shipped_policy()).unwrap();
-        let mut lp = DriveLoop::new(v, task, policy, DriveConfig::default(), 0).unwrap();
-        let r = f(&mut lp, &h);
+        let drive = DriveConfig {
+            realtime,
+            ..DriveConfig::default()
+        };
+        let r = f(DriveLoop::new(v, task, policy, drive, 0), &h);
         h.stop();
         th.join().unwrap().unwrap();
         r
+    }
+
+    /// Run `f` on a lockstep drive loop against a robot with `faults`.
+    fn with_robot<R>(cfg: Ros2Config, faults: Faults, f: impl FnOnce(&mut Loop, &RobotHandle) -> R) -> R {
+        with_robot_at(Pace::Lockstep, cfg, faults, |lp, h| f(&mut lp.unwrap(), h))
     }
 
     #[test]
@@ -213,34 +225,23 @@ mod issue_7_ros2_loopback {
             mute_scan_from: 110,
             ..Faults::default()
         };
-        let cfg = ros_cfg(InvalidRay::Stop);
-        let env_cfg = EnvConfig::default();
-        let mut robot = SimRobot::new("racing-oval", &env_cfg, cfg.clone(), 0, faults).unwrap();
-        let h = robot.handle();
-        let th = std::thread::spawn(move || robot.run(Pace::Realtime, 0));
-        let v = Ros2Vehicle::new(cfg.clone(), false).unwrap();
-        let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
-        let policy = Policy::load(&agvrl_deploy::bench::shipped_policy()).unwrap();
-        let drive = DriveConfig {
-            realtime: true,
-            ..DriveConfig::default()
-        };
-        let mut lp = DriveLoop::new(v, task, policy, drive, 0).unwrap();
-        let mut ticks = Vec::new();
-        // Until ten stops in a row (or 8 s): the scans have frozen and the loop holds the car.
-        while ticks.len() < 240 {
-            ticks.push(lp.tick().unwrap());
-            let n = ticks.len();
-            if n > 10
-                && ticks[n - 10..]
-                    .iter()
-                    .all(|t| matches!(t.event, Some(Event::Stale { .. })))
-            {
-                break;
+        let ticks = with_robot_at(Pace::Realtime, ros_cfg(InvalidRay::Stop), faults, |lp, _| {
+            let mut lp = lp.unwrap();
+            let mut ticks = Vec::new();
+            // Until ten stops in a row (or 8 s): the scans have frozen and the loop holds the car.
+            while ticks.len() < 240 {
+                ticks.push(lp.tick().unwrap());
+                let n = ticks.len();
+                if n > 10
+                    && ticks[n - 10..]
+                        .iter()
+                        .all(|t| matches!(t.event, Some(Event::Stale { .. })))
+                {
+                    break;
+                }
             }
-        }
-        h.stop();
-        th.join().unwrap().unwrap();
+            ticks
+        });
         assert!(
             ticks[0].stamp_s > 1e9,
             "real-time robot stamps are dates: {}",
@@ -270,16 +271,12 @@ mod issue_7_ros2_loopback {
         }
         let mut cfg = ros_cfg(InvalidRay::Stop);
         cfg.startup_timeout_s = 3.0;
-        // A car with sensors but no drive reader of its own...
+        // A car with sensors but no drive reader of its own, and a geometry_msgs/Twist reader
+        // on the drive topic.
         let faults = Faults {
             drive_reader_from: u64::MAX,
             ..Faults::default()
         };
-        let env_cfg = EnvConfig::default();
-        let mut robot = SimRobot::new("racing-oval", &env_cfg, cfg.clone(), 0, faults).unwrap();
-        let h = robot.handle();
-        let th = std::thread::spawn(move || robot.run(Pace::Realtime, 0));
-        // ...and a geometry_msgs/Twist reader on the drive topic.
         let ctx = Context::with_options(ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
         let mut node = ctx
             .new_node(
@@ -287,28 +284,18 @@ mod issue_7_ros2_loopback {
                 NodeOptions::new().enable_rosout(false),
             )
             .unwrap();
-        let qos = QosProfile::default();
         let topic = node
             .create_topic(
                 &Name::parse(&cfg.topics.drive).unwrap(),
                 MessageTypeName::new("geometry_msgs", "Twist"),
-                &qos,
+                &QosProfile::default(),
             )
             .unwrap();
         let _twist = node.create_subscription::<Twist>(&topic, None).unwrap();
-        let v = Ros2Vehicle::new(cfg.clone(), false).unwrap();
-        let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
-        let policy = Policy::load(&agvrl_deploy::bench::shipped_policy()).unwrap();
-        let drive = DriveConfig {
-            realtime: true,
-            ..DriveConfig::default()
-        };
-        let e = match DriveLoop::new(v, task, policy, drive, 0) {
+        let e = with_robot_at(Pace::Realtime, cfg, faults, |lp, _| match lp {
             Ok(_) => panic!("started with nobody able to read the commands"),
             Err(e) => e.to_string(),
-        };
-        h.stop();
-        th.join().unwrap().unwrap();
+        });
         assert!(e.contains("geometry_msgs::msg::dds_::Twist_"), "{e}");
         assert!(e.contains("ackermann_msgs::msg::dds_::AckermannDriveStamped_"), "{e}");
     }
@@ -387,7 +374,7 @@ mod issue_7_ros2_loopback {
 /// The deploy binary's dependency tree (normal edges, default features): no viewer, no
 /// TLS / OpenSSL (a static link needs none), no zenoh. Cheaper than a static build in CI.
 #[test]
-fn issue_7_deploy_links_no_rerun_openssl_or_zenoh() {
+fn deploy_links_no_rerun_openssl_or_zenoh() {
     let cargo = option_env!("CARGO").unwrap_or("cargo");
     let out = std::process::Command::new(cargo)
         .args([
@@ -421,7 +408,7 @@ fn issue_7_deploy_links_no_rerun_openssl_or_zenoh() {
 }
 
 #[test]
-fn issue_7_elf_loaded_size_of_this_test_binary() {
+fn elf_loaded_size_of_this_test_binary() {
     let b = std::fs::read(std::env::current_exe().unwrap()).unwrap();
     let n = agvrl_deploy::bench::elf_loaded_bytes(&b).unwrap();
     assert!(n > 100_000 && n < b.len() as u64, "{n} of {}", b.len());

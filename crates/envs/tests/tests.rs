@@ -11,7 +11,7 @@ fn quick_cfg() -> EnvConfig {
     EnvConfig::default()
 }
 
-mod issue_3_contract {
+mod env_contract {
     use super::*;
 
     #[test]
@@ -93,7 +93,7 @@ mod issue_3_contract {
     }
 }
 
-mod issue_3_episodes {
+mod episodes {
     use super::*;
 
     #[test]
@@ -332,7 +332,7 @@ mod issue_3_episodes {
     }
 }
 
-mod issue_3_vec_and_noise {
+mod vec_and_noise {
     use super::*;
 
     fn actions(n: usize, t: usize) -> Vec<f32> {
@@ -522,7 +522,7 @@ mod issue_3_vec_and_noise {
     }
 }
 
-mod issue_6_camera_frames {
+mod camera_frames {
     use super::*;
 
     #[test]
@@ -549,7 +549,7 @@ mod issue_6_camera_frames {
     }
 }
 
-mod issue_6_subjects {
+mod subjects {
     use super::*;
     use agvrl_envs::task::Search;
     use agvrl_envs::task::search::SearchConfig;
@@ -613,7 +613,7 @@ mod issue_6_subjects {
     }
 }
 
-mod issue_6_image_observations {
+mod image_observations {
     use super::*;
     use agvrl_envs::task::{ImageChannels, ImageObs, ObsConfig};
 

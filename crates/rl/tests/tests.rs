@@ -1,8 +1,8 @@
 //! agvrl-rl integration tests (one binary).
 
-mod issue_4_config;
-mod issue_4_files;
-mod issue_4_learning;
-mod issue_4_seeding;
-mod issue_6_cnn;
+mod cnn;
+mod config;
+mod files;
+mod learning;
 mod reach;
+mod seeding;

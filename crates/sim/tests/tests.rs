@@ -47,7 +47,7 @@ fn run(s: &mut Sim, c: Control, steps: usize) {
     }
 }
 
-mod issue_2_dynamics {
+mod dynamics {
     use super::*;
 
     #[test]
@@ -255,7 +255,7 @@ mod issue_2_dynamics {
     }
 }
 
-mod issue_2_sensors {
+mod sensor_readings {
     use super::*;
 
     /// Closed-form range from (ox, oy) along world bearing `a` to the walls of a square room.
@@ -445,7 +445,7 @@ mod issue_2_sensors {
     }
 }
 
-mod issue_2_scenes {
+mod scene_files {
     use super::*;
 
     #[test]
@@ -554,7 +554,7 @@ mod issue_2_scenes {
     }
 }
 
-mod issue_2_errors {
+mod errors {
     use super::*;
 
     fn write(dir: &std::path::Path, name: &str, text: &str) {
@@ -670,7 +670,7 @@ mod issue_2_errors {
     }
 }
 
-mod issue_6_camera {
+mod camera_images {
     use super::*;
     use agvrl_sim::sensors::CameraConfig;
     use agvrl_sim::sensors::camera::{class, compute_projection_matrix_fov, compute_view_matrix};
@@ -772,7 +772,7 @@ mod issue_6_camera {
     }
 }
 
-mod issue_6_subjects {
+mod subjects {
     use super::*;
 
     #[test]
