@@ -604,11 +604,7 @@ fn eval_source(a: &EvalArgs) -> Result<EvalSource> {
         let cfg = RunConfig::load(&sidecar).with_context(|| format!("reading {}", sidecar.display()))?;
         (Some(cfg.env.clone()), cfg.eval_env_config(), cfg.algo.clone())
     } else {
-        let cfg = EnvConfig {
-            held_out: true,
-            ..EnvConfig::default()
-        };
-        (None, cfg, "policy".to_string())
+        (None, EnvConfig::default(), "policy".to_string())
     };
     Ok(EvalSource {
         policy_path: path.clone(),
@@ -636,6 +632,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         .or(src.env.clone())
         .context("--env is needed: the policy has no FILE.toml beside it naming its env")?;
     let mut env_cfg = src.env_config.clone();
+    // Every evaluation draws held-out episodes, whatever the settings came from.
     env_cfg.held_out = true;
     if a.layouts == "procedural" {
         if agvrl_envs::registry::scene_of(&env_id).is_none_or(|s| s == "oval") {

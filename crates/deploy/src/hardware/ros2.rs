@@ -144,7 +144,8 @@ pub struct Ros2Vehicle {
     cfg: Ros2Config,
     lockstep: bool,
     ctx: Context,
-    node: Node,
+    /// Kept alive: it owns the subscriptions and the publisher.
+    _node: Node,
     scan: Option<Subscription<msg::LaserScan>>,
     imu: Option<Subscription<msg::Imu>>,
     odom: Option<Subscription<msg::Odometry>>,
@@ -189,7 +190,7 @@ impl Ros2Vehicle {
             cfg,
             lockstep,
             ctx,
-            node,
+            _node: node,
             scan,
             imu,
             odom,
@@ -324,7 +325,7 @@ impl Vehicle for Ros2Vehicle {
         // read it (a reader of another type or an incompatible QoS is no reader).
         loop {
             let found = self.drive_readers();
-            if found.iter().any(|r| self.can_read(r)) && self.node.subscription_count(&self.cfg.topics.drive) > 0 {
+            if found.iter().any(|r| self.can_read(r)) {
                 break;
             }
             if t0.elapsed() > timeout {
