@@ -10,7 +10,8 @@ pub enum CpuBackend {
     /// burn-flex: pure-Rust, the faster one in our measurements (see `bench`), the default.
     #[default]
     Flex,
-    /// burn-ndarray (deprecated upstream, kept selectable).
+    /// burn-ndarray (deprecated upstream, kept selectable; the `ndarray` feature).
+    #[cfg(feature = "ndarray")]
     NdArray,
 }
 
@@ -19,7 +20,12 @@ impl CpuBackend {
     pub fn parse(s: &str) -> Result<Self> {
         match s {
             "flex" => Ok(Self::Flex),
+            #[cfg(feature = "ndarray")]
             "ndarray" => Ok(Self::NdArray),
+            #[cfg(not(feature = "ndarray"))]
+            "ndarray" => Err(RlError::Config(
+                "CPU backend 'ndarray' needs agvrl-rl's 'ndarray' feature (this build has flex only)".into(),
+            )),
             _ => Err(RlError::Config(format!("unknown CPU backend '{s}' (flex, ndarray)"))),
         }
     }
@@ -28,6 +34,7 @@ impl CpuBackend {
     pub fn name(self) -> &'static str {
         match self {
             Self::Flex => "flex",
+            #[cfg(feature = "ndarray")]
             Self::NdArray => "ndarray",
         }
     }
@@ -36,6 +43,7 @@ impl CpuBackend {
     pub fn device(self) -> Device {
         match self {
             Self::Flex => Device::flex(),
+            #[cfg(feature = "ndarray")]
             #[allow(deprecated)] // kept selectable on purpose; see the type's doc
             Self::NdArray => Device::ndarray(),
         }
@@ -93,7 +101,9 @@ mod tests {
 
     #[test]
     fn devices_by_name() {
-        assert!(device_by_name("flex").is_ok() && device_by_name("ndarray").is_ok());
+        assert!(device_by_name("flex").is_ok());
+        #[cfg(feature = "ndarray")]
+        assert!(device_by_name("ndarray").is_ok());
         let e = device_by_name("tpu").unwrap_err().to_string();
         assert!(e.contains("tpu") && e.contains("flex"), "{e}");
         #[cfg(not(feature = "cuda"))]

@@ -29,8 +29,10 @@
 //! - Files (policy, checkpoint) are written atomically and carry a CRC-32; a truncated,
 //!   corrupted or mismatching file is an error, never a silently wrong policy.
 //!
-//! Features: none; both CPU backends (flex, the default, and ndarray) are always built and
-//! picked at run time with [`CpuBackend`].
+//! Features (both default): `train`, the learners and everything that needs Burn's autodiff
+//! (SAC, PPO, checkpoints, `bench`, `learning`); `ndarray`, a second CPU backend beside flex,
+//! picked at run time with [`CpuBackend`]. Without them the crate is inference only
+//! ([`Policy`], [`evaluate`], on flex), which is what agvrl-drive links.
 //!
 //! Limitations: gSDE for PPO only (not SAC), no discrete actions, no learning-rate
 //! schedules; envs restart their episodes on resume (the `Env` trait has no state snapshot);
@@ -39,24 +41,33 @@
 
 #![warn(missing_docs)]
 
+#[cfg(feature = "train")]
 pub mod bench;
+#[cfg(feature = "train")]
 mod buffer;
+#[cfg(feature = "train")]
 mod checkpoint;
 pub mod cnn;
 pub mod device;
 mod error;
 pub mod eval;
 mod file;
+#[cfg(feature = "train")]
 pub mod learning;
 pub mod nets;
 pub mod normalize;
 pub mod policy;
+#[cfg(feature = "train")]
 pub mod ppo;
+#[cfg(feature = "train")]
 mod progress;
 pub mod rng;
+#[cfg(feature = "train")]
 pub mod sac;
 
+#[cfg(feature = "train")]
 pub use buffer::ReplayBuffer;
+#[cfg(feature = "train")]
 pub use checkpoint::CHECKPOINT_FORMAT_VERSION;
 pub use cnn::ImageSpec;
 pub use device::{CpuBackend, default_device, device_by_name};
@@ -64,8 +75,11 @@ pub use error::{Result, RlError};
 pub use eval::evaluate;
 pub use normalize::ObsNormalizer;
 pub use policy::{Algorithm, EncoderData, POLICY_FORMAT_VERSION, Policy, PolicyData};
+#[cfg(feature = "train")]
 pub use ppo::{Ppo, PpoConfig};
+#[cfg(feature = "train")]
 pub use progress::{Control, Losses, Progress};
+#[cfg(feature = "train")]
 pub use sac::{Sac, SacConfig};
 
 /// Re-exported so callers can name the device without depending on Burn.

@@ -72,6 +72,7 @@ impl HostParams {
     }
 
     /// Leaf tensors that record gradients (`device` must have autodiff on).
+    #[cfg(feature = "train")]
     pub fn to_tracked(&self, device: &Device) -> Vec<Tensor<3>> {
         self.to_device(device).into_iter().map(|t| t.require_grad()).collect()
     }
@@ -209,6 +210,7 @@ pub fn to_vec<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>> {
 }
 
 /// Gradients of `params` after a backward pass, as host vectors (zeros where none flowed).
+#[cfg(feature = "train")]
 pub fn grads_of(params: &[Tensor<3>], grads: &burn::tensor::Gradients) -> Result<Vec<Vec<f32>>> {
     params
         .iter()
@@ -252,6 +254,7 @@ impl Adam {
     }
 
     /// Rebuild from saved parts (checkpoints).
+    #[cfg(feature = "train")]
     pub(crate) fn from_parts(
         lr: f64,
         beta1: f64,
@@ -273,6 +276,7 @@ impl Adam {
     }
 
     /// First and second moments (checkpoints).
+    #[cfg(feature = "train")]
     pub(crate) fn moments(&self) -> (&[Vec<f32>], &[Vec<f32>]) {
         (&self.m, &self.v)
     }
