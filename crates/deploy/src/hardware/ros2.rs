@@ -76,6 +76,9 @@ fn dds_type(ty: (&str, &str)) -> String {
 struct FoundReader {
     dds_type: String,
     reliable: bool,
+    /// The first QoS policy our drive writer cannot satisfy for this reader (DDS's
+    /// requested/offered rules: durability, reliability, deadline, data representation, ...).
+    incompatible: Option<ros2_client::dds::rustdds::qos::QosPolicyId>,
 }
 
 /// The topic `name` of ROS type `ty`.
@@ -214,6 +217,7 @@ impl Ros2Vehicle {
     /// Readers of the drive topic that discovery has found so far.
     fn drive_readers(&self) -> Vec<FoundReader> {
         let dds_name = format!("rt/{}", self.cfg.topics.drive.trim_start_matches('/'));
+        let offered: ros2_client::ros2::QosPolicies = qos(self.cfg.qos.drive).into();
         self.ctx
             .domain_participant()
             .discovered_readers()
@@ -226,14 +230,14 @@ impl Ros2Vehicle {
                     d.qos().reliability(),
                     Some(ros2_client::dds::rustdds::policy::Reliability::Reliable { .. })
                 ),
+                incompatible: offered.compliance_failure_wrt(&d.qos()),
             })
             .collect()
     }
 
-    /// Whether `r` can read our commands: the same type, and no reliable reader of a
-    /// best-effort writer.
+    /// Whether `r` can read our commands: the same type and a QoS our writer satisfies.
     fn can_read(&self, r: &FoundReader) -> bool {
-        r.dds_type == dds_type(DRIVE_TYPE) && !(r.reliable && self.cfg.qos.drive.reliability == Reliability::BestEffort)
+        r.dds_type == dds_type(DRIVE_TYPE) && r.incompatible.is_none()
     }
 
     fn drain(&mut self) {
@@ -331,30 +335,30 @@ impl Vehicle for Ros2Vehicle {
             if t0.elapsed() > timeout {
                 let d = &self.cfg.topics.drive;
                 let what = if found.is_empty() {
-                    "nobody subscribes".to_string()
+                    format!("nobody subscribes to {d}")
                 } else {
                     let list: Vec<String> = found
                         .iter()
                         .map(|r| {
-                            format!(
-                                "{} ({})",
-                                r.dds_type,
-                                if r.reliable { "reliable" } else { "best effort" }
-                            )
+                            let q = match r.incompatible {
+                                Some(p) => format!("incompatible QoS: {p:?}"),
+                                None => (if r.reliable { "reliable" } else { "best effort" }).to_string(),
+                            };
+                            format!("{} ({q})", r.dds_type)
                         })
                         .collect();
                     format!(
-                        "no reader can take {} ({}) on: found {}",
+                        "found only {} on {d}; none can take {} ({}, volatile)",
+                        list.join(", "),
                         dds_type(DRIVE_TYPE),
                         match self.cfg.qos.drive.reliability {
                             Reliability::BestEffort => "best effort",
                             Reliability::Reliable => "reliable",
                         },
-                        list.join(", ")
                     )
                 };
                 return Err(EnvError::Vehicle(format!(
-                    "{what} {d} within {} s (domain {})",
+                    "{what} within {} s (domain {})",
                     self.cfg.startup_timeout_s, self.cfg.domain_id
                 )));
             }
