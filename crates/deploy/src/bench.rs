@@ -94,18 +94,41 @@ pub fn run(quick: bool) -> Vec<(String, String)> {
         }
         Err(e) => out.push(kv("deploy_infer_error", e.replace(char::is_whitespace, "_"))),
     }
-    // CPU and RSS: agvrl-drive itself (built beside this binary), 30 Hz real time.
-    let exe = std::env::current_exe()
-        .ok()
-        .and_then(|p| p.parent().map(|d| d.join("agvrl-drive")));
-    match exe.filter(|p| p.exists()) {
-        Some(drive) => {
-            if let Ok(m) = std::fs::metadata(&drive) {
-                out.push(kv("deploy_binary_mb", format!("{:.1}", m.len() as f64 / 1e6)));
+    // The binaries as shipped (tools/build-drive.sh), where built: static, LTO, stripped.
+    let exe_dir = std::env::current_exe().ok().and_then(|p| p.parent().map(PathBuf::from));
+    let mut shipped_x86 = None;
+    if let Some(root) = exe_dir.as_deref().and_then(|d| d.parent()) {
+        for (arch, bin) in shipped_binaries(root) {
+            match std::fs::metadata(&bin) {
+                Ok(m) => {
+                    out.push(kv(
+                        &format!("deploy_shipped_{arch}_mb"),
+                        format!("{:.1}", m.len() as f64 / 1e6),
+                    ));
+                    if arch == std::env::consts::ARCH {
+                        shipped_x86 = Some(bin);
+                    }
+                }
+                Err(_) => out.push(kv(
+                    &format!("deploy_shipped_{arch}_mb"),
+                    format!("not_built(tools/build-drive.sh_{arch})"),
+                )),
             }
-            if let Some(b) = std::fs::read(&drive).ok().and_then(|b| elf_loaded_bytes(&b)) {
-                out.push(kv("deploy_binary_loaded_mb", format!("{:.1}", b as f64 / 1e6)));
-            }
+        }
+    }
+    // CPU and RSS: agvrl-drive itself at 30 Hz real time, the shipped build where there is one.
+    let built = exe_dir.map(|d| d.join("agvrl-drive")).filter(|p| p.exists());
+    if let Some(drive) = &built {
+        if let Ok(m) = std::fs::metadata(drive) {
+            out.push(kv("deploy_binary_mb", format!("{:.1}", m.len() as f64 / 1e6)));
+        }
+        if let Some(b) = std::fs::read(drive).ok().and_then(|b| elf_loaded_bytes(&b)) {
+            out.push(kv("deploy_binary_loaded_mb", format!("{:.1}", b as f64 / 1e6)));
+        }
+    }
+    match shipped_x86.map(|b| (b, "shipped")).or(built.map(|b| (b, "release"))) {
+        Some((drive, which)) => {
+            out.push(kv("deploy_30hz_binary", which));
             let steps = if quick { "30" } else { "300" };
             let res = std::process::Command::new(&drive)
                 .args([
@@ -147,6 +170,23 @@ pub fn run(quick: bool) -> Vec<(String, String)> {
     #[cfg(feature = "ros2")]
     out.extend(loopback(quick));
     out
+}
+
+/// Where tools/build-drive.sh puts agvrl-drive for each architecture, given the x86_64 target
+/// directory (`CARGO_TARGET_DIR`; aarch64 has its own beside it).
+pub fn shipped_binaries(target_root: &std::path::Path) -> [(&'static str, PathBuf); 2] {
+    let mut a64 = target_root.as_os_str().to_owned();
+    a64.push("-aarch64");
+    [
+        (
+            "x86_64",
+            target_root.join("x86_64-unknown-linux-gnu/deploy/agvrl-drive"),
+        ),
+        (
+            "aarch64",
+            PathBuf::from(a64).join("aarch64-unknown-linux-gnu/deploy/agvrl-drive"),
+        ),
+    ]
 }
 
 /// Ticks per second of the drive loop against the sim-backed robot over DDS on loopback

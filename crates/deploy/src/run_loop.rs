@@ -1,6 +1,6 @@
 //! The fixed-rate control loop and its watchdog.
 
-use agvrl_envs::api::{Control, RacingInfo, SensorFrame, TerminationCause, Vehicle};
+use agvrl_envs::api::{Control, EnvError, RacingInfo, SensorFrame, TerminationCause, Vehicle};
 use agvrl_envs::task::Task;
 use agvrl_rl::Policy;
 use std::time::{Duration, Instant};
@@ -79,6 +79,14 @@ pub enum Event {
     Inference(String),
 }
 
+/// A vehicle's error, without a second "vehicle:" prefix.
+fn vehicle_err(e: EnvError) -> DeployError {
+    match e {
+        EnvError::Vehicle(m) => DeployError::Vehicle(m),
+        other => DeployError::Vehicle(other.to_string()),
+    }
+}
+
 /// What one tick did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tick {
@@ -97,6 +105,9 @@ pub struct Tick {
     /// The task's termination verdict on the frame (collision, too close, ...); the loop
     /// drives on, a caller may stop.
     pub termination: Option<TerminationCause>,
+    /// The observation the policy saw and the action it gave (None when the watchdog stopped
+    /// the car before inference): what `agvrl-drive --trace` records.
+    pub inference: Option<(Vec<f32>, Vec<f32>)>,
 }
 
 /// A policy driving a vehicle through a task's observation and action mapping.
@@ -119,7 +130,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
         policy
             .check_spaces(&task.observation_space(), &action_space)
             .map_err(|e| DeployError::Mismatch(e.to_string()))?;
-        let frame = vehicle.reset(seed).map_err(|e| DeployError::Vehicle(e.to_string()))?;
+        let frame = vehicle.reset(seed).map_err(vehicle_err)?;
         task.reset(&frame, vehicle.map());
         let clock_s = frame.stamp_s;
         let wall = wall_clock_s();
@@ -192,7 +203,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
     /// period per tick (the vehicle's own time when it is simulated).
     pub fn tick(&mut self) -> Result<Tick, DeployError> {
         let period = 1.0 / self.cfg.rate_hz;
-        let frame = self.vehicle.sense().map_err(|e| DeployError::Vehicle(e.to_string()))?;
+        let frame = self.vehicle.sense().map_err(vehicle_err)?;
         // Timed from here: checks, observation and inference (not the vehicle's wait).
         let t0 = Instant::now();
         let now_s = if self.cfg.realtime {
@@ -202,24 +213,27 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
         };
         let checked = self.check(&frame, now_s);
         let fresh = checked.is_ok();
-        let (control, event) = match checked {
-            Err(ev) => (Control::default(), Some(ev)),
+        let (control, event, inference) = match checked {
+            Err(ev) => (Control::default(), Some(ev), None),
             Ok(()) => {
                 let obs = self.task.observe(&frame);
                 match self.policy.act(&obs, true) {
                     Ok(a) if a.iter().all(|v| v.is_finite()) => {
-                        (self.task.control(&a, self.vehicle.steering_limit_rad()), None)
+                        let c = self.task.control(&a, self.vehicle.steering_limit_rad());
+                        (c, None, Some((obs, a)))
                     }
-                    Ok(_) => (Control::default(), Some(Event::Inference("non-finite action".into()))),
-                    Err(e) => (Control::default(), Some(Event::Inference(e.to_string()))),
+                    Ok(a) => (
+                        Control::default(),
+                        Some(Event::Inference("non-finite action".into())),
+                        Some((obs, a)),
+                    ),
+                    Err(e) => (Control::default(), Some(Event::Inference(e.to_string())), None),
                 }
             }
         };
         let infer_us = t0.elapsed().as_secs_f64() * 1e6;
         let outcome = fresh.then(|| self.task.evaluate(&frame, self.vehicle.map()));
-        self.vehicle
-            .actuate(control)
-            .map_err(|e| DeployError::Vehicle(e.to_string()))?;
+        self.vehicle.actuate(control).map_err(vehicle_err)?;
         self.clock_s += period;
         self.ticks += 1;
         if self.cfg.realtime {
@@ -237,6 +251,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             infer_us,
             racing: outcome.as_ref().and_then(|o| o.racing.clone()),
             termination: outcome.and_then(|o| o.termination),
+            inference,
         })
     }
 }

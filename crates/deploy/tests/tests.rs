@@ -372,9 +372,10 @@ mod ros2_loopback {
 }
 
 /// The deploy binary's dependency tree (normal edges, default features): no viewer, no
-/// TLS / OpenSSL (a static link needs none), no zenoh. Cheaper than a static build in CI.
+/// TLS / OpenSSL (a static link needs none), no zenoh, and inference only (no autodiff, no
+/// second CPU backend). Cheaper than a static build in CI.
 #[test]
-fn deploy_links_no_rerun_openssl_or_zenoh() {
+fn deploy_links_no_rerun_openssl_zenoh_or_autodiff() {
     let cargo = option_env!("CARGO").unwrap_or("cargo");
     let out = std::process::Command::new(cargo)
         .args([
@@ -402,9 +403,64 @@ fn deploy_links_no_rerun_openssl_or_zenoh() {
         "zenoh",
         "ring",
         "plotters",
+        "burn-autodiff",
+        "burn-optim",
+        "burn-ndarray",
     ] {
         assert!(!names.contains(&bad), "agvrl-deploy depends on {bad}");
     }
+}
+
+/// `--trace` records what the policy saw and did; `--check-trace` reproduces it exactly and
+/// rejects a trace whose action was changed by more than the tolerance.
+#[test]
+fn a_trace_replays_to_the_same_actions_and_a_changed_action_is_caught() {
+    let dir = std::env::temp_dir().join(format!("agvrl-trace-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let trace = dir.join("run.jsonl");
+    let policy = agvrl_deploy::bench::shipped_policy();
+    let drive = |args: &[&std::ffi::OsStr]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
+            .arg("--policy")
+            .arg(&policy)
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let o = drive(&[
+        "--steps".as_ref(),
+        "60".as_ref(),
+        "--quiet".as_ref(),
+        "--trace".as_ref(),
+        trace.as_os_str(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&trace).unwrap();
+    assert_eq!(text.lines().count(), 60);
+    assert!(!dir.join("run.jsonl.part").exists());
+
+    let o = drive(&[
+        "--check-trace".as_ref(),
+        trace.as_os_str(),
+        "--tolerance".as_ref(),
+        "0".as_ref(),
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success() && out.contains("rows=60 max_action_diff=0e0"),
+        "{out}"
+    );
+
+    // Tick 30's throttle moved by 1e-3.
+    let mut rows: Vec<serde_json::Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let a = rows[29]["action"][0].as_f64().unwrap();
+    rows[29]["action"][0] = serde_json::json!(a + 1e-3);
+    let bad = dir.join("bad.jsonl");
+    std::fs::write(&bad, rows.iter().map(|r| format!("{r}\n")).collect::<String>()).unwrap();
+    let o = drive(&["--check-trace".as_ref(), bad.as_os_str()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("(tick 30)"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

@@ -61,6 +61,25 @@ struct Args {
     /// Print only the summary line.
     #[arg(long)]
     quiet: bool,
+    /// Record every tick's observation and action to FILE (JSON lines: tick, obs, action),
+    /// to check another build or machine against with --check-trace.
+    #[arg(long, value_name = "FILE")]
+    trace: Option<PathBuf>,
+    /// Drive nothing: run the policy on the observations of a --trace file and compare its
+    /// actions with the recorded ones (exit status 1 beyond --tolerance).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["trace", "serve_sim"])]
+    check_trace: Option<PathBuf>,
+    /// Largest action difference --check-trace accepts.
+    #[arg(long, default_value_t = 1e-4)]
+    tolerance: f32,
+}
+
+/// One line of a --trace file.
+#[derive(serde::Serialize, Deserialize)]
+struct TraceRow {
+    tick: u64,
+    obs: Vec<f32>,
+    action: Vec<f32>,
 }
 
 #[derive(Deserialize)]
@@ -138,7 +157,10 @@ fn run() -> Result<()> {
     let Some(policy_path) = policy_path else {
         bail!("give --run DIR or --policy FILE (e.g. assets/policies/racing-oval-ppo.agvrl)");
     };
-    let policy = Policy::load(&policy_path).with_context(|| format!("loading {}", policy_path.display()))?;
+    let mut policy = Policy::load(&policy_path).with_context(|| format!("loading {}", policy_path.display()))?;
+    if let Some(trace) = &a.check_trace {
+        return check_trace(&mut policy, trace, a.tolerance);
+    }
     let drive = DriveConfig {
         rate_hz: a.rate_hz,
         realtime: a.realtime,
@@ -186,8 +208,12 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<
     let (mut k, mut events, mut terminations) = (0u64, 0u64, 0u64);
     let mut infer_us = Vec::new();
     let mut racing = None;
+    let mut trace = a.trace.as_deref().map(TraceWriter::create).transpose()?;
     while a.steps == 0 || k < a.steps {
         let t = lp.tick()?;
+        if let (Some(w), Some((obs, action))) = (trace.as_mut(), &t.inference) {
+            w.row(t.index, obs, action)?;
+        }
         k += 1;
         events += u64::from(t.event.is_some());
         terminations += u64::from(t.termination.is_some());
@@ -210,6 +236,9 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<
         }
     }
     let wall_s = t0.elapsed().as_secs_f64();
+    if let Some(w) = trace {
+        w.finish()?;
+    }
     let cpu = match (cpu0, cpu_time_s()) {
         (Some(c0), Some(c1)) if wall_s > 0.0 => format!("{:.1}", 100.0 * (c1 - c0) / wall_s),
         _ => "na".into(),
@@ -227,6 +256,85 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<
         quantile(&infer_us, 0.5),
         quantile(&infer_us, 0.99)
     );
+    Ok(())
+}
+
+/// A --trace file, written beside its name and renamed when the run ends, so a file under
+/// that name is always whole.
+struct TraceWriter {
+    part: PathBuf,
+    path: PathBuf,
+    out: std::io::BufWriter<std::fs::File>,
+}
+
+impl TraceWriter {
+    fn create(path: &Path) -> Result<Self> {
+        let mut part = path.as_os_str().to_owned();
+        part.push(".part");
+        let part = PathBuf::from(part);
+        let f = std::fs::File::create(&part).with_context(|| format!("creating {}", part.display()))?;
+        Ok(Self {
+            part,
+            path: path.to_path_buf(),
+            out: std::io::BufWriter::new(f),
+        })
+    }
+
+    fn row(&mut self, tick: u64, obs: &[f32], action: &[f32]) -> Result<()> {
+        use std::io::Write;
+        let row = TraceRow {
+            tick,
+            obs: obs.to_vec(),
+            action: action.to_vec(),
+        };
+        serde_json::to_writer(&mut self.out, &row)?;
+        self.out.write_all(b"\n")?;
+        Ok(())
+    }
+
+    fn finish(self) -> Result<()> {
+        let f = self.out.into_inner().map_err(|e| e.into_error())?;
+        f.sync_all()?;
+        std::fs::rename(&self.part, &self.path).with_context(|| format!("writing {}", self.path.display()))?;
+        Ok(())
+    }
+}
+
+/// Re-run the policy on a trace's observations; print the largest action difference.
+fn check_trace(policy: &mut Policy, path: &Path, tolerance: f32) -> Result<()> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let (mut rows, mut max_diff, mut worst_tick) = (0u64, 0f32, 0u64);
+    for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let r: TraceRow =
+            serde_json::from_str(line).with_context(|| format!("{}:{}: not a trace row", path.display(), i + 1))?;
+        let a = policy
+            .act(&r.obs, true)
+            .with_context(|| format!("{}:{}: tick {}", path.display(), i + 1, r.tick))?;
+        if a.len() != r.action.len() {
+            bail!(
+                "{}:{}: the policy gives {} actions, the trace {}",
+                path.display(),
+                i + 1,
+                a.len(),
+                r.action.len()
+            );
+        }
+        for (x, y) in a.iter().zip(&r.action) {
+            let d = (x - y).abs();
+            if d.is_nan() || d > max_diff {
+                max_diff = if d.is_nan() { f32::INFINITY } else { d };
+                worst_tick = r.tick;
+            }
+        }
+        rows += 1;
+    }
+    if rows == 0 {
+        bail!("{}: no trace rows", path.display());
+    }
+    println!("trace rows={rows} max_action_diff={max_diff:e} worst_tick={worst_tick} tolerance={tolerance:e}");
+    if max_diff > tolerance {
+        bail!("actions differ from the trace by {max_diff:e} (tick {worst_tick}), over the tolerance {tolerance:e}");
+    }
     Ok(())
 }
 
