@@ -42,10 +42,10 @@ enum Cmd {
         /// Short runs (a smoke test, not for reporting).
         #[arg(long)]
         quick: bool,
-        /// Also run the learning checks (SAC and PPO on pendulum, 3 seeds; tens of minutes).
+        /// Also run the learning checks (SAC, PPO with gSDE and Gaussian PPO on pendulum, 5 seeds each, scored on the 100 start states shared with SB3; ~15 minutes on 2 cores).
         #[arg(long)]
         learning: bool,
-        /// Only this part: sim, envs, rl or deploy.
+        /// Only this part: sim, envs, rl, deploy, or learning (the learning checks alone).
         #[arg(long)]
         only: Option<String>,
     },
@@ -89,8 +89,8 @@ fn bench(quick: bool, learning: bool, only: Option<&str>) -> Result<()> {
     let want = |part: &str| only.is_none_or(|o| o == part);
     if let Some(o) = only {
         anyhow::ensure!(
-            ["sim", "envs", "rl", "deploy"].contains(&o),
-            "--only takes sim, envs, rl or deploy, not '{o}'"
+            ["sim", "envs", "rl", "deploy", "learning"].contains(&o),
+            "--only takes sim, envs, rl, deploy or learning, not '{o}'"
         );
     }
     println!(
@@ -120,14 +120,31 @@ fn bench(quick: bool, learning: bool, only: Option<&str>) -> Result<()> {
             println!("{k}={v}");
         }
     }
-    if learning {
-        for seed in 0..3 {
-            let r = agvrl_rl::learning::pendulum_sac(seed, 20_000)?;
-            println!("learning=sac env=pendulum steps=20000 seed={seed} mean_return={r:.1}");
-        }
-        for seed in 0..3 {
-            let r = agvrl_rl::learning::pendulum_ppo(seed, 100_000)?;
-            println!("learning=ppo env=pendulum steps=100000 seed={seed} mean_return={r:.1}");
+    if learning || only == Some("learning") {
+        // Scored as Stable-Baselines3's side (`pendulum_parity.py`): 200-step deterministic
+        // episodes from the 100 shared start states, 5 seeds.
+        type Run = Box<dyn Fn(u64) -> agvrl_rl::Result<f64>>;
+        let runs: [(&str, u64, Run); 3] = [
+            ("sac", 20_000, Box::new(|s| agvrl_rl::learning::sac_parity(s, 20_000))),
+            (
+                "ppo_zoo",
+                100_000,
+                Box::new(|s| agvrl_rl::learning::ppo_parity(true, s, 100_000, &mut |_| {})),
+            ),
+            (
+                "ppo_zoo_gaussian",
+                100_000,
+                Box::new(|s| agvrl_rl::learning::ppo_parity(false, s, 100_000, &mut |_| {})),
+            ),
+        ];
+        for (algo, steps, run) in runs {
+            let mut sum = 0.0;
+            for seed in 0..5 {
+                let r = run(seed)?;
+                sum += r;
+                println!("learning={algo} env=pendulum steps={steps} seed={seed} mean_return={r:.2}");
+            }
+            println!("learning={algo} env=pendulum seeds=5 mean_return={:.2}", sum / 5.0);
         }
     }
     Ok(())

@@ -70,5 +70,4 @@ CARGO_TARGET_DIR="$target_dir" "${cargo[@]}" build --locked --profile deploy -p 
 bin="$target_dir/$triple/deploy/agvrl-drive"
 bytes=$(stat -c %s "$bin")
 echo "built $bin in $(($(date +%s) - start)) s" >&2
-file "$bin" 2> /dev/null >&2 || true
 echo "drive_binary=$bin size_mb=$(awk "BEGIN{printf \"%.1f\", $bytes/1e6}") arch=$arch"

@@ -28,8 +28,9 @@ steady() {
   sed -E 's/ (infer_us_p50|infer_us_p99|wall_s|cpu_pct|rss_mb)=[^ ]+//g' <<< "$1"
 }
 
-file "$a64" | grep -q 'ARM aarch64' || fail "$a64 is not an aarch64 binary ($(file -b "$a64"))"
-file "$a64" | grep -Eq 'static(-pie)? ?(linked|executable)|statically linked' || fail "$a64 is not static ($(file -b "$a64"))"
+# readelf (binutils, there with gcc): the machine, and no program interpreter (static).
+readelf -h "$a64" | grep -q 'Machine:.*AArch64' || fail "$a64 is not an aarch64 binary"
+if readelf -l "$a64" | grep -q INTERP; then fail "$a64 is dynamically linked"; fi
 
 bytes=$(stat -c %s "$a64")
 echo "aarch64 binary: $bytes bytes"

@@ -2,10 +2,12 @@
 //! Pendulum-v1). Each returns the mean return of 10 deterministic eval episodes.
 
 use crate::device::default_device;
-use crate::error::Result;
+use crate::error::{Result, RlError};
+use crate::policy::Policy;
 use crate::ppo::{Ppo, PpoConfig};
-use crate::progress::Control;
+use crate::progress::{Control, Progress};
 use crate::sac::{Sac, SacConfig};
+use agvrl_envs::pendulum::Pendulum;
 use agvrl_envs::{Env, VecEnv, make};
 
 /// Episodes per evaluation (the protocol).
@@ -58,4 +60,58 @@ fn pendulum_ppo_with(cfg: PpoConfig, seed: u64, steps: u64) -> Result<f64> {
     ppo.learn(steps, &mut |_| Control::Continue)?;
     let mut env = make("pendulum", &agvrl_envs::EnvConfig::default())?;
     ppo.evaluate(&mut env, EVAL_EPISODES, 1_000_000 + seed)
+}
+
+/// The 100 Pendulum start states `(theta, theta_dot)` shared with Stable-Baselines3's side
+/// (`pendulum_parity.py --make-states`: numpy `default_rng(20261123)`, theta in [-pi, pi),
+/// theta_dot in [-1, 1)).
+pub fn parity_states() -> Vec<(f64, f64)> {
+    let raw: Vec<[f64; 2]> = serde_json::from_str(include_str!("../data/pendulum_start_states.json"))
+        .expect("the embedded start states are valid JSON");
+    raw.into_iter().map(|[t, td]| (t, td)).collect()
+}
+
+/// Mean return of 200-step deterministic episodes of `policy` from each state (actions clipped
+/// to the torque limit, as SB3's `predict`).
+pub fn score_on_states(policy: &mut Policy, states: &[(f64, f64)]) -> Result<f64> {
+    if states.is_empty() {
+        return Err(RlError::Config("no start states".into()));
+    }
+    let mut total = 0.0;
+    for &(theta, theta_dot) in states {
+        let mut env = Pendulum::new();
+        env.set_state(theta, theta_dot);
+        let space = env.action_space();
+        let mut obs = vec![theta.cos() as f32, theta.sin() as f32, theta_dot as f32];
+        for _ in 0..200 {
+            let mut a = policy.act(&obs, true)?;
+            for (j, v) in a.iter_mut().enumerate() {
+                *v = v.clamp(space.low[j], space.high[j]);
+            }
+            let st = env.step(&a)?;
+            total += st.reward;
+            obs = st.obs;
+        }
+    }
+    Ok(total / states.len() as f64)
+}
+
+/// PPO with rl-zoo3's Pendulum settings (`use_sde`: gSDE, else Gaussian) for `steps`, then
+/// scored on [`parity_states`]; `on_update` sees every rollout + update.
+pub fn ppo_parity(use_sde: bool, seed: u64, steps: u64, on_update: &mut dyn FnMut(&Progress<'_>)) -> Result<f64> {
+    let dev = default_device();
+    let mut ppo = Ppo::new(zoo_pendulum_ppo_config(use_sde), pendulum_envs(4)?, &dev, seed)?;
+    ppo.learn(steps, &mut |p| {
+        on_update(p);
+        Control::Continue
+    })?;
+    score_on_states(&mut ppo.policy(&dev), &parity_states())
+}
+
+/// SAC with SB3's defaults on one env for `steps`, then scored on [`parity_states`].
+pub fn sac_parity(seed: u64, steps: u64) -> Result<f64> {
+    let dev = default_device();
+    let mut sac = Sac::new(SacConfig::default(), pendulum_envs(1)?, &dev, seed)?;
+    sac.learn(steps, &mut |_| Control::Continue)?;
+    score_on_states(&mut sac.policy(&dev), &parity_states())
 }

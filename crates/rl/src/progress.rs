@@ -14,10 +14,20 @@ pub struct Losses {
     pub entropy: f64,
     /// SAC's entropy coefficient (alpha).
     pub ent_coef: f64,
-    /// PPO's approximate KL divergence between old and new policy.
+    /// PPO's approximate KL divergence between the rollout's policy and the one being updated,
+    /// `mean((r - 1) - ln r)` before each minibatch step, over the last epoch (SB3's
+    /// `train/approx_kl`, whose list restarts every epoch; `clip_fraction` and the losses are
+    /// over all epochs, as SB3's).
     pub approx_kl: f64,
     /// PPO's fraction of samples whose ratio was clipped.
     pub clip_fraction: f64,
+    /// PPO: `1 - Var(returns - values) / Var(returns)` over the rollout (SB3's
+    /// `explained_variance`).
+    pub explained_variance: f64,
+    /// PPO: mean of `exp(log_std)` (SB3's `train/std`; with gSDE, over the latent x action matrix).
+    pub std: f64,
+    /// PPO: mean global gradient norm before clipping, over the update's minibatches.
+    pub grad_norm: f64,
 }
 
 impl Default for Losses {
@@ -29,6 +39,9 @@ impl Default for Losses {
             ent_coef: f64::NAN,
             approx_kl: f64::NAN,
             clip_fraction: f64::NAN,
+            explained_variance: f64::NAN,
+            std: f64::NAN,
+            grad_norm: f64::NAN,
         }
     }
 }

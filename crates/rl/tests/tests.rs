@@ -5,4 +5,5 @@ mod config;
 mod files;
 mod learning;
 mod reach;
+mod sb3_numerics;
 mod seeding;

@@ -15,6 +15,8 @@ mod config;
 mod update;
 
 pub use config::PpoConfig;
+#[doc(hidden)]
+pub use update::GradientProbe;
 
 use crate::checkpoint::{self, AdamMeta, ArrayWriter};
 use crate::cnn::encode;
@@ -85,6 +87,8 @@ pub struct Ppo<E: Env> {
     losses: Losses,
     /// Current raw observations and whether each env just started an episode.
     last: Option<(Vec<f32>, Vec<bool>)>,
+    /// Minibatches in shuffled order (off only to replay an update in another implementation).
+    shuffle: bool,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -110,6 +114,9 @@ pub(crate) struct Rollout {
     pub(crate) log_probs: Vec<f32>,
     pub(crate) advantages: Vec<f32>,
     pub(crate) returns: Vec<f32>,
+    /// GAE's inputs (rewards with truncation bootstraps, values, episode starts; the values and
+    /// done flags after the last step), kept for checking GAE against another implementation.
+    pub(crate) gae_inputs: [Vec<f32>; 5],
 }
 
 impl<E: Env> Ppo<E> {
@@ -176,7 +183,15 @@ impl<E: Env> Ppo<E> {
             episodes: Episodes::default(),
             losses: Losses::default(),
             last: None,
+            shuffle: true,
         })
+    }
+
+    /// Visit minibatches in rollout order instead of shuffled (to replay an update step for
+    /// step in another implementation; see `tools/parity/`).
+    #[doc(hidden)]
+    pub fn set_minibatch_shuffle(&mut self, on: bool) {
+        self.shuffle = on;
     }
 
     /// The configuration.
@@ -255,6 +270,7 @@ impl<E: Env> Ppo<E> {
             log_probs: Vec::with_capacity(total),
             advantages: vec![0.0; total],
             returns: vec![0.0; total],
+            gae_inputs: Default::default(),
         };
         let mut rewards = Vec::with_capacity(total);
         let mut values = Vec::with_capacity(total);
@@ -352,6 +368,8 @@ impl<E: Env> Ppo<E> {
                 r.returns[k] = last_gae[e] + values[k];
             }
         }
+        let dones = starts.iter().map(|s| *s as u8 as f32).collect();
+        r.gae_inputs = [rewards, values, episode_starts, last_values, dones];
         self.last = Some((obs, starts));
         Ok(r)
     }

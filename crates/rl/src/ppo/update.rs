@@ -17,6 +17,40 @@ use burn::tensor::{Tensor, TensorData};
 
 const HALF_LN_2PI: f64 = 0.918_938_533_204_672_7;
 
+/// What [`Ppo::gradient_probe`] returns (weights in agvrl's layout: `[members, in, out]`).
+#[doc(hidden)]
+#[derive(serde::Serialize)]
+pub struct GradientProbe {
+    pub shapes: Vec<[usize; 3]>,
+    /// The weights the rollout was collected with.
+    pub params_before: Vec<Vec<f32>>,
+    /// The weights after the update on it, where `grads` were taken.
+    pub params: Vec<Vec<f32>>,
+    pub obs: Vec<f32>,
+    pub actions: Vec<f32>,
+    pub old_log_prob: Vec<f32>,
+    pub advantages: Vec<f32>,
+    pub returns: Vec<f32>,
+    pub pg_loss: f64,
+    pub vf_loss: f64,
+    pub approx_kl: f64,
+    pub clip_fraction: f64,
+    pub grads: Vec<Vec<f32>>,
+    /// The whole rollout (`obs`, ... above are its first minibatch), advantages unnormalised.
+    pub rollout_obs: Vec<f32>,
+    pub rollout_actions: Vec<f32>,
+    pub rollout_log_prob: Vec<f32>,
+    pub rollout_advantages: Vec<f32>,
+    pub rollout_returns: Vec<f32>,
+    /// GAE's inputs: rewards (truncations bootstrapped), values, episode starts, last values,
+    /// last done flags.
+    pub gae_inputs: [Vec<f32>; 5],
+    /// What this learner's update on that rollout reported.
+    pub update_approx_kl: f64,
+    pub update_clip_fraction: f64,
+    pub update_std: f64,
+}
+
 /// Loss values and gradients of one minibatch.
 pub(crate) struct Head {
     pub(crate) pg_loss: f64,
@@ -122,19 +156,151 @@ pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f6
     h
 }
 
+/// `1 - Var(returns - values) / Var(returns)` with `returns - values = advantages`; NaN when
+/// the returns do not vary (SB3's `explained_variance`).
+fn explained_variance(returns: &[f32], advantages: &[f32]) -> f64 {
+    let var = |v: &mut dyn Iterator<Item = f64>| {
+        let x: Vec<f64> = v.collect();
+        let m = x.iter().sum::<f64>() / x.len() as f64;
+        x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / x.len() as f64
+    };
+    let vr = var(&mut returns.iter().map(|v| *v as f64));
+    if vr == 0.0 {
+        return f64::NAN;
+    }
+    1.0 - var(&mut advantages.iter().map(|v| *v as f64)) / vr
+}
+
 impl<E: Env> Ppo<E> {
+    /// Loss and gradients (before clipping) of one minibatch; `adv` already normalised.
+    fn minibatch(
+        &self,
+        obs: Vec<f32>,
+        act: Vec<f32>,
+        old_lp: &[f32],
+        adv: &[f32],
+        ret: &[f32],
+    ) -> Result<(Head, Vec<Vec<f32>>)> {
+        let (o, a, n) = (self.obs_dim, self.act_dim, old_lp.len());
+        let ad = self.device.clone().autodiff();
+        let log_std_idx = head_idx(&self.cfg) + 4;
+        let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
+        // log_std's gradient comes from the host head; only the networks are tracked.
+        let mut params: Vec<Tensor<3>> = self.params.to_tracked(&ad);
+        params[log_std_idx] = params[log_std_idx].clone().detach();
+        let (mean, value, latent) = forward(&params, t3(obs, [1, n, o]), &self.cfg);
+        let (mean_h, value_h) = (to_vec(mean.clone().inner())?, to_vec(value.clone().inner())?);
+        let latent_h = if self.cfg.use_sde {
+            Some(to_vec(latent.inner())?)
+        } else {
+            None
+        };
+        let head = loss_head(
+            &HeadInput {
+                mean: &mean_h,
+                value: &value_h,
+                log_std: &self.params.data[log_std_idx],
+                latent: latent_h.as_deref(),
+                actions: &act,
+                old_log_prob: old_lp,
+                advantages: adv,
+                returns: ret,
+            },
+            self.cfg.clip_range,
+            self.cfg.vf_coef,
+            self.cfg.ent_coef,
+        );
+        let surrogate =
+            (mean * t3(head.d_mean.clone(), [1, n, a])).sum() + (value * t3(head.d_value.clone(), [1, n, 1])).sum();
+        let mut grads = grads_of(&params, &surrogate.backward())?;
+        grads[log_std_idx] = head.d_log_std.clone();
+        Ok((head, grads))
+    }
+
+    /// Collect one rollout, update on it, then return the rollout's first `batch_size` samples
+    /// (advantages normalised as the update does) with their loss and gradients before clipping
+    /// at the updated weights (ratios away from 1, some clipped), and the weights before and
+    /// after: for checking the loss and the update against another implementation.
+    #[doc(hidden)]
+    pub fn gradient_probe(&mut self) -> Result<GradientProbe> {
+        let r = self.collect_rollout()?;
+        let params_before = self.params.data.clone();
+        self.update(&r)?;
+        let (o, a) = (self.obs_dim, self.act_dim);
+        let n = self.cfg.batch_size.min(r.log_probs.len());
+        let mut adv = r.advantages[..n].to_vec();
+        if self.cfg.normalize_advantage && n > 1 {
+            let mean = adv.iter().map(|v| *v as f64).sum::<f64>() / n as f64;
+            let var = adv.iter().map(|v| (*v as f64 - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+            let sd = var.sqrt() + 1e-8;
+            adv.iter_mut().for_each(|v| *v = ((*v as f64 - mean) / sd) as f32);
+        }
+        let (head, grads) = self.minibatch(
+            r.obs[..n * o].to_vec(),
+            r.actions[..n * a].to_vec(),
+            &r.log_probs[..n],
+            &adv,
+            &r.returns[..n],
+        )?;
+        Ok(GradientProbe {
+            shapes: self.params.shapes.clone(),
+            params_before,
+            params: self.params.data.clone(),
+            rollout_obs: r.obs.clone(),
+            rollout_actions: r.actions.clone(),
+            rollout_log_prob: r.log_probs.clone(),
+            rollout_advantages: r.advantages.clone(),
+            rollout_returns: r.returns.clone(),
+            gae_inputs: r.gae_inputs.clone(),
+            update_approx_kl: self.losses.approx_kl,
+            update_clip_fraction: self.losses.clip_fraction,
+            update_std: self.losses.std,
+            obs: r.obs[..n * o].to_vec(),
+            actions: r.actions[..n * a].to_vec(),
+            old_log_prob: r.log_probs[..n].to_vec(),
+            advantages: adv,
+            returns: r.returns[..n].to_vec(),
+            pg_loss: head.pg_loss,
+            vf_loss: head.vf_loss,
+            approx_kl: head.approx_kl,
+            clip_fraction: head.clip_fraction,
+            grads,
+        })
+    }
+
+    /// Loss and gradients (before clipping) of one minibatch at `params` (agvrl's layout; `adv`
+    /// already normalised): `(pg_loss, vf_loss, grads)`. For checking against another
+    /// implementation's numbers (tests against Stable-Baselines3's).
+    #[doc(hidden)]
+    pub fn gradients_at(&mut self, params: Vec<Vec<f32>>, minibatch: [&[f32]; 5]) -> Result<(f64, f64, Vec<Vec<f32>>)> {
+        if params.len() != self.params.data.len()
+            || params.iter().zip(&self.params.data).any(|(p, q)| p.len() != q.len())
+        {
+            return Err(RlError::Config(
+                "gradients_at: the weights do not fit this learner".into(),
+            ));
+        }
+        self.params.data = params;
+        let [obs, act, old_lp, adv, ret] = minibatch;
+        let (h, g) = self.minibatch(obs.to_vec(), act.to_vec(), old_lp, adv, ret)?;
+        Ok((h.pg_loss, h.vf_loss, g))
+    }
+
     pub(crate) fn update(&mut self, r: &Rollout) -> Result<()> {
         let (o, a) = (self.obs_dim, self.act_dim);
         let total = r.log_probs.len();
         let bs = self.cfg.batch_size.min(total);
-        let dev = self.device.clone();
-        let ad = dev.clone().autodiff();
         let log_std_idx = head_idx(&self.cfg) + 4;
         let mut idx: Vec<usize> = (0..total).collect();
-        let (mut pg_sum, mut vf_sum, mut kl_sum, mut clip_sum, mut ent_sum, mut n_mb) =
-            (0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
+        let (mut pg_sum, mut vf_sum, mut clip_sum, mut ent_sum, mut n_mb) = (0.0, 0.0, 0.0, 0.0, 0usize);
+        let (mut gn_sum, mut n_steps) = (0.0, 0usize);
+        // SB3 logs the KL of the last epoch only (its list restarts every epoch).
+        let (mut kl_epoch, mut n_epoch) = (0.0, 0usize);
         'epochs: for _ in 0..self.cfg.n_epochs {
-            self.rng.shuffle(&mut idx);
+            (kl_epoch, n_epoch) = (0.0, 0);
+            if self.shuffle {
+                self.rng.shuffle(&mut idx);
+            }
             // SB3 yields whole minibatches and a smaller last one.
             for mb in idx.chunks(bs) {
                 let n = mb.len();
@@ -157,48 +323,22 @@ impl<E: Env> Ppo<E> {
                     let sd = var.sqrt() + 1e-8;
                     adv.iter_mut().for_each(|v| *v = ((*v as f64 - mean) / sd) as f32);
                 }
-                let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
-                // log_std's gradient comes from the host head; only the networks are tracked.
-                let mut params: Vec<Tensor<3>> = self.params.to_tracked(&ad);
-                params[log_std_idx] = params[log_std_idx].clone().detach();
-                let (mean, value, latent) = forward(&params, t3(obs, [1, n, o]), &self.cfg);
-                let (mean_h, value_h) = (to_vec(mean.clone().inner())?, to_vec(value.clone().inner())?);
-                let latent_h = if self.cfg.use_sde {
-                    Some(to_vec(latent.inner())?)
-                } else {
-                    None
-                };
-                let head = loss_head(
-                    &HeadInput {
-                        mean: &mean_h,
-                        value: &value_h,
-                        log_std: &self.params.data[log_std_idx],
-                        latent: latent_h.as_deref(),
-                        actions: &act,
-                        old_log_prob: &old_lp,
-                        advantages: &adv,
-                        returns: &ret,
-                    },
-                    self.cfg.clip_range,
-                    self.cfg.vf_coef,
-                    self.cfg.ent_coef,
-                );
+                let (head, mut grads) = self.minibatch(obs, act, &old_lp, &adv, &ret)?;
                 if !head.pg_loss.is_finite() || !head.vf_loss.is_finite() {
                     return Err(RlError::NonFinite("PPO loss"));
                 }
                 pg_sum += head.pg_loss;
                 vf_sum += head.vf_loss;
-                kl_sum += head.approx_kl;
+                kl_epoch += head.approx_kl;
+                n_epoch += 1;
                 clip_sum += head.clip_fraction;
                 ent_sum += head.entropy;
                 n_mb += 1;
                 if self.cfg.target_kl.is_some_and(|t| head.approx_kl > 1.5 * t) {
                     break 'epochs;
                 }
-                let surrogate = (mean * t3(head.d_mean, [1, n, a])).sum() + (value * t3(head.d_value, [1, n, 1])).sum();
-                let mut grads = grads_of(&params, &surrogate.backward())?;
-                grads[log_std_idx] = head.d_log_std;
-                Adam::clip_grad_norm(&mut grads, self.cfg.max_grad_norm);
+                gn_sum += Adam::clip_grad_norm(&mut grads, self.cfg.max_grad_norm);
+                n_steps += 1;
                 self.opt.step(&mut self.params, &grads);
                 self.n_updates += 1;
             }
@@ -206,9 +346,14 @@ impl<E: Env> Ppo<E> {
         let m = n_mb.max(1) as f64;
         self.losses.policy = pg_sum / m;
         self.losses.value = vf_sum / m;
-        self.losses.approx_kl = kl_sum / m;
+        self.losses.approx_kl = kl_epoch / n_epoch.max(1) as f64;
         self.losses.clip_fraction = clip_sum / m;
         self.losses.entropy = ent_sum / m;
+        self.losses.grad_norm = gn_sum / n_steps.max(1) as f64;
+        let log_std = &self.params.data[log_std_idx];
+        self.losses.std = log_std.iter().map(|l| (*l as f64).exp()).sum::<f64>() / log_std.len() as f64;
+        // values = returns - advantages (before normalisation).
+        self.losses.explained_variance = explained_variance(&r.returns, &r.advantages);
         Ok(())
     }
 }
