@@ -156,6 +156,19 @@ pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f6
     h
 }
 
+/// A minibatch's advantages to zero mean and unit (unbiased, as torch.std) deviation; a
+/// single sample is left as it is (SB3 skips it too).
+fn normalize_advantages(adv: &mut [f32]) {
+    let n = adv.len();
+    if n < 2 {
+        return;
+    }
+    let mean = adv.iter().map(|v| *v as f64).sum::<f64>() / n as f64;
+    let var = adv.iter().map(|v| (*v as f64 - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    let sd = var.sqrt() + 1e-8;
+    adv.iter_mut().for_each(|v| *v = ((*v as f64 - mean) / sd) as f32);
+}
+
 /// `1 - Var(returns - values) / Var(returns)` with `returns - values = advantages`; NaN when
 /// the returns do not vary (SB3's `explained_variance`).
 fn explained_variance(returns: &[f32], advantages: &[f32]) -> f64 {
@@ -229,11 +242,8 @@ impl<E: Env> Ppo<E> {
         let (o, a) = (self.obs_dim, self.act_dim);
         let n = self.cfg.batch_size.min(r.log_probs.len());
         let mut adv = r.advantages[..n].to_vec();
-        if self.cfg.normalize_advantage && n > 1 {
-            let mean = adv.iter().map(|v| *v as f64).sum::<f64>() / n as f64;
-            let var = adv.iter().map(|v| (*v as f64 - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-            let sd = var.sqrt() + 1e-8;
-            adv.iter_mut().for_each(|v| *v = ((*v as f64 - mean) / sd) as f32);
+        if self.cfg.normalize_advantage {
+            normalize_advantages(&mut adv);
         }
         let (head, grads) = self.minibatch(
             r.obs[..n * o].to_vec(),
@@ -316,12 +326,8 @@ impl<E: Env> Ppo<E> {
                     adv.push(r.advantages[k]);
                     ret.push(r.returns[k]);
                 }
-                if self.cfg.normalize_advantage && n > 1 {
-                    let mean = adv.iter().map(|v| *v as f64).sum::<f64>() / n as f64;
-                    // torch.std is unbiased.
-                    let var = adv.iter().map(|v| (*v as f64 - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-                    let sd = var.sqrt() + 1e-8;
-                    adv.iter_mut().for_each(|v| *v = ((*v as f64 - mean) / sd) as f32);
+                if self.cfg.normalize_advantage {
+                    normalize_advantages(&mut adv);
                 }
                 let (head, mut grads) = self.minibatch(obs, act, &old_lp, &adv, &ret)?;
                 if !head.pg_loss.is_finite() || !head.vf_loss.is_finite() {
