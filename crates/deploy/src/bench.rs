@@ -96,7 +96,7 @@ pub fn run(quick: bool) -> Vec<(String, String)> {
     }
     // The binaries as shipped (tools/build-drive.sh), where built: static, LTO, stripped.
     let exe_dir = std::env::current_exe().ok().and_then(|p| p.parent().map(PathBuf::from));
-    let mut shipped_x86 = None;
+    let mut shipped_here = None;
     if let Some(root) = exe_dir.as_deref().and_then(|d| d.parent()) {
         for (arch, bin) in shipped_binaries(root) {
             match std::fs::metadata(&bin) {
@@ -106,7 +106,7 @@ pub fn run(quick: bool) -> Vec<(String, String)> {
                         format!("{:.1}", m.len() as f64 / 1e6),
                     ));
                     if arch == std::env::consts::ARCH {
-                        shipped_x86 = Some(bin);
+                        shipped_here = Some(bin);
                     }
                 }
                 Err(_) => out.push(kv(
@@ -126,7 +126,7 @@ pub fn run(quick: bool) -> Vec<(String, String)> {
             out.push(kv("deploy_binary_loaded_mb", format!("{:.1}", b as f64 / 1e6)));
         }
     }
-    match shipped_x86.map(|b| (b, "shipped")).or(built.map(|b| (b, "release"))) {
+    match shipped_here.map(|b| (b, "shipped")).or(built.map(|b| (b, "release"))) {
         Some((drive, which)) => {
             out.push(kv("deploy_30hz_binary", which));
             let steps = if quick { "30" } else { "300" };
