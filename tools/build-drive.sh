@@ -33,8 +33,8 @@ case "$arch" in
     [ -f /usr/aarch64-linux-gnu/lib/libc.a ] || need+=(libc6-dev-arm64-cross)
     # Debian 12's qemu (7.2) lacks IP_MULTICAST_IF, which RustDDS sets ("Protocol not
     # available"); 10.0, in bookworm-backports, has it.
-    qemu_major=$(qemu-aarch64-static --version 2> /dev/null | sed -n 's/.*version \([0-9]*\)\..*/\1/p' | head -1)
-    [ "${qemu_major:-0}" -ge 10 ] || need+=(qemu-user-static)
+    qemu_major() { { qemu-aarch64-static --version 2> /dev/null || true; } | sed -n 's/.*version \([0-9]*\)\..*/\1/p' | head -1; }
+    [ "$(qemu_major)" -ge 10 ] 2> /dev/null || need+=(qemu-user-static)
     if [ ${#need[@]} -gt 0 ]; then
       if [ "$(id -u)" != 0 ]; then
         echo "missing packages: ${need[*]} (qemu-user-static >= 10); as root: dpkg --add-architecture arm64 && apt-get update && apt-get install ${need[*]}" >&2
@@ -44,8 +44,7 @@ case "$arch" in
       dpkg --add-architecture arm64
       apt-get update -q > /dev/null
       DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${need[@]}" > /dev/null
-      qemu_major=$(qemu-aarch64-static --version | sed -n 's/.*version \([0-9]*\)\..*/\1/p' | head -1)
-      if [ "$qemu_major" -lt 10 ]; then
+      if ! [ "$(qemu_major)" -ge 10 ] 2> /dev/null; then
         codename=$(. /etc/os-release && echo "$VERSION_CODENAME")
         echo "deb http://deb.debian.org/debian $codename-backports main" > /etc/apt/sources.list.d/agvrl-backports.list
         apt-get update -q > /dev/null
