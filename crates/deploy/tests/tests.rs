@@ -263,16 +263,38 @@ mod ros2_loopback {
 
     #[test]
     fn a_drive_reader_of_another_type_is_no_reader_and_startup_names_it() {
-        use ros2_client::{Context, ContextOptions, MessageTypeName, Name, NodeName, NodeOptions, QosProfile};
         #[derive(serde::Deserialize)]
         struct Twist {
             _linear: [f64; 3],
             _angular: [f64; 3],
         }
+        let e = refusal_with_only_this_drive_reader::<Twist>(("geometry_msgs", "Twist"), QosProfile::default());
+        assert!(e.contains("geometry_msgs::msg::dds_::Twist_"), "{e}");
+        assert!(e.contains("ackermann_msgs::msg::dds_::AckermannDriveStamped_"), "{e}");
+    }
+
+    #[test]
+    fn an_ackermann_reader_asking_more_than_the_writer_offers_is_no_reader() {
+        // Transient-local durability: the volatile drive writer can never match it.
+        let q = QosProfile::default().durability(ros2_client::qos::Durability::TransientLocal);
+        let e = refusal_with_only_this_drive_reader::<agvrl_deploy::hardware::msg::AckermannDriveStamped>(
+            ("ackermann_msgs", "AckermannDriveStamped"),
+            q,
+        );
+        assert!(e.contains("incompatible QoS: Durability"), "{e}");
+    }
+
+    use ros2_client::QosProfile;
+
+    /// Startup's error when the car's only reader on the drive topic has type `ty` and QoS `q`.
+    fn refusal_with_only_this_drive_reader<M: serde::de::DeserializeOwned + 'static>(
+        ty: (&str, &str),
+        q: QosProfile,
+    ) -> String {
+        use ros2_client::{Context, ContextOptions, MessageTypeName, Name, NodeName, NodeOptions};
         let mut cfg = ros_cfg(InvalidRay::Stop);
         cfg.startup_timeout_s = 3.0;
-        // A car with sensors but no drive reader of its own, and a geometry_msgs/Twist reader
-        // on the drive topic.
+        // A car with sensors but no drive reader of its own.
         let faults = Faults {
             drive_reader_from: u64::MAX,
             ..Faults::default()
@@ -280,24 +302,22 @@ mod ros2_loopback {
         let ctx = Context::with_options(ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
         let mut node = ctx
             .new_node(
-                NodeName::new("/", "twist_car").unwrap(),
+                NodeName::new("/", "other_car").unwrap(),
                 NodeOptions::new().enable_rosout(false),
             )
             .unwrap();
         let topic = node
             .create_topic(
                 &Name::parse(&cfg.topics.drive).unwrap(),
-                MessageTypeName::new("geometry_msgs", "Twist"),
-                &QosProfile::default(),
+                MessageTypeName::new(ty.0, ty.1),
+                &q,
             )
             .unwrap();
-        let _twist = node.create_subscription::<Twist>(&topic, None).unwrap();
-        let e = with_robot_at(Pace::Realtime, cfg, faults, |lp, _| match lp {
+        let _reader = node.create_subscription::<M>(&topic, Some(q)).unwrap();
+        with_robot_at(Pace::Realtime, cfg, faults, |lp, _| match lp {
             Ok(_) => panic!("started with nobody able to read the commands"),
             Err(e) => e.to_string(),
-        });
-        assert!(e.contains("geometry_msgs::msg::dds_::Twist_"), "{e}");
-        assert!(e.contains("ackermann_msgs::msg::dds_::AckermannDriveStamped_"), "{e}");
+        })
     }
 
     #[test]
