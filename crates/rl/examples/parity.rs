@@ -16,16 +16,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let path = args.get(i + 1).ok_or("--dump-grads FILE")?;
         let sde = args.get(i + 2).is_none_or(|s| s != "gaussian");
         let seed: u64 = args.get(i + 3).map_or(Ok(0), |s| s.parse())?;
-        let envs = (0..4)
-            .map(|_| agvrl_envs::make("pendulum", &agvrl_envs::EnvConfig::default()))
-            .collect::<Result<Vec<_>, _>>()?;
         let cfg = agvrl_rl::learning::zoo_pendulum_ppo_config(sde);
-        let mut ppo = agvrl_rl::Ppo::new(
-            cfg,
-            agvrl_envs::VecEnv::new(envs, 1)?,
-            &agvrl_rl::default_device(),
-            seed,
-        )?;
+        let envs = agvrl_rl::learning::pendulum_envs(4)?;
+        let mut ppo = agvrl_rl::Ppo::new(cfg, envs, &agvrl_rl::default_device(), seed)?;
         ppo.set_minibatch_shuffle(!args.iter().any(|a| a == "--no-shuffle"));
         let probe = ppo.gradient_probe()?;
         std::fs::write(path, serde_json::to_string(&probe)?)?;

@@ -13,7 +13,8 @@ use agvrl_envs::{Env, VecEnv, make};
 /// Episodes per evaluation (the protocol).
 pub const EVAL_EPISODES: usize = 10;
 
-fn pendulum_envs(n: usize) -> Result<VecEnv<Box<dyn Env>>> {
+/// `n` pendulum envs stepped on the caller's thread (the parity runs' vector env).
+pub fn pendulum_envs(n: usize) -> Result<VecEnv<Box<dyn Env>>> {
     let envs = (0..n)
         .map(|_| make("pendulum", &agvrl_envs::EnvConfig::default()))
         .collect::<std::result::Result<Vec<_>, _>>()?;

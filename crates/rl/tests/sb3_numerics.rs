@@ -2,8 +2,7 @@
 //! after one update on Pendulum (some ratios clipped) and one minibatch, with SB3's own policy
 //! and PPO.train's loss under autograd (`tools/parity/sb3_gradient_check.py --write-golden`).
 
-use agvrl_envs::{EnvConfig, VecEnv, make};
-use agvrl_rl::learning::zoo_pendulum_ppo_config;
+use agvrl_rl::learning::{pendulum_envs, zoo_pendulum_ppo_config};
 use agvrl_rl::{Ppo, default_device};
 use serde::Deserialize;
 
@@ -26,11 +25,8 @@ fn check(file: &str) {
     let path = format!("{}/tests/data/{file}", env!("CARGO_MANIFEST_DIR"));
     let g: Golden = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     assert!(g.clip_fraction > 0.0, "the minibatch exercises the clipped branch");
-    let envs = (0..4)
-        .map(|_| make("pendulum", &EnvConfig::default()).unwrap())
-        .collect();
     let cfg = zoo_pendulum_ppo_config(g.use_sde);
-    let mut ppo = Ppo::new(cfg, VecEnv::new(envs, 1).unwrap(), &default_device(), 0).unwrap();
+    let mut ppo = Ppo::new(cfg, pendulum_envs(4).unwrap(), &default_device(), 0).unwrap();
     let mb = [&g.obs[..], &g.actions, &g.old_log_prob, &g.advantages, &g.returns];
     let (pg, vf, grads) = ppo.gradients_at(g.params.clone(), mb).unwrap();
     assert!(

@@ -172,16 +172,15 @@ fn normalize_advantages(adv: &mut [f32]) {
 /// `1 - Var(returns - values) / Var(returns)` with `returns - values = advantages`; NaN when
 /// the returns do not vary (SB3's `explained_variance`).
 fn explained_variance(returns: &[f32], advantages: &[f32]) -> f64 {
-    let var = |v: &mut dyn Iterator<Item = f64>| {
-        let x: Vec<f64> = v.collect();
-        let m = x.iter().sum::<f64>() / x.len() as f64;
-        x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / x.len() as f64
+    let var = |x: &[f32]| {
+        let m = x.iter().map(|v| *v as f64).sum::<f64>() / x.len() as f64;
+        x.iter().map(|v| (*v as f64 - m).powi(2)).sum::<f64>() / x.len() as f64
     };
-    let vr = var(&mut returns.iter().map(|v| *v as f64));
+    let vr = var(returns);
     if vr == 0.0 {
         return f64::NAN;
     }
-    1.0 - var(&mut advantages.iter().map(|v| *v as f64)) / vr
+    1.0 - var(advantages) / vr
 }
 
 impl<E: Env> Ppo<E> {
