@@ -5,7 +5,7 @@ use crate::pendulum::Pendulum;
 use crate::sim_vehicle::{Randomisation, SimVehicle, SpawnMode};
 use crate::task::racing::RacingConfig;
 use crate::task::search::SearchConfig;
-use crate::task::{CommonConfig, ObsConfig, Racing, Search, SearchReward};
+use crate::task::{CommonConfig, ObsConfig, Racing, SafeShaping, Search, SearchReward};
 use crate::task_env::TaskEnv;
 use crate::wrappers::{NoiseConfig, Noisy, TimeLimit};
 use agvrl_sim::sensors::LidarConfig;
@@ -33,6 +33,9 @@ pub struct EnvConfig {
     pub dynamics: DynamicsMode,
     /// Physics substeps per 1/30 s control period.
     pub substeps: u32,
+    /// Braking deceleration when the throttle asks for less speed, m/s^2, like the car's
+    /// speed-controlled ESC; 0 (the default) coasts, as AutoVRL.
+    pub brake_mps2: f64,
     /// LiDAR.
     pub lidar: LidarConfig,
     /// Search subjects placed in the scene (seeded by `subject_seed`); finding them needs the
@@ -48,6 +51,8 @@ pub struct EnvConfig {
     pub action_mapping: ActionMapping,
     /// R_search form.
     pub search_reward: SearchReward,
+    /// Constants of the `safe` search reward (ignored by the other forms).
+    pub safe_reward: SafeShaping,
     /// Where episodes start.
     pub spawn: SpawnMode,
     /// Sensor noise and latency.
@@ -75,6 +80,7 @@ impl Default for EnvConfig {
             vehicle: "xtenth_car".into(),
             dynamics: DynamicsMode::Raycast,
             substeps: 4,
+            brake_mps2: 0.0,
             lidar: LidarConfig::default(),
             subjects: 0,
             subject_seed: 0,
@@ -82,6 +88,7 @@ impl Default for EnvConfig {
             observation: ObsConfig::default(),
             action_mapping: ActionMapping::Scaled,
             search_reward: SearchReward::AutovrlCode,
+            safe_reward: SafeShaping::default(),
             spawn: SpawnMode::Random,
             noise: NoiseConfig::default(),
             randomisation: Randomisation::default(),
@@ -188,6 +195,7 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
         camera: cfg.camera.clone(),
         subjects: cfg.subjects,
         subject_seed: cfg.subject_seed,
+        brake_mps2: cfg.brake_mps2,
         ..SimConfig::default()
     };
     let v =
@@ -203,6 +211,7 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
 /// `steering_limit_rad` (the deploy loop pairs it with any `Vehicle`).
 pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<Box<dyn crate::task::Task>, EnvError> {
     scene_of(id).ok_or_else(|| unknown(id))?;
+    cfg.safe_reward.validate().map_err(EnvError::Config)?;
     let common = CommonConfig {
         observation: cfg.observation,
         action_mapping: cfg.action_mapping,
@@ -222,6 +231,7 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
             SearchConfig {
                 common,
                 reward: cfg.search_reward,
+                safe: cfg.safe_reward,
                 slow_penalty: id == "search-outdoor-50" && cfg.search_reward == SearchReward::AutovrlCode,
                 ..SearchConfig::default()
             },

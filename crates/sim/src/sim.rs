@@ -59,6 +59,9 @@ pub struct SimConfig {
     /// Split steering between the front wheels by Ackermann geometry (`None`: the vehicle's
     /// own setting; `Some(false)`: AutoVRL's equal angles).
     pub ackermann: Option<bool>,
+    /// Braking deceleration of the drive when the throttle asks for less speed, m/s^2 (0:
+    /// AutoVRL's coasting; see `DriveModel`).
+    pub brake_mps2: f64,
 }
 
 impl Default for SimConfig {
@@ -75,6 +78,7 @@ impl Default for SimConfig {
             subject_seed: 0,
             camera: None,
             ackermann: None,
+            brake_mps2: 0.0,
         }
     }
 }
@@ -140,6 +144,9 @@ impl Sim {
                 cfg.control_period_s / cfg.substeps as f64
             )));
         }
+        if !(cfg.brake_mps2 >= 0.0 && cfg.brake_mps2.is_finite()) {
+            return Err(invalid(format!("brake_mps2 must be finite and >= 0, got {}", cfg.brake_mps2)));
+        }
         cfg.lidar.validate().map_err(invalid)?;
         if let Some(c) = &cfg.camera {
             c.validate().map_err(invalid)?;
@@ -170,6 +177,7 @@ impl Sim {
                 c_t: d.c_t,
                 c_d: d.c_d,
                 c_r: d.c_r,
+                brake: cfg.brake_mps2 / model.drive_radius_m() as f64,
             },
             tyre_friction: model.spec.tyre_friction,
             mass_scale: 1.0,

@@ -91,6 +91,52 @@ mod dynamics {
     }
 
     #[test]
+    fn braking_stops_the_car_within_the_closed_form_distance() {
+        let a = 3.0;
+        for mode in MODES {
+            let mut s = Sim::new(SimConfig {
+                scene: room(40.0, "brake"),
+                mode,
+                brake_mps2: a,
+                ..SimConfig::default()
+            })
+            .unwrap();
+            s.reset(PlanarPose {
+                x_m: -30.0,
+                y_m: 0.0,
+                yaw_rad: 0.0,
+            })
+            .unwrap();
+            let full = Control {
+                throttle: 1.0,
+                steering_rad: 0.0,
+            };
+            run(&mut s, full, 240);
+            let v0 = s.forward_speed_mps() as f64;
+            let x0 = s.pose2().x_m as f64;
+            run(&mut s, Control::default(), 90);
+            let d = s.pose2().x_m as f64 - x0;
+            // v0^2 / 2a, plus up to one control period at v0 before the first braked step and
+            // the speed tracking's lag.
+            let expect = v0 * v0 / (2.0 * a);
+            assert!(s.forward_speed_mps().abs() < 0.02, "{mode:?}: still moving");
+            assert!(
+                d > 0.9 * expect && d < expect + v0 * (1.0 / 30.0 + 0.05),
+                "{mode:?}: stopped in {d:.3} m from {v0:.2} m/s, closed form {expect:.3} m"
+            );
+        }
+    }
+
+    #[test]
+    fn brake_rejects_a_negative_rate() {
+        let e = Sim::new(SimConfig {
+            brake_mps2: -1.0,
+            ..SimConfig::default()
+        });
+        assert!(e.err().is_some_and(|e| e.to_string().contains("brake_mps2")));
+    }
+
+    #[test]
     fn low_speed_turning_radius_matches_ackermann_geometry() {
         for mode in MODES {
             for delta in [0.2f64, -0.3] {

@@ -10,7 +10,7 @@ use agvrl_sim::ActionMapping;
 use serde::{Deserialize, Serialize};
 
 pub use racing::Racing;
-pub use reward::SearchReward;
+pub use reward::{SafeShaping, SearchReward};
 pub use search::Search;
 
 /// What a task concluded about one step.

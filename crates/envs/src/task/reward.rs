@@ -26,23 +26,70 @@ pub enum SearchReward {
 
 impl SearchReward {
     /// The penalty charged once when an episode ends by a collision.
-    pub fn collision_penalty(self) -> f64 {
+    pub fn collision_penalty(self, safe: &SafeShaping) -> f64 {
         match self {
             Self::AutovrlCode | Self::PaperCases => PENALTY,
-            Self::Safe => SAFE_COLLISION,
+            Self::Safe => safe.collision,
         }
     }
 }
 
-/// The `safe` form's collision penalty.
-pub const SAFE_COLLISION: f64 = -20.0;
+/// The constants of the `safe` form's penalties (the defaults are the form as documented on
+/// [`SearchReward::Safe`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SafeShaping {
+    /// The graded proximity penalty starts under this range, metres...
+    pub near_m: f64,
+    /// ...and grows linearly to this per step at 0.6 m, AutoVRL's termination range.
+    pub near_weight: f64,
+    /// Charged once on a collision (<= 0).
+    pub collision: f64,
+}
+
+impl Default for SafeShaping {
+    fn default() -> Self {
+        Self {
+            near_m: 1.0,
+            near_weight: 1.0,
+            collision: -20.0,
+        }
+    }
+}
+
+impl SafeShaping {
+    /// Why these constants cannot shape a reward, if they cannot.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.near_m.is_finite() && self.near_m > SAFE_FULL_M) {
+            return Err(format!("safe_reward.near_m must be above {SAFE_FULL_M} m, got {}", self.near_m));
+        }
+        if !(self.near_weight.is_finite() && self.near_weight >= 0.0) {
+            return Err(format!("safe_reward.near_weight must be >= 0, got {}", self.near_weight));
+        }
+        if !(self.collision.is_finite() && self.collision <= 0.0) {
+            return Err(format!("safe_reward.collision must be <= 0, got {}", self.collision));
+        }
+        Ok(())
+    }
+}
+
+/// Where the `safe` form's proximity penalty reaches its full weight, metres.
+const SAFE_FULL_M: f64 = 0.6;
 
 /// Penalty of a collision, and of AutoVRL's outdoor-50 crawl.
 pub const PENALTY: f64 = -50.0;
 
 /// R_search for one step. `slow_penalty`: AutoVRL's outdoor-50 adds -50 when T < 0.1;
 /// `new_cells`: coverage cells first reached this step (used by `Safe` only).
-pub fn search(form: SearchReward, d: f64, t: f64, delta: f64, slow_penalty: bool, new_cells: usize) -> RewardTerms {
+pub fn search(
+    form: SearchReward,
+    safe: &SafeShaping,
+    d: f64,
+    t: f64,
+    delta: f64,
+    slow_penalty: bool,
+    new_cells: usize,
+) -> RewardTerms {
     let mut r = RewardTerms::default();
     let band = d > 2.0 && d < 2.5;
     match form {
@@ -50,8 +97,8 @@ pub fn search(form: SearchReward, d: f64, t: f64, delta: f64, slow_penalty: bool
             r.throttle = 0.5 * t * t;
             r.steering = -0.1 * (delta / 0.36).powi(2);
             r.coverage = 0.5 * new_cells as f64;
-            if d < 1.0 {
-                r.proximity = -((1.0 - d) / 0.4).min(1.0);
+            if d < safe.near_m {
+                r.proximity = -safe.near_weight * ((safe.near_m - d) / (safe.near_m - SAFE_FULL_M)).min(1.0);
             }
         }
         SearchReward::AutovrlCode => {
@@ -121,36 +168,53 @@ mod tests {
     #[test]
     fn autovrl_code_form_by_hand() {
         // d = 2.2 (band), T = 0.5, delta = 0.1: 0.005*4.84 + 1.25 - 0.02 + 2 = 3.2542
-        let r = search(SearchReward::AutovrlCode, 2.2, 0.5, 0.1, false, 0).total();
+        let r = search(SearchReward::AutovrlCode, &SafeShaping::default(), 2.2, 0.5, 0.1, false, 0).total();
         assert!((r - 3.2542).abs() < 1e-12, "{r}");
         // d = 0.7 (terminal too), T = 1, delta = -0.36: 0.00245 + 5 - 0.2592 - 50 = -45.25675
-        let r = search(SearchReward::AutovrlCode, 0.7, 1.0, -0.36, false, 0).total();
+        let r = search(SearchReward::AutovrlCode, &SafeShaping::default(), 0.7, 1.0, -0.36, false, 0).total();
         assert!((r + 45.25675).abs() < 1e-12, "{r}");
         // d = 5, T = 0.05 with outdoor-50's crawl penalty: 0.125 + 0.0125 - 0 - 50
-        let r = search(SearchReward::AutovrlCode, 5.0, 0.05, 0.0, true, 0).total();
+        let r = search(SearchReward::AutovrlCode, &SafeShaping::default(), 5.0, 0.05, 0.0, true, 0).total();
         assert!((r + 49.8625).abs() < 1e-12, "{r}");
     }
 
     #[test]
     fn paper_case_form_by_hand() {
-        assert_eq!(search(SearchReward::PaperCases, 2.2, 0.5, 0.1, false, 0).total(), 2.0);
-        assert_eq!(search(SearchReward::PaperCases, 0.7, 1.0, 0.3, false, 0).total(), -50.0);
-        let r = search(SearchReward::PaperCases, 3.0, 0.5, 0.1, false, 0).total();
+        assert_eq!(search(SearchReward::PaperCases, &SafeShaping::default(), 2.2, 0.5, 0.1, false, 0).total(), 2.0);
+        assert_eq!(search(SearchReward::PaperCases, &SafeShaping::default(), 0.7, 1.0, 0.3, false, 0).total(), -50.0);
+        let r = search(SearchReward::PaperCases, &SafeShaping::default(), 3.0, 0.5, 0.1, false, 0).total();
         assert!((r - (0.045 + 1.25 - 0.02)).abs() < 1e-12, "{r}");
     }
 
     #[test]
     fn safe_form_by_hand() {
         // d = 0.8, T = 1, delta = 0.18, 2 new cells: 0.5 - 0.025 + 1.0 - 0.5 = 0.975
-        let r = search(SearchReward::Safe, 0.8, 1.0, 0.18, false, 2);
+        let r = search(SearchReward::Safe, &SafeShaping::default(), 0.8, 1.0, 0.18, false, 2);
         assert!((r.total() - 0.975).abs() < 1e-12, "{r:?}");
         assert_eq!(r.collision, 0.0);
         // Far from everything: no proximity term; at 0.5 m the term saturates at -1.
-        assert_eq!(search(SearchReward::Safe, 3.0, 0.0, 0.0, true, 0).total(), 0.0);
-        assert_eq!(search(SearchReward::Safe, 0.5, 0.0, 0.0, false, 0).proximity, -1.0);
+        assert_eq!(search(SearchReward::Safe, &SafeShaping::default(), 3.0, 0.0, 0.0, true, 0).total(), 0.0);
+        assert_eq!(search(SearchReward::Safe, &SafeShaping::default(), 0.5, 0.0, 0.0, false, 0).proximity, -1.0);
         // Ten steps of the worst proximity cost less than the collision.
-        let worst = search(SearchReward::Safe, 0.0, 0.0, 0.0, false, 0).proximity;
-        assert!(10.0 * worst > SearchReward::Safe.collision_penalty());
+        let worst = search(SearchReward::Safe, &SafeShaping::default(), 0.0, 0.0, 0.0, false, 0).proximity;
+        assert!(10.0 * worst > SearchReward::Safe.collision_penalty(&SafeShaping::default()));
+    }
+
+    #[test]
+    fn safe_form_with_a_wider_band_and_a_heavier_collision() {
+        let wide = SafeShaping {
+            near_m: 1.6,
+            near_weight: 2.0,
+            collision: -100.0,
+        };
+        // Halfway between 1.6 m and 0.6 m: half of the weight.
+        let r = search(SearchReward::Safe, &wide, 1.1, 0.0, 0.0, false, 0);
+        assert!((r.proximity + 1.0).abs() < 1e-12, "{r:?}");
+        assert_eq!(search(SearchReward::Safe, &wide, 0.3, 0.0, 0.0, false, 0).proximity, -2.0);
+        assert_eq!(SearchReward::Safe.collision_penalty(&wide), -100.0);
+        assert_eq!(SearchReward::AutovrlCode.collision_penalty(&wide), PENALTY);
+        assert!(SafeShaping { near_m: 0.5, ..wide }.validate().unwrap_err().contains("near_m"));
+        assert!(SafeShaping { collision: 1.0, ..wide }.validate().unwrap_err().contains("collision"));
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! Search / exploration (the paper's R_search): drive fast, keep a clearance band, avoid
 //! obstacles. Reports coverage of the free map and the distance travelled.
 
-use super::reward::{self, SearchReward};
+use super::reward::{self, SafeShaping, SearchReward};
 use super::{CommonConfig, Outcome, Task, min_range_m, terminate};
 use crate::api::{BoxSpace, Control, MapInfo, SearchInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
@@ -15,6 +15,8 @@ pub struct SearchConfig {
     pub common: CommonConfig,
     /// Reward form.
     pub reward: SearchReward,
+    /// Constants of the `safe` form.
+    pub safe: SafeShaping,
     /// AutoVRL's outdoor-50 extra -50 when T < 0.1.
     pub slow_penalty: bool,
     /// The episode ends when the minimum range falls below this, metres (AutoVRL: 0.6).
@@ -32,6 +34,7 @@ impl Default for SearchConfig {
         Self {
             common: CommonConfig::default(),
             reward: SearchReward::AutovrlCode,
+            safe: SafeShaping::default(),
             slow_penalty: false,
             terminate_below_m: 0.6,
             coverage_radius_m: 2.0,
@@ -220,6 +223,7 @@ impl Task for Search {
         let new_cells = self.n_covered - covered_before;
         let mut terms = reward::search(
             self.cfg.reward,
+            &self.cfg.safe,
             d,
             c.throttle,
             c.steering_rad,
@@ -231,7 +235,7 @@ impl Task for Search {
             frame,
             map,
             self.cfg.terminate_below_m,
-            self.cfg.reward.collision_penalty(),
+            self.cfg.reward.collision_penalty(&self.cfg.safe),
         );
         self.look(frame, map);
         Outcome {

@@ -38,6 +38,11 @@ impl ActionMapping {
 
 /// AutoVRL's wheel-speed model, integrated once per control period:
 /// `w <- max(0, w + t_s (c_t T - w (c_d w + c_r)))`, w in rad/s.
+///
+/// With `brake > 0` the drive behaves like a speed-controlled ESC (what a VESC does with the
+/// speed a ROS 2 drive command asks for): above the throttle's steady speed it slows at
+/// `brake` rad/s^2 (or faster, by drag) down to that speed, instead of AutoVRL's coasting,
+/// which needs metres to stop. Accelerating is AutoVRL's model either way.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DriveModel {
     /// Throttle gain, rad/s^2.
@@ -46,13 +51,23 @@ pub struct DriveModel {
     pub c_d: f64,
     /// Linear resistance, 1/s.
     pub c_r: f64,
+    /// Braking deceleration of the wheel, rad/s^2 (0: coast, as AutoVRL).
+    #[serde(default)]
+    pub brake: f64,
 }
 
 impl DriveModel {
     /// Next wheel speed (rad/s) after `t_s` seconds at throttle `throttle` in [0, 1].
     pub fn advance(&self, w: f64, throttle: f64, t_s: f64) -> f64 {
         let dw = self.c_t * throttle - w * (self.c_d * w + self.c_r);
-        (w + t_s * dw).max(0.0)
+        let coast = (w + t_s * dw).max(0.0);
+        if self.brake > 0.0 {
+            let target = self.steady_state(throttle);
+            if w > target {
+                return coast.min(w - t_s * self.brake).max(target);
+            }
+        }
+        coast
     }
 
     /// Steady-state wheel speed at throttle `throttle`, rad/s: the positive root of
@@ -130,6 +145,7 @@ mod tests {
             c_t: 20.0,
             c_d: 0.01,
             c_r: 0.2,
+            brake: 0.0,
         };
         let mut w = 0.0;
         for _ in 0..600 {
@@ -139,6 +155,41 @@ mod tests {
         assert!((w - 35.83).abs() < 0.01, "w = {w}");
         assert!((m.steady_state(1.0) - w).abs() < 1e-6);
         assert_eq!(m.advance(1.0, 0.0, 10.0), 0.0, "never negative");
+    }
+
+    #[test]
+    fn brake_slows_at_its_rate_down_to_the_throttles_steady_speed() {
+        let coast = DriveModel {
+            c_t: 20.0,
+            c_d: 0.01,
+            c_r: 0.2,
+            brake: 0.0,
+        };
+        let braked = DriveModel { brake: 60.0, ..coast };
+        let dt = 1.0 / 30.0;
+        let w0 = coast.steady_state(1.0);
+        // Released throttle: coasting loses c_d w^2 + c_r w (20 rad/s^2 at top speed) per
+        // second; the brake takes 60 rad/s^2 and stops in w0 / 60 s.
+        let (mut wc, mut wb) = (w0, w0);
+        let mut stop_steps = None;
+        for k in 1..=60 {
+            wc = coast.advance(wc, 0.0, dt);
+            wb = braked.advance(wb, 0.0, dt);
+            if wb == 0.0 && stop_steps.is_none() {
+                stop_steps = Some(k);
+            }
+        }
+        assert_eq!(stop_steps, Some((w0 / 60.0 / dt).ceil() as usize));
+        assert!(wc > 5.0, "coasting is slow: w = {wc} after 2 s");
+        // Half throttle: the brake stops at the steady speed of 0.5, not below.
+        let half = coast.steady_state(0.5);
+        let mut w = w0;
+        for _ in 0..60 {
+            w = braked.advance(w, 0.5, dt);
+        }
+        assert!((w - half).abs() < 1e-9, "{w} vs {half}");
+        // Accelerating is the same model with or without the brake.
+        assert_eq!(braked.advance(3.0, 1.0, dt), coast.advance(3.0, 1.0, dt));
     }
 
     #[test]

@@ -295,6 +295,7 @@ impl VehicleModel {
             c_t: d.c_t,
             c_d: d.c_d,
             c_r: d.c_r,
+            brake: 0.0,
         };
         model.steady_state(1.0) as f32 * self.drive_radius_m()
     }
