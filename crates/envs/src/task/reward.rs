@@ -45,6 +45,10 @@ pub struct SafeShaping {
     pub near_weight: f64,
     /// Charged once on a collision (<= 0).
     pub collision: f64,
+    /// When > 0, the proximity penalty is scaled by forward speed / this (capped at 1), m/s: a
+    /// car standing still near an obstacle pays nothing, so stopping where it cannot turn
+    /// (there is no reverse) beats crashing. 0 (the default): not scaled.
+    pub near_speed_mps: f64,
 }
 
 impl Default for SafeShaping {
@@ -53,6 +57,7 @@ impl Default for SafeShaping {
             near_m: 1.0,
             near_weight: 1.0,
             collision: -20.0,
+            near_speed_mps: 0.0,
         }
     }
 }
@@ -65,6 +70,9 @@ impl SafeShaping {
         }
         if !(self.near_weight.is_finite() && self.near_weight >= 0.0) {
             return Err(format!("safe_reward.near_weight must be >= 0, got {}", self.near_weight));
+        }
+        if !(self.near_speed_mps.is_finite() && self.near_speed_mps >= 0.0) {
+            return Err(format!("safe_reward.near_speed_mps must be >= 0, got {}", self.near_speed_mps));
         }
         if !(self.collision.is_finite() && self.collision <= 0.0) {
             return Err(format!("safe_reward.collision must be <= 0, got {}", self.collision));
@@ -129,6 +137,13 @@ pub fn search(
         r.slow = PENALTY;
     }
     r
+}
+
+/// Scale the `safe` proximity term by forward speed (see [`SafeShaping::near_speed_mps`]).
+pub fn weight_proximity_by_speed(terms: &mut RewardTerms, safe: &SafeShaping, forward_mps: f64) {
+    if safe.near_speed_mps > 0.0 {
+        terms.proximity *= (forward_mps / safe.near_speed_mps).clamp(0.0, 1.0);
+    }
 }
 
 /// R_racing: 5 T^2 - 2 delta^2, or -50 (and the episode ends) when `d < 0.8`.
@@ -206,6 +221,7 @@ mod tests {
             near_m: 1.6,
             near_weight: 2.0,
             collision: -100.0,
+            near_speed_mps: 0.0,
         };
         // Halfway between 1.6 m and 0.6 m: half of the weight.
         let r = search(SearchReward::Safe, &wide, 1.1, 0.0, 0.0, false, 0);
@@ -213,6 +229,13 @@ mod tests {
         assert_eq!(search(SearchReward::Safe, &wide, 0.3, 0.0, 0.0, false, 0).proximity, -2.0);
         assert_eq!(SearchReward::Safe.collision_penalty(&wide), -100.0);
         assert_eq!(SearchReward::AutovrlCode.collision_penalty(&wide), PENALTY);
+        // Speed-weighted: nothing at a standstill, half at half the reference speed.
+        let moving = SafeShaping { near_speed_mps: 1.5, ..wide };
+        for (v, expect) in [(0.0, 0.0), (-0.2, 0.0), (0.75, -1.0), (3.0, -2.0)] {
+            let mut r = search(SearchReward::Safe, &moving, 0.3, 0.0, 0.0, false, 0);
+            weight_proximity_by_speed(&mut r, &moving, v);
+            assert_eq!(r.proximity, expect, "v = {v}");
+        }
         assert!(SafeShaping { near_m: 0.5, ..wide }.validate().unwrap_err().contains("near_m"));
         assert!(SafeShaping { collision: 1.0, ..wide }.validate().unwrap_err().contains("collision"));
     }

@@ -230,6 +230,8 @@ impl Task for Search {
             self.cfg.slow_penalty,
             new_cells,
         );
+        let forward = frame.imu.as_ref().map_or(f64::INFINITY, |i| i.lin_vel_b[0]);
+        reward::weight_proximity_by_speed(&mut terms, &self.cfg.safe, forward);
         let termination = terminate(
             &mut terms,
             frame,

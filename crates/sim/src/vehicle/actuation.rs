@@ -13,6 +13,9 @@ pub enum ActionMapping {
     /// T = (a0 + 1) / 2, delta = a1 * delta_max: every part of the action range does something.
     #[default]
     Scaled,
+    /// T = clamp(a0, 0, 1), delta = a1 * delta_max: the lower half of a0 asks for a standstill,
+    /// so with a braking drive a car can stop and stay stopped under exploration noise.
+    ScaledStop,
 }
 
 pub use crate::msg::Control;
@@ -30,6 +33,10 @@ impl ActionMapping {
             },
             ActionMapping::Scaled => Control {
                 throttle: ((a0.clamp(-1.0, 1.0) + 1.0) / 2.0),
+                steering_rad: a1.clamp(-1.0, 1.0) * delta_max_rad,
+            },
+            ActionMapping::ScaledStop => Control {
+                throttle: a0.clamp(0.0, 1.0),
                 steering_rad: a1.clamp(-1.0, 1.0) * delta_max_rad,
             },
         }
@@ -137,6 +144,9 @@ mod tests {
             }
         );
         assert_eq!(ActionMapping::Scaled.control(f64::NAN, 0.0, 0.36), Control::default());
+        let stop = ActionMapping::ScaledStop;
+        assert_eq!(stop.control(-0.3, -1.0, 0.36), Control { throttle: 0.0, steering_rad: -0.36 });
+        assert_eq!(stop.control(0.5, 0.5, 0.36), Control { throttle: 0.5, steering_rad: 0.18 });
     }
 
     #[test]
