@@ -53,6 +53,10 @@ pub struct EnvConfig {
     pub search_reward: SearchReward,
     /// Constants of the `safe` search reward (ignored by the other forms).
     pub safe_reward: SafeShaping,
+    /// Search: r_m (reward and "too close" termination) is the minimum range within half
+    /// this of straight ahead, degrees; 0 (the default): every ray. 90 keeps AutoVRL's r_m
+    /// with a wider LiDAR, whose side rays then only feed the observation.
+    pub clearance_fov_deg: f32,
     /// Where episodes start.
     pub spawn: SpawnMode,
     /// Sensor noise and latency.
@@ -89,6 +93,7 @@ impl Default for EnvConfig {
             action_mapping: ActionMapping::Scaled,
             search_reward: SearchReward::AutovrlCode,
             safe_reward: SafeShaping::default(),
+            clearance_fov_deg: 0.0,
             spawn: SpawnMode::Random,
             noise: NoiseConfig::default(),
             randomisation: Randomisation::default(),
@@ -212,6 +217,12 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
 pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<Box<dyn crate::task::Task>, EnvError> {
     scene_of(id).ok_or_else(|| unknown(id))?;
     cfg.safe_reward.validate().map_err(EnvError::Config)?;
+    if !(cfg.clearance_fov_deg.is_finite() && (0.0..=360.0).contains(&cfg.clearance_fov_deg)) {
+        return Err(EnvError::Config(format!(
+            "clearance_fov_deg must be in [0, 360], got {}",
+            cfg.clearance_fov_deg
+        )));
+    }
     let common = CommonConfig {
         observation: cfg.observation,
         action_mapping: cfg.action_mapping,
@@ -232,6 +243,7 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
                 common,
                 reward: cfg.search_reward,
                 safe: cfg.safe_reward,
+                clearance_fov_deg: cfg.clearance_fov_deg,
                 slow_penalty: id == "search-outdoor-50" && cfg.search_reward == SearchReward::AutovrlCode,
                 ..SearchConfig::default()
             },

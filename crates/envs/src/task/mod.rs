@@ -335,6 +335,20 @@ pub fn min_range_m(frame: &SensorFrame) -> f64 {
         .min(1e6) as f64
 }
 
+/// The minimum range among the rays within `fov_deg / 2` of straight ahead, metres (the whole
+/// scan when `fov_deg` is 0; infinite without a scan).
+pub fn min_range_ahead_m(frame: &SensorFrame, fov_deg: f32) -> f64 {
+    if fov_deg <= 0.0 {
+        return min_range_m(frame);
+    }
+    frame
+        .scan
+        .as_ref()
+        .map(|s| s.min_range_within(0.5 * fov_deg.to_radians()))
+        .unwrap_or(f32::INFINITY)
+        .min(1e6) as f64
+}
+
 /// Termination by `common_termination`, charging `penalty` once as the collision term.
 pub fn terminate(
     terms: &mut RewardTerms,
@@ -343,7 +357,20 @@ pub fn terminate(
     threshold_m: f32,
     penalty: f64,
 ) -> Option<TerminationCause> {
-    let t = common_termination(frame, map, threshold_m);
+    terminate_ahead(terms, frame, map, threshold_m, 0.0, penalty)
+}
+
+/// `terminate` with "too close" judged on the rays within `fov_deg / 2` of straight ahead
+/// (0: every ray).
+pub fn terminate_ahead(
+    terms: &mut RewardTerms,
+    frame: &SensorFrame,
+    map: Option<&MapInfo>,
+    threshold_m: f32,
+    fov_deg: f32,
+    penalty: f64,
+) -> Option<TerminationCause> {
+    let t = common_termination_ahead(frame, map, threshold_m, fov_deg);
     if t.is_some() && terms.collision == 0.0 {
         terms.collision = penalty;
     }
@@ -353,9 +380,18 @@ pub fn terminate(
 /// Termination shared by the tasks: too close (r_m below `threshold_m`), real contact,
 /// flipped, or out of the map. Returns the first that applies, in that order.
 pub fn common_termination(frame: &SensorFrame, map: Option<&MapInfo>, threshold_m: f32) -> Option<TerminationCause> {
-    if let Some(scan) = &frame.scan
-        && scan.min_range() < threshold_m
-    {
+    common_termination_ahead(frame, map, threshold_m, 0.0)
+}
+
+/// `common_termination` with "too close" judged within `fov_deg / 2` of straight ahead (0:
+/// every ray).
+pub fn common_termination_ahead(
+    frame: &SensorFrame,
+    map: Option<&MapInfo>,
+    threshold_m: f32,
+    fov_deg: f32,
+) -> Option<TerminationCause> {
+    if frame.scan.is_some() && (min_range_ahead_m(frame, fov_deg) as f32) < threshold_m {
         return Some(TerminationCause::TooClose);
     }
     if frame.contact == Some(true) {

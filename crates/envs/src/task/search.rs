@@ -2,7 +2,7 @@
 //! obstacles. Reports coverage of the free map and the distance travelled.
 
 use super::reward::{self, SafeShaping, SearchReward};
-use super::{CommonConfig, Outcome, Task, min_range_m, terminate};
+use super::{CommonConfig, Outcome, Task, min_range_ahead_m, terminate_ahead};
 use crate::api::{BoxSpace, Control, MapInfo, SearchInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -21,6 +21,10 @@ pub struct SearchConfig {
     pub slow_penalty: bool,
     /// The episode ends when the minimum range falls below this, metres (AutoVRL: 0.6).
     pub terminate_below_m: f32,
+    /// r_m, the range the reward and the termination use, is the minimum over the rays within
+    /// half this of straight ahead, degrees; 0: every ray. AutoVRL's LiDAR is 90 degrees wide,
+    /// so 90 keeps its r_m for a wider LiDAR whose side rays only feed the observation.
+    pub clearance_fov_deg: f32,
     /// A free cell counts as covered once the vehicle came this close, metres.
     pub coverage_radius_m: f32,
     /// A subject counts as found once it covers this many camera pixels...
@@ -37,6 +41,7 @@ impl Default for SearchConfig {
             safe: SafeShaping::default(),
             slow_penalty: false,
             terminate_below_m: 0.6,
+            clearance_fov_deg: 0.0,
             coverage_radius_m: 2.0,
             found_min_pixels: 30,
             found_range_m: 8.0,
@@ -209,7 +214,7 @@ impl Task for Search {
     }
 
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
-        let d = min_range_m(frame);
+        let d = min_range_ahead_m(frame, self.cfg.clearance_fov_deg);
         let c = frame.applied;
         let covered_before = self.n_covered;
         if let Some(g) = &frame.gps {
@@ -232,11 +237,12 @@ impl Task for Search {
         );
         let forward = frame.imu.as_ref().map_or(f64::INFINITY, |i| i.lin_vel_b[0]);
         reward::weight_proximity_by_speed(&mut terms, &self.cfg.safe, forward);
-        let termination = terminate(
+        let termination = terminate_ahead(
             &mut terms,
             frame,
             map,
             self.cfg.terminate_below_m,
+            self.cfg.clearance_fov_deg,
             self.cfg.reward.collision_penalty(&self.cfg.safe),
         );
         self.look(frame, map);
@@ -246,5 +252,59 @@ impl Task for Search {
             racing: None,
             search: Some(self.info()),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::api::TerminationCause;
+    use agvrl_sim::msg::LaserScan;
+
+    /// A 270 degree scan (one ray per degree) reading 5 m except `near` m at `bearing_deg`.
+    fn frame(bearing_deg: i32, near: f32) -> SensorFrame {
+        let ranges: Vec<f32> = (-135..=135).map(|a| if a == bearing_deg { near } else { 5.0 }).collect();
+        SensorFrame {
+            scan: Some(LaserScan {
+                angle_min: -135f32.to_radians(),
+                angle_increment: 1f32.to_radians(),
+                range_min: 0.05,
+                range_max: 12.0,
+                hit: vec![true; ranges.len()],
+                ranges,
+                ..LaserScan::default()
+            }),
+            ..SensorFrame::default()
+        }
+    }
+
+    #[test]
+    fn clearance_fov_judges_only_the_rays_ahead() {
+        let narrow = SearchConfig {
+            clearance_fov_deg: 90.0,
+            reward: SearchReward::Safe,
+            ..SearchConfig::default()
+        };
+        let whole = SearchConfig {
+            clearance_fov_deg: 0.0,
+            ..narrow
+        };
+        let ended = |cfg: SearchConfig, f: &SensorFrame| {
+            let mut s = Search::new(cfg, 0.36);
+            s.reset(f, None);
+            s.evaluate(f, None)
+        };
+        // An obstacle 0.4 m away at 80 degrees (beside the car): outside AutoVRL's 90 degree
+        // fan, so only the whole-scan rule ends the episode.
+        let side = frame(80, 0.4);
+        assert_eq!(ended(whole, &side).termination, Some(TerminationCause::TooClose));
+        let o = ended(narrow, &side);
+        assert_eq!(o.termination, None);
+        assert_eq!(o.terms.proximity, 0.0, "r_m is 5 m ahead");
+        // At 30 degrees it is ahead: both end it.
+        assert_eq!(ended(narrow, &frame(30, 0.4)).termination, Some(TerminationCause::TooClose));
+        // 45 degrees is the fan's edge, still inside.
+        assert_eq!(ended(narrow, &frame(45, 0.5)).termination, Some(TerminationCause::TooClose));
+        assert_eq!(ended(narrow, &frame(47, 0.5)).termination, None);
     }
 }
