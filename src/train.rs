@@ -86,7 +86,8 @@ pub struct EvalArgs {
     #[arg(long, required_unless_present = "policy", conflicts_with = "policy")]
     pub run: Option<PathBuf>,
     /// A policy file; env and env settings come from FILE.toml beside it when present (a run's
-    /// config.toml, as shipped in assets/policies), else --env with the default settings.
+    /// config.toml, as shipped in assets/policies), else from the config.toml of the run
+    /// directory holding it (runs/<dir>/policy.agvrl), else --env with the default settings.
     #[arg(long)]
     pub policy: Option<PathBuf>,
     /// Base of the evaluation episodes' seeds: episode k resets with seed S + k, drawn from the
@@ -582,6 +583,8 @@ struct EvalSource {
     env_config: EnvConfig,
     algo: String,
     seed: u64,
+    /// Where the env settings came from (a TOML path, or `default`).
+    settings: String,
 }
 
 fn eval_source(a: &EvalArgs) -> Result<EvalSource> {
@@ -594,17 +597,23 @@ fn eval_source(a: &EvalArgs) -> Result<EvalSource> {
             env_config: cfg.eval_env_config(),
             algo: cfg.algo.clone(),
             seed: cfg.seed + 2_000_000,
+            settings: dir.join("config.toml").display().to_string(),
         });
     }
     let Some(path) = &a.policy else {
         bail!("give --run DIR or --policy FILE");
     };
-    let sidecar = path.with_extension("toml");
-    let (env, env_config, algo) = if sidecar.exists() {
-        let cfg = RunConfig::load(&sidecar).with_context(|| format!("reading {}", sidecar.display()))?;
-        (Some(cfg.env.clone()), cfg.eval_env_config(), cfg.algo.clone())
-    } else {
-        (None, EnvConfig::default(), "policy".to_string())
+    let (env, env_config, algo, settings) = match agvrl_deploy::settings_beside(path) {
+        Some(side) => {
+            let cfg = RunConfig::load(&side).with_context(|| format!("reading {}", side.display()))?;
+            (
+                Some(cfg.env.clone()),
+                cfg.eval_env_config(),
+                cfg.algo.clone(),
+                side.display().to_string(),
+            )
+        }
+        None => (None, EnvConfig::default(), "policy".to_string(), "default".to_string()),
     };
     Ok(EvalSource {
         policy_path: path.clone(),
@@ -612,6 +621,7 @@ fn eval_source(a: &EvalArgs) -> Result<EvalSource> {
         env_config,
         algo,
         seed: 0,
+        settings,
     })
 }
 
@@ -676,6 +686,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             src.policy_path.display().to_string()
         }
     );
+    println!("settings={}", src.settings);
     println!("seed={seed}");
     println!("layouts={}", a.layouts);
     println!("preset={}", a.preset.as_deref().unwrap_or("none"));

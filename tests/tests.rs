@@ -138,6 +138,16 @@ mod cli {
         for key in ["mean_return=", "episodes=2", "collisions=", "laps=", "best_lap_s="] {
             assert!(out.contains(key), "{key} missing in:\n{out}");
         }
+        // The policy file of a run directory is evaluated with that run's settings, not the
+        // defaults: the same episodes give the same lines as --run.
+        let pf = run.join("policy.agvrl");
+        let o = agvrl(&["eval", "--policy", pf.to_str().unwrap(), "--episodes", "2", "--seed", "2000001"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let by_file = stdout(&o);
+        assert_eq!(key(&by_file, "settings"), run.join("config.toml").display().to_string());
+        for k in ["env", "mean_return", "ended"] {
+            assert_eq!(key(&by_file, k), key(&out, k), "{k}: --policy\n{by_file}\n--run\n{out}");
+        }
         // A truncated policy file is refused with a one-line error.
         let pf = run.join("policy.agvrl");
         let bytes = std::fs::read(&pf).unwrap();

@@ -110,8 +110,7 @@ fn policy_and_env(a: &Args) -> Result<(Option<PathBuf>, String, EnvConfig)> {
             (Some(dir.join("policy.agvrl")), r.env, r.env_config)
         }
         (None, Some(p)) => {
-            let side = p.with_extension("toml");
-            if side.exists() {
+            if let Some(side) = agvrl_deploy::settings_beside(p) {
                 let r = read_run_file(&side)?;
                 (Some(p.clone()), r.env, r.env_config)
             } else {
