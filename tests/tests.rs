@@ -141,7 +141,15 @@ mod cli {
         // The policy file of a run directory is evaluated with that run's settings, not the
         // defaults: the same episodes give the same lines as --run.
         let pf = run.join("policy.agvrl");
-        let o = agvrl(&["eval", "--policy", pf.to_str().unwrap(), "--episodes", "2", "--seed", "2000001"]);
+        let o = agvrl(&[
+            "eval",
+            "--policy",
+            pf.to_str().unwrap(),
+            "--episodes",
+            "2",
+            "--seed",
+            "2000001",
+        ]);
         assert!(o.status.success(), "{}", stderr(&o));
         let by_file = stdout(&o);
         assert_eq!(key(&by_file, "settings"), run.join("config.toml").display().to_string());

@@ -145,7 +145,10 @@ impl Sim {
             )));
         }
         if !(cfg.brake_mps2 >= 0.0 && cfg.brake_mps2.is_finite()) {
-            return Err(invalid(format!("brake_mps2 must be finite and >= 0, got {}", cfg.brake_mps2)));
+            return Err(invalid(format!(
+                "brake_mps2 must be finite and >= 0, got {}",
+                cfg.brake_mps2
+            )));
         }
         cfg.lidar.validate().map_err(invalid)?;
         if let Some(c) = &cfg.camera {

@@ -66,13 +66,22 @@ impl SafeShaping {
     /// Why these constants cannot shape a reward, if they cannot.
     pub fn validate(&self) -> Result<(), String> {
         if !(self.near_m.is_finite() && self.near_m > SAFE_FULL_M) {
-            return Err(format!("safe_reward.near_m must be above {SAFE_FULL_M} m, got {}", self.near_m));
+            return Err(format!(
+                "safe_reward.near_m must be above {SAFE_FULL_M} m, got {}",
+                self.near_m
+            ));
         }
         if !(self.near_weight.is_finite() && self.near_weight >= 0.0) {
-            return Err(format!("safe_reward.near_weight must be >= 0, got {}", self.near_weight));
+            return Err(format!(
+                "safe_reward.near_weight must be >= 0, got {}",
+                self.near_weight
+            ));
         }
         if !(self.near_speed_mps.is_finite() && self.near_speed_mps >= 0.0) {
-            return Err(format!("safe_reward.near_speed_mps must be >= 0, got {}", self.near_speed_mps));
+            return Err(format!(
+                "safe_reward.near_speed_mps must be >= 0, got {}",
+                self.near_speed_mps
+            ));
         }
         if !(self.collision.is_finite() && self.collision <= 0.0) {
             return Err(format!("safe_reward.collision must be <= 0, got {}", self.collision));
@@ -183,21 +192,81 @@ mod tests {
     #[test]
     fn autovrl_code_form_by_hand() {
         // d = 2.2 (band), T = 0.5, delta = 0.1: 0.005*4.84 + 1.25 - 0.02 + 2 = 3.2542
-        let r = search(SearchReward::AutovrlCode, &SafeShaping::default(), 2.2, 0.5, 0.1, false, 0).total();
+        let r = search(
+            SearchReward::AutovrlCode,
+            &SafeShaping::default(),
+            2.2,
+            0.5,
+            0.1,
+            false,
+            0,
+        )
+        .total();
         assert!((r - 3.2542).abs() < 1e-12, "{r}");
         // d = 0.7 (terminal too), T = 1, delta = -0.36: 0.00245 + 5 - 0.2592 - 50 = -45.25675
-        let r = search(SearchReward::AutovrlCode, &SafeShaping::default(), 0.7, 1.0, -0.36, false, 0).total();
+        let r = search(
+            SearchReward::AutovrlCode,
+            &SafeShaping::default(),
+            0.7,
+            1.0,
+            -0.36,
+            false,
+            0,
+        )
+        .total();
         assert!((r + 45.25675).abs() < 1e-12, "{r}");
         // d = 5, T = 0.05 with outdoor-50's crawl penalty: 0.125 + 0.0125 - 0 - 50
-        let r = search(SearchReward::AutovrlCode, &SafeShaping::default(), 5.0, 0.05, 0.0, true, 0).total();
+        let r = search(
+            SearchReward::AutovrlCode,
+            &SafeShaping::default(),
+            5.0,
+            0.05,
+            0.0,
+            true,
+            0,
+        )
+        .total();
         assert!((r + 49.8625).abs() < 1e-12, "{r}");
     }
 
     #[test]
     fn paper_case_form_by_hand() {
-        assert_eq!(search(SearchReward::PaperCases, &SafeShaping::default(), 2.2, 0.5, 0.1, false, 0).total(), 2.0);
-        assert_eq!(search(SearchReward::PaperCases, &SafeShaping::default(), 0.7, 1.0, 0.3, false, 0).total(), -50.0);
-        let r = search(SearchReward::PaperCases, &SafeShaping::default(), 3.0, 0.5, 0.1, false, 0).total();
+        assert_eq!(
+            search(
+                SearchReward::PaperCases,
+                &SafeShaping::default(),
+                2.2,
+                0.5,
+                0.1,
+                false,
+                0
+            )
+            .total(),
+            2.0
+        );
+        assert_eq!(
+            search(
+                SearchReward::PaperCases,
+                &SafeShaping::default(),
+                0.7,
+                1.0,
+                0.3,
+                false,
+                0
+            )
+            .total(),
+            -50.0
+        );
+        let r = search(
+            SearchReward::PaperCases,
+            &SafeShaping::default(),
+            3.0,
+            0.5,
+            0.1,
+            false,
+            0,
+        )
+        .total();
         assert!((r - (0.045 + 1.25 - 0.02)).abs() < 1e-12, "{r}");
     }
 
@@ -208,8 +277,14 @@ mod tests {
         assert!((r.total() - 0.975).abs() < 1e-12, "{r:?}");
         assert_eq!(r.collision, 0.0);
         // Far from everything: no proximity term; at 0.5 m the term saturates at -1.
-        assert_eq!(search(SearchReward::Safe, &SafeShaping::default(), 3.0, 0.0, 0.0, true, 0).total(), 0.0);
-        assert_eq!(search(SearchReward::Safe, &SafeShaping::default(), 0.5, 0.0, 0.0, false, 0).proximity, -1.0);
+        assert_eq!(
+            search(SearchReward::Safe, &SafeShaping::default(), 3.0, 0.0, 0.0, true, 0).total(),
+            0.0
+        );
+        assert_eq!(
+            search(SearchReward::Safe, &SafeShaping::default(), 0.5, 0.0, 0.0, false, 0).proximity,
+            -1.0
+        );
         // Ten steps of the worst proximity cost less than the collision.
         let worst = search(SearchReward::Safe, &SafeShaping::default(), 0.0, 0.0, 0.0, false, 0).proximity;
         assert!(10.0 * worst > SearchReward::Safe.collision_penalty(&SafeShaping::default()));
@@ -226,18 +301,34 @@ mod tests {
         // Halfway between 1.6 m and 0.6 m: half of the weight.
         let r = search(SearchReward::Safe, &wide, 1.1, 0.0, 0.0, false, 0);
         assert!((r.proximity + 1.0).abs() < 1e-12, "{r:?}");
-        assert_eq!(search(SearchReward::Safe, &wide, 0.3, 0.0, 0.0, false, 0).proximity, -2.0);
+        assert_eq!(
+            search(SearchReward::Safe, &wide, 0.3, 0.0, 0.0, false, 0).proximity,
+            -2.0
+        );
         assert_eq!(SearchReward::Safe.collision_penalty(&wide), -100.0);
         assert_eq!(SearchReward::AutovrlCode.collision_penalty(&wide), PENALTY);
         // Speed-weighted: nothing at a standstill, half at half the reference speed.
-        let moving = SafeShaping { near_speed_mps: 1.5, ..wide };
+        let moving = SafeShaping {
+            near_speed_mps: 1.5,
+            ..wide
+        };
         for (v, expect) in [(0.0, 0.0), (-0.2, 0.0), (0.75, -1.0), (3.0, -2.0)] {
             let mut r = search(SearchReward::Safe, &moving, 0.3, 0.0, 0.0, false, 0);
             weight_proximity_by_speed(&mut r, &moving, v);
             assert_eq!(r.proximity, expect, "v = {v}");
         }
-        assert!(SafeShaping { near_m: 0.5, ..wide }.validate().unwrap_err().contains("near_m"));
-        assert!(SafeShaping { collision: 1.0, ..wide }.validate().unwrap_err().contains("collision"));
+        assert!(
+            SafeShaping { near_m: 0.5, ..wide }
+                .validate()
+                .unwrap_err()
+                .contains("near_m")
+        );
+        assert!(
+            SafeShaping { collision: 1.0, ..wide }
+                .validate()
+                .unwrap_err()
+                .contains("collision")
+        );
     }
 
     #[test]

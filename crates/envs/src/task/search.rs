@@ -263,7 +263,9 @@ mod tests {
 
     /// A 270 degree scan (one ray per degree) reading 5 m except `near` m at `bearing_deg`.
     fn frame(bearing_deg: i32, near: f32) -> SensorFrame {
-        let ranges: Vec<f32> = (-135..=135).map(|a| if a == bearing_deg { near } else { 5.0 }).collect();
+        let ranges: Vec<f32> = (-135..=135)
+            .map(|a| if a == bearing_deg { near } else { 5.0 })
+            .collect();
         SensorFrame {
             scan: Some(LaserScan {
                 angle_min: -135f32.to_radians(),
@@ -302,9 +304,15 @@ mod tests {
         assert_eq!(o.termination, None);
         assert_eq!(o.terms.proximity, 0.0, "r_m is 5 m ahead");
         // At 30 degrees it is ahead: both end it.
-        assert_eq!(ended(narrow, &frame(30, 0.4)).termination, Some(TerminationCause::TooClose));
+        assert_eq!(
+            ended(narrow, &frame(30, 0.4)).termination,
+            Some(TerminationCause::TooClose)
+        );
         // 45 degrees is the fan's edge, still inside.
-        assert_eq!(ended(narrow, &frame(45, 0.5)).termination, Some(TerminationCause::TooClose));
+        assert_eq!(
+            ended(narrow, &frame(45, 0.5)).termination,
+            Some(TerminationCause::TooClose)
+        );
         assert_eq!(ended(narrow, &frame(47, 0.5)).termination, None);
     }
 }

@@ -145,8 +145,20 @@ mod tests {
         );
         assert_eq!(ActionMapping::Scaled.control(f64::NAN, 0.0, 0.36), Control::default());
         let stop = ActionMapping::ScaledStop;
-        assert_eq!(stop.control(-0.3, -1.0, 0.36), Control { throttle: 0.0, steering_rad: -0.36 });
-        assert_eq!(stop.control(0.5, 0.5, 0.36), Control { throttle: 0.5, steering_rad: 0.18 });
+        assert_eq!(
+            stop.control(-0.3, -1.0, 0.36),
+            Control {
+                throttle: 0.0,
+                steering_rad: -0.36
+            }
+        );
+        assert_eq!(
+            stop.control(0.5, 0.5, 0.36),
+            Control {
+                throttle: 0.5,
+                steering_rad: 0.18
+            }
+        );
     }
 
     #[test]
