@@ -354,44 +354,27 @@ pub fn terminate(
     terms: &mut RewardTerms,
     frame: &SensorFrame,
     map: Option<&MapInfo>,
+    r_m: f64,
     threshold_m: f32,
     penalty: f64,
 ) -> Option<TerminationCause> {
-    terminate_ahead(terms, frame, map, threshold_m, 0.0, penalty)
-}
-
-/// `terminate` with "too close" judged on the rays within `fov_deg / 2` of straight ahead
-/// (0: every ray).
-pub fn terminate_ahead(
-    terms: &mut RewardTerms,
-    frame: &SensorFrame,
-    map: Option<&MapInfo>,
-    threshold_m: f32,
-    fov_deg: f32,
-    penalty: f64,
-) -> Option<TerminationCause> {
-    let t = common_termination_ahead(frame, map, threshold_m, fov_deg);
+    let t = common_termination(frame, map, r_m, threshold_m);
     if t.is_some() && terms.collision == 0.0 {
         terms.collision = penalty;
     }
     t
 }
 
-/// Termination shared by the tasks: too close (r_m below `threshold_m`), real contact,
-/// flipped, or out of the map. Returns the first that applies, in that order.
-pub fn common_termination(frame: &SensorFrame, map: Option<&MapInfo>, threshold_m: f32) -> Option<TerminationCause> {
-    common_termination_ahead(frame, map, threshold_m, 0.0)
-}
-
-/// `common_termination` with "too close" judged within `fov_deg / 2` of straight ahead (0:
-/// every ray).
-pub fn common_termination_ahead(
+/// Termination shared by the tasks: too close (`r_m`, the task's minimum range, below
+/// `threshold_m`), real contact, flipped, or out of the map. Returns the first that applies, in
+/// that order.
+pub fn common_termination(
     frame: &SensorFrame,
     map: Option<&MapInfo>,
+    r_m: f64,
     threshold_m: f32,
-    fov_deg: f32,
 ) -> Option<TerminationCause> {
-    if frame.scan.is_some() && (min_range_ahead_m(frame, fov_deg) as f32) < threshold_m {
+    if frame.scan.is_some() && (r_m as f32) < threshold_m {
         return Some(TerminationCause::TooClose);
     }
     if frame.contact == Some(true) {

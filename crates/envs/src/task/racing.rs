@@ -81,7 +81,7 @@ impl Task for Racing {
         let d = min_range_m(frame);
         let c = frame.applied;
         let mut terms = reward::racing(d, c.throttle, c.steering_rad);
-        let termination = terminate(&mut terms, frame, map, self.cfg.terminate_below_m, reward::PENALTY);
+        let termination = terminate(&mut terms, frame, map, d, self.cfg.terminate_below_m, reward::PENALTY);
         let mut racing = None;
         if let (Some(t), Some(g)) = (map.and_then(|m| m.track), &frame.gps) {
             let lap = t.lap_length_m() as f64;

@@ -2,7 +2,7 @@
 //! obstacles. Reports coverage of the free map and the distance travelled.
 
 use super::reward::{self, SafeShaping, SearchReward};
-use super::{CommonConfig, Outcome, Task, min_range_ahead_m, terminate_ahead};
+use super::{CommonConfig, Outcome, Task, min_range_ahead_m, terminate};
 use crate::api::{BoxSpace, Control, MapInfo, SearchInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -237,12 +237,12 @@ impl Task for Search {
         );
         let forward = frame.imu.as_ref().map_or(f64::INFINITY, |i| i.lin_vel_b[0]);
         reward::weight_proximity_by_speed(&mut terms, &self.cfg.safe, forward);
-        let termination = terminate_ahead(
+        let termination = terminate(
             &mut terms,
             frame,
             map,
+            d,
             self.cfg.terminate_below_m,
-            self.cfg.clearance_fov_deg,
             self.cfg.reward.collision_penalty(&self.cfg.safe),
         );
         self.look(frame, map);
