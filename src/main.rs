@@ -2,19 +2,7 @@
 //! car sees, and measure speed. `cargo run --release` with no arguments trains the default
 //! racing policy (configs/default.toml).
 
-mod config;
-// Without rerun, nothing reads what only recordings use.
-#[cfg_attr(not(feature = "rerun"), allow(dead_code))]
-mod episode;
-mod plots;
-mod probe;
-mod runs;
-#[cfg_attr(not(feature = "rerun"), allow(dead_code))]
-mod sink;
-mod train;
-#[cfg_attr(not(feature = "rerun"), path = "viz_off.rs")]
-mod viz;
-
+use agvrl::{probe, train};
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 

@@ -178,6 +178,117 @@ fn rgb(c: [f32; 3]) -> RGBColor {
     RGBColor(u(c[0]), u(c[1]), u(c[2]))
 }
 
+/// Ground, then the objects' footprints: parts above the car (tree canopies) faint and first,
+/// so the trunks the car can hit stay visible under them.
+fn draw_scene<DB: DrawingBackend>(
+    chart: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf32, plotters::coord::types::RangedCoordf32>,
+    >,
+    scene: &Scene,
+) -> Result<()> {
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("plot: {e}");
+    let g = &scene.file.ground;
+    let (hx, hy) = (g.size_m[0] / 2.0, g.size_m[1] / 2.0);
+    let ground = rgb(g.color).mix(0.35);
+    chart
+        .draw_series(std::iter::once(Rectangle::new([(-hx, -hy), (hx, hy)], ground.filled())))
+        .map_err(e)?;
+    let overhead = |s: &agvrl_sim::urdf::ShapeSpec| s.shape.compute_aabb(&s.pose).mins.z > OVERHEAD_M;
+    let layers = [true, false].map(|high| {
+        scene
+            .objects
+            .iter()
+            .flat_map(|o| &o.shapes)
+            .filter(move |s| overhead(s) == high)
+    });
+    for (layer, shapes) in layers.into_iter().enumerate() {
+        for s in shapes {
+            let mut fp = Vec::new();
+            footprints(&s.shape, &s.pose, &mut fp);
+            let style = match layer {
+                0 => rgb(s.color).mix(0.3).filled(),
+                _ => rgb(s.color).filled(),
+            };
+            for f in fp {
+                let p = match f {
+                    Footprint::Poly(p) => p,
+                    // A circle in data units: a polygon keeps the radius in metres.
+                    Footprint::Circle(c, r) => (0..24)
+                        .map(|k| {
+                            let a = k as f32 * std::f32::consts::TAU / 24.0;
+                            (c.0 + r * a.cos(), c.1 + r * a.sin())
+                        })
+                        .collect(),
+                };
+                chart.draw_series(std::iter::once(Polygon::new(p, style))).map_err(e)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// An RGB image (row-major, 3 bytes a pixel) of the scene from above with the car and, given a
+/// scan, its LiDAR rays (hits red, misses grey): what a Gymnasium `rgb_array` render shows.
+/// The longer side of the map gets `px` pixels.
+pub fn top_view(
+    sim: &agvrl_sim::Sim,
+    scan: Option<&agvrl_sim::msg::LaserScan>,
+    px: u32,
+) -> Result<(Vec<u8>, u32, u32)> {
+    let scene = sim.scene();
+    let g = &scene.file.ground;
+    let (vx, vy) = (g.size_m[0] / 2.0 + 0.6, g.size_m[1] / 2.0 + 0.6);
+    let span = vx.max(vy);
+    let (w, h) = (
+        ((px as f32 * vx / span) as u32).max(16),
+        ((px as f32 * vy / span) as u32).max(16),
+    );
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        let e = |e: DrawingAreaErrorKind<_>| anyhow!("plot: {e}");
+        root.fill(&WHITE).map_err(e)?;
+        let mut chart = ChartBuilder::on(&root)
+            .build_cartesian_2d(-vx..vx, -vy..vy)
+            .map_err(e)?;
+        draw_scene(&mut chart, scene)?;
+        if let Some(scan) = scan {
+            let o = (scan.origin_w[0], scan.origin_w[1]);
+            for (p, hit) in scan.points_w.iter().zip(&scan.hit) {
+                let c = if *hit {
+                    RED.mix(0.8)
+                } else {
+                    RGBColor(150, 150, 150).mix(0.5)
+                };
+                chart
+                    .draw_series(std::iter::once(PathElement::new(vec![o, (p[0], p[1])], c)))
+                    .map_err(e)?;
+            }
+        }
+        let pose = sim.pose2();
+        let v = sim.vehicle();
+        let r = v.wheels.iter().map(|w| w.radius_m).fold(0.0, f32::max);
+        let (hl, hw) = (v.wheelbase_m / 2.0 + r, v.front_track_m / 2.0 + r / 2.0);
+        let (c, sn) = (pose.yaw_rad.cos(), pose.yaw_rad.sin());
+        let at = |dx: f32, dy: f32| (pose.x_m + dx * c - dy * sn, pose.y_m + dx * sn + dy * c);
+        let body = vec![at(-hl, -hw), at(hl, -hw), at(hl, hw), at(-hl, hw)];
+        chart
+            .draw_series(std::iter::once(Polygon::new(body, BLUE.filled())))
+            .map_err(e)?;
+        // The nose, so the heading reads at a glance.
+        chart
+            .draw_series(std::iter::once(Polygon::new(
+                vec![at(hl, -hw), at(hl + hw, 0.0), at(hl, hw)],
+                BLACK.filled(),
+            )))
+            .map_err(e)?;
+        root.present().map_err(e)?;
+    }
+    Ok((buf, w, h))
+}
+
 /// Top view of `scene` with the evaluated `paths` (start: circle, collision: cross).
 pub fn trajectory(path: &Path, scene: &Scene, paths: &[Path2], title: &str) -> Result<()> {
     let g = &scene.file.ground;
@@ -205,47 +316,7 @@ pub fn trajectory(path: &Path, scene: &Scene, paths: &[Path2], title: &str) -> R
             .label_style(("sans-serif", 13))
             .draw()
             .map_err(e)?;
-        let ground = rgb(g.color).mix(0.35);
-        chart
-            .draw_series(std::iter::once(Rectangle::new([(-hx, -hy), (hx, hy)], ground.filled())))
-            .map_err(e)?;
-        // Parts above the car (tree canopies) are drawn faint and first, so the trunks the car
-        // can hit stay visible under them.
-        let overhead = |s: &agvrl_sim::urdf::ShapeSpec| s.shape.compute_aabb(&s.pose).mins.z > OVERHEAD_M;
-        let layers = [true, false].map(|high| {
-            scene
-                .objects
-                .iter()
-                .flat_map(|o| &o.shapes)
-                .filter(move |s| overhead(s) == high)
-        });
-        for (layer, shapes) in layers.into_iter().enumerate() {
-            for s in shapes {
-                let mut fp = Vec::new();
-                footprints(&s.shape, &s.pose, &mut fp);
-                let style = match layer {
-                    0 => rgb(s.color).mix(0.3).filled(),
-                    _ => rgb(s.color).filled(),
-                };
-                for f in fp {
-                    match f {
-                        Footprint::Poly(p) => {
-                            chart.draw_series(std::iter::once(Polygon::new(p, style))).map_err(e)?;
-                        }
-                        Footprint::Circle(c, r) => {
-                            // A circle in data units: a polygon keeps the radius in metres.
-                            let p = (0..24)
-                                .map(|k| {
-                                    let a = k as f32 * std::f32::consts::TAU / 24.0;
-                                    (c.0 + r * a.cos(), c.1 + r * a.sin())
-                                })
-                                .collect::<Vec<_>>();
-                            chart.draw_series(std::iter::once(Polygon::new(p, style))).map_err(e)?;
-                        }
-                    }
-                }
-            }
-        }
+        draw_scene(&mut chart, scene)?;
         let palette = [BLUE, MAGENTA, CYAN, RGBColor(255, 140, 0), BLACK];
         for (k, p) in paths.iter().enumerate() {
             let c = palette[k % palette.len()];

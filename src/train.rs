@@ -12,6 +12,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Name of the policy file in a run directory.
@@ -49,7 +50,8 @@ pub struct TrainArgs {
     pub resume: Option<PathBuf>,
 }
 
-static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// Set by Ctrl-C: the CLI's training finishes the current update and writes its run directory.
+static STOP: AtomicBool = AtomicBool::new(false);
 
 /// The two learners, as the training loop sees them.
 trait Learner {
@@ -187,8 +189,6 @@ fn resolve(a: &TrainArgs) -> Result<RunConfig> {
     if let Some(v) = a.n_envs {
         cfg.n_envs = v;
     }
-    image_spec_from_env(&mut cfg);
-    cfg.validate()?;
     Ok(cfg)
 }
 
@@ -222,14 +222,14 @@ pub fn train(a: TrainArgs) -> Result<()> {
     if STOP_HANDLER.set(()).is_ok() {
         // A second Ctrl-C falls through to the default (kill) only after this one is handled.
         let _ = ctrlc::set_handler(|| {
-            if STOP.swap(true, std::sync::atomic::Ordering::SeqCst) {
+            if STOP.swap(true, Ordering::SeqCst) {
                 std::process::exit(130);
             }
             eprintln!("\ninterrupt: finishing the current update, then writing a checkpoint and the run directory");
         });
     }
-    let device = agvrl_rl::device_by_name(if a.device.is_empty() { "flex" } else { &a.device })?;
     if let Some(dir) = &a.resume {
+        let device = agvrl_rl::device_by_name(if a.device.is_empty() { "flex" } else { &a.device })?;
         let cfg = RunConfig::load(&dir.join("config.toml"))
             .with_context(|| format!("{} is not a run directory", dir.display()))?;
         let ckpt = dir.join("checkpoint.ckpt");
@@ -249,16 +249,28 @@ pub fn train(a: TrainArgs) -> Result<()> {
             learner.num_timesteps()
         );
         let files = |name: &str| dir.join(name);
-        let text = run_learner(learner.as_mut(), &cfg, target, &files, &previous)?;
+        let text = run_learner(learner.as_mut(), &cfg, target, &files, &previous, &STOP)?;
         println!("run_dir={}", dir.display());
         print!("{text}");
         return Ok(());
     }
     let cfg = resolve(&a)?;
-    let out = a
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)));
+    let (dir, text) = train_run(cfg, a.out.clone(), &a.device, &STOP)?;
+    println!("run_dir={}", dir.display());
+    print!("{text}");
+    Ok(())
+}
+
+/// Train `cfg` into a new run directory (`out`, or runs/<date-time>-<env>-<algo>), stopping
+/// early, with a complete run directory, once `stop` is set. `device` as `--device` (empty:
+/// flex). Returns the directory and the text of its eval.txt.
+pub fn train_run(cfg: RunConfig, out: Option<PathBuf>, device: &str, stop: &AtomicBool) -> Result<(PathBuf, String)> {
+    let device = agvrl_rl::device_by_name(if device.is_empty() { "flex" } else { device })?;
+    let device = &device;
+    let mut cfg = cfg;
+    image_spec_from_env(&mut cfg);
+    cfg.validate()?;
+    let out = out.unwrap_or_else(|| PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)));
     let run = RunDir::create(out)?;
     write_atomic(&run.file("config.toml"), cfg.to_toml()?.as_bytes())?;
     eprintln!(
@@ -266,16 +278,14 @@ pub fn train(a: TrainArgs) -> Result<()> {
         cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs
     );
     let mut learner: Box<dyn Learner> = if cfg.algo == "ppo" {
-        Box::new(Ppo::new(cfg.ppo.clone(), vec_env(&cfg)?, &device, cfg.seed)?)
+        Box::new(Ppo::new(cfg.ppo.clone(), vec_env(&cfg)?, device, cfg.seed)?)
     } else {
-        Box::new(Sac::new(cfg.sac.clone(), vec_env(&cfg)?, &device, cfg.seed)?)
+        Box::new(Sac::new(cfg.sac.clone(), vec_env(&cfg)?, device, cfg.seed)?)
     };
     let files = |name: &str| run.file(name);
-    let text = run_learner(learner.as_mut(), &cfg, cfg.steps, &files, "")?;
+    let text = run_learner(learner.as_mut(), &cfg, cfg.steps, &files, "", stop)?;
     let dir = run.finish()?;
-    println!("run_dir={}", dir.display());
-    print!("{text}");
-    Ok(())
+    Ok((dir, text))
 }
 
 static STOP_HANDLER: std::sync::OnceLock<()> = std::sync::OnceLock::new();
@@ -288,6 +298,7 @@ fn run_learner(
     target: u64,
     file: &dyn Fn(&str) -> PathBuf,
     previous_csv: &str,
+    stop: &AtomicBool,
 ) -> Result<String> {
     let start = learner.num_timesteps();
     let bar = ProgressBar::new(target);
@@ -313,7 +324,7 @@ fn run_learner(
             entropy: p.losses.entropy,
             steps_per_s: (p.steps - start) as f64 / t0.elapsed().as_secs_f64().max(1e-9),
         });
-        if STOP.load(std::sync::atomic::Ordering::SeqCst) {
+        if stop.load(Ordering::SeqCst) {
             Control::Stop
         } else {
             Control::Continue
@@ -321,7 +332,7 @@ fn run_learner(
     };
     // Checkpoint at least every tenth of the run and every 50,000 steps.
     let per_chunk = cfg.steps.div_ceil(10).clamp(1, 50_000);
-    while learner.num_timesteps() < target && !STOP.load(std::sync::atomic::Ordering::SeqCst) {
+    while learner.num_timesteps() < target && !stop.load(Ordering::SeqCst) {
         learner.learn(per_chunk.min(target - learner.num_timesteps()), &mut on_progress)?;
         learner.save_checkpoint(&file("checkpoint.ckpt"))?;
     }

@@ -30,4 +30,4 @@ pub use check::check_env;
 pub use registry::{ENV_IDS, EnvConfig, make, make_task, make_vehicle};
 pub use sim_vehicle::{Randomisation, SimVehicle, SpawnMode};
 pub use task_env::TaskEnv;
-pub use vec_env::{VecEnv, VecStep};
+pub use vec_env::{Autoreset, VecEnv, VecStep};

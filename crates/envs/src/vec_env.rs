@@ -1,6 +1,7 @@
-//! N envs stepped in parallel, with same-step auto-reset (Stable-Baselines3's convention): when an
-//! episode ends, `obs` holds the first observation of the next episode and `infos[i].final_obs`
-//! the last one of the episode that ended.
+//! N envs stepped in parallel. By default with same-step auto-reset (Stable-Baselines3's
+//! convention): when an episode ends, `obs` holds the first observation of the next episode and
+//! `infos[i].final_obs` the last one of the episode that ended. [`Autoreset`] selects Gymnasium's
+//! other two modes (reset on the next step, or never).
 //!
 //! Threads: the envs are split into `threads` contiguous chunks; the caller's thread steps the
 //! first and each other chunk belongs to a persistent worker thread. A thread that finishes its
@@ -34,30 +35,71 @@ pub struct VecStep {
     pub infos: Vec<Info>,
 }
 
+/// What a `VecEnv` does with an env whose episode ended (Gymnasium's autoreset modes).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Autoreset {
+    /// Reset within the step that ended the episode: `obs` is the next episode's first
+    /// observation and `info.final_obs` the ended one's last (Stable-Baselines3; Gymnasium's
+    /// `SAME_STEP`).
+    #[default]
+    SameStep,
+    /// The env's next step resets it instead of stepping (its action is ignored) and reports
+    /// the first observation with reward 0, neither terminated nor truncated (Gymnasium's
+    /// `NEXT_STEP`, its default).
+    NextStep,
+    /// Never: stepping an ended env is an error until `reset_envs` resets it (Gymnasium's
+    /// `DISABLED`).
+    Disabled,
+}
+
 struct Slot<E> {
     env: E,
     ret: f64,
     len: u64,
-    out: Option<Result<(Vec<f32>, Step), EnvError>>,
+    /// The episode ended and the env has not been reset since (`NextStep`, `Disabled`).
+    ended: bool,
+    /// The last observation handed out (what a masked reset reports for an env it skips).
+    last_obs: Vec<f32>,
+    out: Option<Result<Step, EnvError>>,
 }
 
 impl<E: Env> Slot<E> {
-    fn run(&mut self, index: usize, cmd: &Cmd, act_dim: usize) -> Result<(Vec<f32>, Step), EnvError> {
+    fn reset(&mut self, seed: Option<u64>) -> Result<Step, EnvError> {
+        self.ret = 0.0;
+        self.len = 0;
+        self.ended = false;
+        let (obs, info) = self.env.reset(seed)?;
+        self.last_obs.clone_from(&obs);
+        Ok(Step {
+            obs,
+            reward: 0.0,
+            terminated: false,
+            truncated: false,
+            info,
+        })
+    }
+
+    fn run(&mut self, index: usize, cmd: &Cmd, act_dim: usize, mode: Autoreset) -> Result<Step, EnvError> {
         match cmd {
-            Cmd::Reset(seed) => {
-                self.ret = 0.0;
-                self.len = 0;
-                let (obs, info) = self.env.reset(seed.map(|x| x.wrapping_add(index as u64)))?;
-                let st = Step {
-                    obs: obs.clone(),
-                    reward: 0.0,
-                    terminated: false,
-                    truncated: false,
-                    info,
-                };
-                Ok((obs, st))
+            Cmd::Reset(seeds, mask) => {
+                if mask.as_ref().is_some_and(|m| !m[index]) {
+                    return Ok(Step {
+                        obs: self.last_obs.clone(),
+                        reward: 0.0,
+                        terminated: false,
+                        truncated: false,
+                        info: Info::default(),
+                    });
+                }
+                self.reset(seeds[index])
             }
             Cmd::Step(actions) => {
+                if self.ended {
+                    return match mode {
+                        Autoreset::NextStep => self.reset(None),
+                        _ => Err(EnvError::NeedsReset),
+                    };
+                }
                 let mut st = self.env.step(&actions[index * act_dim..(index + 1) * act_dim])?;
                 self.ret += st.reward;
                 self.len += 1;
@@ -66,19 +108,23 @@ impl<E: Env> Slot<E> {
                         ret: self.ret,
                         len: self.len,
                     });
-                    let (obs, _) = self.env.reset(None)?;
-                    st.info.final_obs = Some(std::mem::replace(&mut st.obs, obs));
-                    self.ret = 0.0;
-                    self.len = 0;
+                    if mode == Autoreset::SameStep {
+                        let first = self.reset(None)?.obs;
+                        st.info.final_obs = Some(std::mem::replace(&mut st.obs, first));
+                    } else {
+                        self.ended = true;
+                    }
                 }
-                Ok((Vec::new(), st))
+                self.last_obs.clone_from(&st.obs);
+                Ok(st)
             }
         }
     }
 }
 
 enum Cmd {
-    Reset(Option<u64>),
+    /// A seed per env, and which envs to reset (all without a mask).
+    Reset(Vec<Option<u64>>, Option<Vec<bool>>),
     Step(Vec<f32>),
 }
 
@@ -89,6 +135,7 @@ struct Shared<E> {
     /// Contiguous env ranges, one per thread; thread 0 is the caller's.
     chunks: Vec<Range<usize>>,
     act_dim: usize,
+    autoreset: Autoreset,
     round: AtomicU64,
     finished: AtomicUsize,
     cmd: Mutex<(u64, Option<Arc<Cmd>>)>,
@@ -128,7 +175,7 @@ impl<E: Env> Shared<E> {
 
     fn run_one(&self, i: usize, cmd: &Cmd) {
         if let Ok(mut slot) = self.slots[i].lock() {
-            slot.out = Some(slot.run(i, cmd, self.act_dim));
+            slot.out = Some(slot.run(i, cmd, self.act_dim, self.autoreset));
         }
     }
 }
@@ -170,8 +217,14 @@ pub struct VecEnv<E: Env> {
 }
 
 impl<E: Env + 'static> VecEnv<E> {
-    /// Wrap `envs` (all with the same spaces) on `threads` threads (the caller's included).
+    /// Wrap `envs` (all with the same spaces) on `threads` threads (the caller's included),
+    /// with same-step auto-reset.
     pub fn new(envs: Vec<E>, threads: usize) -> Result<Self, EnvError> {
+        Self::with_autoreset(envs, threads, Autoreset::SameStep)
+    }
+
+    /// [`VecEnv::new`] with the given auto-reset mode.
+    pub fn with_autoreset(envs: Vec<E>, threads: usize, autoreset: Autoreset) -> Result<Self, EnvError> {
         let first = envs
             .first()
             .ok_or_else(|| EnvError::Config("VecEnv needs at least one env".into()))?;
@@ -204,6 +257,8 @@ impl<E: Env + 'static> VecEnv<E> {
                         env,
                         ret: 0.0,
                         len: 0,
+                        ended: false,
+                        last_obs: Vec::new(),
                         out: None,
                     })
                 })
@@ -211,6 +266,7 @@ impl<E: Env + 'static> VecEnv<E> {
             claimed: (0..n_envs).map(|_| AtomicU64::new(0)).collect(),
             chunks,
             act_dim,
+            autoreset,
             round: AtomicU64::new(0),
             finished: AtomicUsize::new(0),
             cmd: Mutex::new((0, None)),
@@ -276,13 +332,18 @@ impl<E: Env> VecEnv<E> {
         self.dt_s
     }
 
+    /// What happens to an env whose episode ended.
+    pub fn autoreset(&self) -> Autoreset {
+        self.shared.autoreset
+    }
+
     /// Threads stepping the envs (the caller's included).
     pub fn threads(&self) -> usize {
         self.shared.chunks.len()
     }
 
     /// Run `cmd` on every env once, on all threads; results in env order.
-    fn run_all(&mut self, cmd: Cmd) -> Result<Vec<(Vec<f32>, Step)>, EnvError> {
+    fn run_all(&mut self, cmd: Cmd) -> Result<Vec<Step>, EnvError> {
         let sh = &self.shared;
         if self.workers.is_empty() || self.round_cost < SOLO_BELOW {
             // Results do not depend on which thread steps an env, so this changes speed only.
@@ -316,26 +377,57 @@ impl<E: Env> VecEnv<E> {
         self.collect()
     }
 
-    fn collect(&self) -> Result<Vec<(Vec<f32>, Step)>, EnvError> {
-        self.shared
-            .slots
-            .iter()
-            .map(|s| {
-                s.lock()
-                    .ok()
-                    .and_then(|mut s| s.out.take())
-                    .ok_or_else(|| EnvError::Config("VecEnv lost a result".into()))?
-            })
-            .collect()
+    fn collect(&self) -> Result<Vec<Step>, EnvError> {
+        let mut out = Vec::with_capacity(self.n_envs);
+        let mut first_err = None;
+        // Every result is taken, so none is left over for the next round.
+        for (i, s) in self.shared.slots.iter().enumerate() {
+            let r = s
+                .lock()
+                .ok()
+                .and_then(|mut s| s.out.take())
+                .unwrap_or_else(|| Err(EnvError::Config("VecEnv lost a result".into())));
+            match r {
+                Ok(st) => out.push(st),
+                Err(e) => {
+                    first_err.get_or_insert(EnvError::InEnv {
+                        env: i,
+                        source: Box::new(e),
+                    });
+                }
+            }
+        }
+        first_err.map_or(Ok(out), Err)
     }
 
     /// Reset every env; env `i` gets `seed + i`. Returns `n_envs * obs_dim` observations.
     pub fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f32>, Vec<Info>), EnvError> {
-        let out = self.run_all(Cmd::Reset(seed))?;
-        let mut obs = Vec::with_capacity(self.n_envs * self.obs_dim);
-        let mut infos = Vec::with_capacity(self.n_envs);
-        for (o, st) in out {
-            obs.extend_from_slice(&o);
+        let seeds = (0..self.n_envs as u64)
+            .map(|i| seed.map(|s| s.wrapping_add(i)))
+            .collect();
+        self.reset_envs(seeds, None)
+    }
+
+    /// Reset env `i` with `seeds[i]` (`None` continues its random stream) where `mask` is
+    /// true, or every env without a mask. Rows of envs left alone hold their last observation
+    /// and their info is empty.
+    pub fn reset_envs(
+        &mut self,
+        seeds: Vec<Option<u64>>,
+        mask: Option<Vec<bool>>,
+    ) -> Result<(Vec<f32>, Vec<Info>), EnvError> {
+        let n = self.n_envs;
+        if seeds.len() != n || mask.as_ref().is_some_and(|m| m.len() != n) {
+            return Err(EnvError::Config(format!(
+                "reset needs one seed{} per env ({n} envs)",
+                if mask.is_some() { " and one mask entry" } else { "" }
+            )));
+        }
+        let out = self.run_all(Cmd::Reset(seeds, mask))?;
+        let mut obs = Vec::with_capacity(n * self.obs_dim);
+        let mut infos = Vec::with_capacity(n);
+        for st in out {
+            obs.extend_from_slice(&st.obs);
             infos.push(st.info);
         }
         Ok((obs, infos))
@@ -350,6 +442,21 @@ impl<E: Env> VecEnv<E> {
                 got: actions.len(),
             });
         }
+        if self.autoreset() == Autoreset::Disabled
+            && let Some(env) = self.shared.slots.iter().position(|s| s.lock().is_ok_and(|s| s.ended))
+        {
+            return Err(EnvError::InEnv {
+                env,
+                source: Box::new(EnvError::NeedsReset),
+            });
+        }
+        // Nothing steps unless every action is valid, so a bad row leaves no env half-stepped.
+        for (i, a) in actions.chunks_exact(self.act_dim.max(1)).enumerate() {
+            crate::api::validate_action(&self.act_space, a).map_err(|e| EnvError::InEnv {
+                env: i,
+                source: Box::new(e),
+            })?;
+        }
         let steps = self.run_all(Cmd::Step(actions.to_vec()))?;
         let mut out = VecStep {
             obs: Vec::with_capacity(n * self.obs_dim),
@@ -358,7 +465,7 @@ impl<E: Env> VecEnv<E> {
             truncated: Vec::with_capacity(n),
             infos: Vec::with_capacity(n),
         };
-        for (_, st) in steps {
+        for st in steps {
             out.obs.extend_from_slice(&st.obs);
             out.rewards.push(st.reward);
             out.terminated.push(st.terminated);

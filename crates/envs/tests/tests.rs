@@ -400,6 +400,105 @@ mod vec_and_noise {
         assert!(saw_done, "the test must cross an auto-reset");
     }
 
+    /// Single envs stepped in a loop the way Gymnasium's `NEXT_STEP` mode describes: an env
+    /// whose episode ended resets on its next step instead of stepping.
+    #[test]
+    fn next_step_autoreset_equals_single_envs_reset_on_the_following_step() {
+        const N: usize = 3;
+        let cfg = EnvConfig {
+            max_steps: 25,
+            ..quick_cfg()
+        };
+        let mk = || {
+            (0..N)
+                .map(|_| make("search-urban-20", &cfg).unwrap())
+                .collect::<Vec<_>>()
+        };
+        let mut v = VecEnv::with_autoreset(mk(), 2, Autoreset::NextStep).unwrap();
+        let mut serial = mk();
+        let (o, _) = v.reset(Some(5)).unwrap();
+        let mut os = Vec::new();
+        for (i, e) in serial.iter_mut().enumerate() {
+            os.extend(e.reset(Some(5 + i as u64)).unwrap().0);
+        }
+        assert_eq!(o, os);
+        let mut ended = [false; N];
+        let (mut ends, mut resets) = (0, 0);
+        for t in 0..80 {
+            let a = actions(N, t);
+            let s = v.step(&a).unwrap();
+            for (i, e) in serial.iter_mut().enumerate() {
+                let row = &s.obs[i * 104..(i + 1) * 104];
+                if ended[i] {
+                    resets += 1;
+                    let (o, _) = e.reset(None).unwrap();
+                    assert_eq!(row, &o[..]);
+                    assert_eq!((s.rewards[i], s.terminated[i], s.truncated[i]), (0.0, false, false));
+                    assert!(s.infos[i].episode.is_none());
+                    ended[i] = false;
+                } else {
+                    let st = e.step(&a[i * 2..i * 2 + 2]).unwrap();
+                    assert_eq!(row, &st.obs[..], "no reset within the ending step");
+                    assert_eq!(
+                        (s.rewards[i], s.terminated[i], s.truncated[i]),
+                        (st.reward, st.terminated, st.truncated)
+                    );
+                    assert!(s.infos[i].final_obs.is_none());
+                    ended[i] = st.done();
+                    ends += usize::from(st.done());
+                    assert_eq!(s.infos[i].episode.is_some(), st.done());
+                }
+            }
+        }
+        assert!(ends >= N && resets >= N, "ends {ends}, resets {resets}");
+    }
+
+    #[test]
+    fn disabled_autoreset_refuses_an_ended_env_until_a_masked_reset() {
+        let cfg = EnvConfig {
+            max_steps: 5,
+            ..quick_cfg()
+        };
+        let mk = || (0..2).map(|_| make("racing-oval", &cfg).unwrap()).collect::<Vec<_>>();
+        let mut v = VecEnv::with_autoreset(mk(), 1, Autoreset::Disabled).unwrap();
+        let mut solo = mk();
+        let (o0, _) = v.reset(Some(1)).unwrap();
+        let mut last = Vec::new();
+        for t in 0..5 {
+            let s = v.step(&actions(2, t)).unwrap();
+            last = s.obs.clone();
+            assert_eq!(s.truncated, [t == 4, t == 4]);
+        }
+        let e = v.step(&actions(2, 5)).unwrap_err();
+        assert!(matches!(e.innermost(), EnvError::NeedsReset), "{e}");
+        assert!(e.to_string().starts_with("env 0:"), "{e}");
+        // Only env 1 resets, with its own seed; env 0 keeps its last observation.
+        let (o, infos) = v.reset_envs(vec![None, Some(77)], Some(vec![false, true])).unwrap();
+        assert_eq!(infos.len(), 2);
+        assert_eq!(&o[..o.len() / 2], &last[..last.len() / 2]);
+        assert_eq!(&o[o.len() / 2..], &solo[1].reset(Some(77)).unwrap().0[..]);
+        assert_ne!(&o[o.len() / 2..], &o0[o0.len() / 2..]);
+        assert!(v.step(&actions(2, 6)).is_err(), "env 0 still needs its reset");
+        assert!(v.reset_envs(vec![None], None).is_err(), "one seed per env");
+    }
+
+    #[test]
+    fn a_nan_action_in_any_row_steps_no_env() {
+        let mk = || {
+            (0..2)
+                .map(|_| make("racing-oval", &quick_cfg()).unwrap())
+                .collect::<Vec<_>>()
+        };
+        let mut v = VecEnv::new(mk(), 2).unwrap();
+        let mut w = VecEnv::new(mk(), 2).unwrap();
+        v.reset(Some(2)).unwrap();
+        w.reset(Some(2)).unwrap();
+        let e = v.step(&[0.5, 0.0, f32::NAN, 0.0]).unwrap_err();
+        assert_eq!(e.to_string(), "env 1: action element 0 is not finite (NaN)");
+        // Env 0 did not move: both vectors still agree after the same valid step.
+        assert_eq!(v.step(&actions(2, 0)).unwrap().obs, w.step(&actions(2, 0)).unwrap().obs);
+    }
+
     #[test]
     fn vec_env_of_tiny_envs_on_two_threads_equals_one_thread() {
         // Pendulum rounds are too short to hand over: the caller's thread steps them alone,

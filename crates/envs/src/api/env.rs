@@ -40,6 +40,24 @@ pub enum EnvError {
     /// A configuration value is invalid.
     #[error("config: {0}")]
     Config(String),
+    /// Env `env` of a vector env failed.
+    #[error("env {env}: {source}")]
+    InEnv {
+        /// Index of the env in the vector.
+        env: usize,
+        /// What went wrong there.
+        source: Box<EnvError>,
+    },
+}
+
+impl EnvError {
+    /// The error itself, without the vector env's "env i" wrapping.
+    pub fn innermost(&self) -> &EnvError {
+        match self {
+            EnvError::InEnv { source, .. } => source.innermost(),
+            e => e,
+        }
+    }
 }
 
 /// Named parts of the last reward, for logging (absent terms are 0).

@@ -1,0 +1,50 @@
+"""agvrl from Python: every agvrl env as a Gymnasium env and vector env, trained policies,
+and the Rust trainer.
+
+    import agvrl
+    env = agvrl.make("racing-oval")                 # a gymnasium.Env
+    envs = agvrl.make_vec("racing-oval", 8)         # a gymnasium.vector.VectorEnv (Rust VecEnv)
+    policy = agvrl.Policy.load("runs/x/policy.agvrl")
+    run = agvrl.train("configs/default.toml")       # same run directory as `agvrl train`
+
+Importing the package registers every env with Gymnasium as ``agvrl/<id>-v0``.
+"""
+
+from agvrl._core import TERMINATION_CAUSES, env_ids as _env_ids
+from agvrl.env import AgvrlEnv, make
+from agvrl.policy import Policy
+from agvrl.training import RunResult, train
+from agvrl.vector import AgvrlVectorEnv, make_vec
+
+#: Every env id, as ``agvrl envs`` lists them.
+ENV_IDS: tuple[str, ...] = tuple(_env_ids())
+
+
+def _register() -> None:
+    import gymnasium
+
+    for env_id in ENV_IDS:
+        name = f"agvrl/{env_id}-v0"
+        if name in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=name,
+            entry_point="agvrl.env:_entry_point",
+            vector_entry_point="agvrl.vector:_vector_entry_point",
+            kwargs={"env_id": env_id},
+        )
+
+
+_register()
+
+__all__ = [
+    "ENV_IDS",
+    "TERMINATION_CAUSES",
+    "AgvrlEnv",
+    "AgvrlVectorEnv",
+    "Policy",
+    "RunResult",
+    "make",
+    "make_vec",
+    "train",
+]

@@ -1,0 +1,15 @@
+//! The agvrl application layer, shared by the `agvrl` CLI and the Python package: run
+//! configurations, training into run directories, evaluation, plots and recordings.
+
+pub mod config;
+// Without rerun, nothing reads what only recordings use.
+#[cfg_attr(not(feature = "rerun"), allow(dead_code))]
+pub mod episode;
+pub mod plots;
+pub mod probe;
+pub mod runs;
+#[cfg_attr(not(feature = "rerun"), allow(dead_code))]
+pub mod sink;
+pub mod train;
+#[cfg_attr(not(feature = "rerun"), path = "viz_off.rs")]
+pub mod viz;
