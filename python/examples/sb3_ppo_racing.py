@@ -60,7 +60,8 @@ def main():
     print(f"sb3_ppo env=racing-oval steps={model.num_timesteps} seed={a.seed}")
     print(f"train_s={train_s:.1f}")
     print(f"steps_per_s={model.num_timesteps / train_s:.0f}")
-    print(f"episodes=3 laps={laps} collisions={collisions} best_lap_s={best if np.isfinite(best) else 'none'}")
+    best_s = f"{best:.2f}" if np.isfinite(best) else "none"
+    print(f"episodes=3 laps={laps} collisions={collisions} best_lap_s={best_s}")
 
 
 if __name__ == "__main__":

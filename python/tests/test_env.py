@@ -159,3 +159,12 @@ def test_rgb_array_render_is_the_camera_frame_when_there_is_a_camera():
 def test_pendulum_has_no_render_mode():
     with pytest.raises(ValueError, match="render_mode"):
         agvrl.make("pendulum", render_mode="rgb_array")
+
+
+def test_a_rust_panic_reaches_python_as_runtime_error():
+    from agvrl import _core
+
+    with pytest.raises(RuntimeError, match="internal error \\(Rust panic\\): boom"):
+        _core._panic_for_test("boom")
+    # The interpreter and the package carry on.
+    assert agvrl.make("pendulum").reset(seed=0)[0].shape == (3,)

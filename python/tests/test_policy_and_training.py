@@ -126,3 +126,28 @@ def test_train_takes_a_config_file(root, workdir):
     run = agvrl.train(root / "configs/default.toml", out=workdir / "r", steps=1024, n_envs=2, eval_episodes=1, eval_max_steps=50)
     assert run.metrics["steps"] >= 1024
     assert 'env = "racing-oval"' in (run.run_dir / "config.toml").read_text()
+
+
+def test_ctrl_c_stops_training_with_a_complete_run_directory(workdir):
+    import signal
+    import sys
+    import time
+
+    script = (
+        "import agvrl\n"
+        "agvrl.train({'env': 'pendulum', 'algo': 'ppo', 'steps': 50_000_000, 'eval_episodes': 1}, out='run')\n"
+    )
+    p = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True)
+    # The run directory is claimed as run.partial before training starts.
+    deadline = time.time() + 60
+    while not (workdir / "run.partial" / "config.toml").exists():
+        assert time.time() < deadline and p.poll() is None, p.stderr.read()
+        time.sleep(0.05)
+    time.sleep(1.0)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode != 0 and "KeyboardInterrupt" in err, err
+    eval_txt = (workdir / "run" / "eval.txt").read_text()
+    assert "interrupted=true" in eval_txt
+    assert (workdir / "run" / "policy.agvrl").is_file()
+    assert not (workdir / "run.partial").exists()

@@ -633,6 +633,13 @@ fn bench_rust(
     })
 }
 
+/// Panic in Rust, with the GIL released, and raise what Python sees: the tests' check that no
+/// panic crosses the boundary (every entry point goes through the same `guard`).
+#[pyfunction]
+fn _panic_for_test(py: Python<'_>, message: &str) -> PyResult<()> {
+    guard(|| py.detach(|| guard(|| -> PyResult<()> { panic!("{message}") })))
+}
+
 /// The registered env ids, as `agvrl envs` lists them.
 #[pyfunction]
 fn env_ids(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
@@ -647,6 +654,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(train, m)?)?;
     m.add_function(wrap_pyfunction!(bench_rust, m)?)?;
     m.add_function(wrap_pyfunction!(env_ids, m)?)?;
+    m.add_function(wrap_pyfunction!(_panic_for_test, m)?)?;
     m.add("TERMINATION_CAUSES", info::CAUSES.to_vec())?;
     Ok(())
 }
