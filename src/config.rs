@@ -72,6 +72,37 @@ impl RunConfig {
         Ok(cfg)
     }
 
+    /// Parse a run TOML with `sets` (`KEY=VALUE`, dotted keys, TOML values; a value that is
+    /// not TOML is taken as a string) applied on top.
+    pub fn from_toml_with(text: &str, origin: &str, sets: &[String]) -> Result<Self> {
+        if sets.is_empty() {
+            return Self::from_toml(text, origin);
+        }
+        let mut table: toml::Table =
+            toml::from_str(text).map_err(|e| anyhow::anyhow!("{origin}: {}", e.message().trim()))?;
+        for s in sets {
+            let (key, value) = s
+                .split_once('=')
+                .ok_or_else(|| anyhow::anyhow!("--set {s}: expected KEY=VALUE"))?;
+            let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+                .ok()
+                .and_then(|mut t| t.remove("v"))
+                .unwrap_or_else(|| toml::Value::String(value.to_string()));
+            let path: Vec<&str> = key.trim().split('.').collect();
+            let mut t = &mut table;
+            for part in &path[..path.len() - 1] {
+                let next = t
+                    .entry(part.to_string())
+                    .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+                t = next
+                    .as_table_mut()
+                    .ok_or_else(|| anyhow::anyhow!("--set {s}: '{part}' is not a table"))?;
+            }
+            t.insert(path[path.len() - 1].to_string(), value);
+        }
+        Self::from_toml(&toml::to_string(&table)?, &format!("{origin} with --set"))
+    }
+
     /// Load a run TOML file.
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;

@@ -46,8 +46,31 @@ pub struct TrainArgs {
     pub device: String,
     /// Continue an interrupted (or finished) run directory up to its configured steps, or
     /// --steps more.
-    #[arg(long, conflicts_with_all = ["env", "algo", "seed", "n_envs", "config", "out"])]
+    #[arg(long, conflicts_with_all = ["env", "algo", "seed", "n_envs", "config", "out", "set"])]
     pub resume: Option<PathBuf>,
+    /// Set one key of the run config, KEY=VALUE with a TOML value and a dotted key
+    /// (`--set ppo.learning_rate=1e-4 --set env_config.max_steps=500 --set threads=1`); applied
+    /// after --config, before --env/--algo/--steps/--seed/--n-envs.
+    #[arg(long, value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Progress output: a bar on stderr (bar), none, or JSON lines on stdout (json: one
+    /// `{"event":"progress",...}` object per update and a last `{"event":"done",...}` with the
+    /// run directory and the evaluation; for drivers such as sweeps, and the process then also
+    /// stops, with a complete run directory, when the process that started it exits).
+    #[arg(long, value_enum, default_value_t = ProgressMode::Bar)]
+    pub progress: ProgressMode,
+}
+
+/// How training reports progress.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum ProgressMode {
+    /// A progress bar on stderr.
+    #[default]
+    Bar,
+    /// Nothing until the end.
+    None,
+    /// JSON lines on stdout.
+    Json,
 }
 
 /// Set by Ctrl-C: the CLI's training finishes the current update and writes its run directory.
@@ -170,10 +193,14 @@ struct Row {
 }
 
 fn resolve(a: &TrainArgs) -> Result<RunConfig> {
-    let mut cfg = match &a.config {
-        Some(p) => RunConfig::load(p)?,
-        None => RunConfig::from_toml(DEFAULT_TOML, "configs/default.toml (built in)")?,
+    let (text, origin) = match &a.config {
+        Some(p) => (
+            std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?,
+            p.display().to_string(),
+        ),
+        None => (DEFAULT_TOML.to_string(), "configs/default.toml (built in)".to_string()),
     };
+    let mut cfg = RunConfig::from_toml_with(&text, &origin, &a.set)?;
     if let Some(v) = &a.env {
         cfg.env = v.clone();
     }
@@ -249,29 +276,88 @@ pub fn train(a: TrainArgs) -> Result<()> {
             learner.num_timesteps()
         );
         let files = |name: &str| dir.join(name);
-        let text = run_learner(learner.as_mut(), &cfg, target, &files, &previous, &STOP)?;
+        let text = run_learner(learner.as_mut(), &cfg, target, &files, &previous, &STOP, a.progress)?;
         println!("run_dir={}", dir.display());
         print!("{text}");
         return Ok(());
     }
     let cfg = resolve(&a)?;
-    let (dir, text) = train_run(cfg, a.out.clone(), &a.device, &STOP)?;
-    println!("run_dir={}", dir.display());
-    print!("{text}");
+    if a.progress == ProgressMode::Json {
+        stop_with_parent(&STOP);
+    }
+    let (dir, text) = train_run(cfg, a.out.clone(), &a.device, &STOP, a.progress)?;
+    if a.progress == ProgressMode::Json {
+        println!("{}", done_json(&dir, &text));
+    } else {
+        println!("run_dir={}", dir.display());
+        print!("{text}");
+    }
     Ok(())
+}
+
+/// Stop (as Ctrl-C does) once the process that started this one exits, so a killed driver
+/// leaves no training behind. Polled: a reparented process sees another parent id.
+fn stop_with_parent(stop: &'static AtomicBool) {
+    let parent = std::os::unix::process::parent_id();
+    let _ = std::thread::Builder::new()
+        .name("agvrl-parent-watch".into())
+        .spawn(move || {
+            loop {
+                std::thread::sleep(std::time::Duration::from_millis(200));
+                if std::os::unix::process::parent_id() != parent {
+                    eprintln!(
+                        "the parent process exited: finishing the current update, then writing the run directory"
+                    );
+                    stop.store(true, Ordering::SeqCst);
+                    return;
+                }
+            }
+        });
+}
+
+/// The last JSON progress line: the run directory and eval.txt's key=value pairs (numbers as
+/// numbers).
+fn done_json(dir: &std::path::Path, eval_text: &str) -> String {
+    let metrics: serde_json::Map<String, serde_json::Value> = eval_text
+        .lines()
+        .filter_map(|l| l.split_once('='))
+        .map(|(k, v)| {
+            let v = match v.parse::<f64>() {
+                Ok(x) if x.is_finite() => serde_json::json!(x),
+                _ if v == "true" || v == "false" => serde_json::json!(v == "true"),
+                _ => serde_json::json!(v),
+            };
+            (k.to_string(), v)
+        })
+        .collect();
+    serde_json::json!({
+        "event": "done",
+        "run_dir": dir.display().to_string(),
+        "interrupted": metrics.get("interrupted").is_some_and(|v| v == &serde_json::json!(true)),
+        "metrics": metrics,
+    })
+    .to_string()
 }
 
 /// Train `cfg` into a new run directory (`out`, or runs/<date-time>-<env>-<algo>), stopping
 /// early, with a complete run directory, once `stop` is set. `device` as `--device` (empty:
 /// flex). Returns the directory and the text of its eval.txt.
-pub fn train_run(cfg: RunConfig, out: Option<PathBuf>, device: &str, stop: &AtomicBool) -> Result<(PathBuf, String)> {
+pub fn train_run(
+    cfg: RunConfig,
+    out: Option<PathBuf>,
+    device: &str,
+    stop: &AtomicBool,
+    progress: ProgressMode,
+) -> Result<(PathBuf, String)> {
     let device = agvrl_rl::device_by_name(if device.is_empty() { "flex" } else { device })?;
     let device = &device;
     let mut cfg = cfg;
     image_spec_from_env(&mut cfg);
     cfg.validate()?;
-    let out = out.unwrap_or_else(|| PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)));
-    let run = RunDir::create(out)?;
+    let run = match out {
+        Some(out) => RunDir::create(out)?,
+        None => RunDir::create_unique(PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)))?,
+    };
     write_atomic(&run.file("config.toml"), cfg.to_toml()?.as_bytes())?;
     eprintln!(
         "training {} on {} for {} steps (seed {}, {} envs)",
@@ -283,7 +369,7 @@ pub fn train_run(cfg: RunConfig, out: Option<PathBuf>, device: &str, stop: &Atom
         Box::new(Sac::new(cfg.sac.clone(), vec_env(&cfg)?, device, cfg.seed)?)
     };
     let files = |name: &str| run.file(name);
-    let text = run_learner(learner.as_mut(), &cfg, cfg.steps, &files, "", stop)?;
+    let text = run_learner(learner.as_mut(), &cfg, cfg.steps, &files, "", stop, progress)?;
     let dir = run.finish()?;
     Ok((dir, text))
 }
@@ -299,9 +385,13 @@ fn run_learner(
     file: &dyn Fn(&str) -> PathBuf,
     previous_csv: &str,
     stop: &AtomicBool,
+    progress: ProgressMode,
 ) -> Result<String> {
     let start = learner.num_timesteps();
-    let bar = ProgressBar::new(target);
+    let bar = match progress {
+        ProgressMode::Bar => ProgressBar::new(target),
+        _ => ProgressBar::hidden(),
+    };
     bar.set_position(start.min(target));
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}")
@@ -314,6 +404,19 @@ fn run_learner(
         let mean = p.mean_return();
         if let Some(m) = mean {
             bar.set_message(format!("mean return {m:.1}"));
+        }
+        if progress == ProgressMode::Json {
+            println!(
+                "{}",
+                serde_json::json!({
+                    "event": "progress",
+                    "steps": p.steps,
+                    "target_steps": target,
+                    "episodes": p.episodes,
+                    "mean_return": mean.filter(|m| m.is_finite()),
+                    "wall_s": t0.elapsed().as_secs_f64(),
+                })
+            );
         }
         rows.push(Row {
             step: p.steps,

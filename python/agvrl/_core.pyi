@@ -9,6 +9,7 @@ import numpy.typing as npt
 TERMINATION_CAUSES: list[str]
 
 def env_ids() -> list[str]: ...
+def cli(argv: list[str]) -> int: ...
 def train(
     config: str | os.PathLike[str] | dict[str, Any],
     out: str | os.PathLike[str] | None = None,

@@ -557,7 +557,10 @@ fn train(
         let flag = stop.clone();
         let worker = std::thread::Builder::new()
             .name("agvrl-train".into())
-            .spawn(move || agvrl::train::train_run(cfg, out, &device, &flag).map_err(|e| format!("{e:#}")))
+            .spawn(move || {
+                agvrl::train::train_run(cfg, out, &device, &flag, agvrl::train::ProgressMode::Bar)
+                    .map_err(|e| format!("{e:#}"))
+            })
             .map_err(|e| PyRuntimeError::new_err(format!("starting the trainer: {e}")))?;
         // The trainer runs without the GIL; this thread wakes to let Python see Ctrl-C.
         let mut interrupted = None;
@@ -640,6 +643,13 @@ fn _panic_for_test(py: Python<'_>, message: &str) -> PyResult<()> {
     guard(|| py.detach(|| guard(|| -> PyResult<()> { panic!("{message}") })))
 }
 
+/// Run the `agvrl` command line on `argv` (the program name first) with the GIL released, as
+/// the `agvrl` binary does; returns its exit status. The wheel's `agvrl` script.
+#[pyfunction]
+fn cli(py: Python<'_>, argv: Vec<String>) -> PyResult<i32> {
+    guard(|| Ok(py.detach(|| catch_unwind(|| agvrl::cli::main_with(argv)).unwrap_or(101))))
+}
+
 /// The registered env ids, as `agvrl envs` lists them.
 #[pyfunction]
 fn env_ids(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
@@ -654,6 +664,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(train, m)?)?;
     m.add_function(wrap_pyfunction!(bench_rust, m)?)?;
     m.add_function(wrap_pyfunction!(env_ids, m)?)?;
+    m.add_function(wrap_pyfunction!(cli, m)?)?;
     m.add_function(wrap_pyfunction!(_panic_for_test, m)?)?;
     m.add("TERMINATION_CAUSES", info::CAUSES.to_vec())?;
     Ok(())

@@ -1,0 +1,5 @@
+"""``python -m agvrl ...`` is the ``agvrl`` command line."""
+
+from agvrl.cli import main
+
+main()

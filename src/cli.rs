@@ -1,0 +1,152 @@
+//! The `agvrl` command line (the `agvrl` binary, and the `agvrl` script of the Python wheel).
+
+use crate::{probe, train};
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "agvrl", version, about = "Train autonomous ground vehicle policies with deep RL and run them on a real car.", long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Option<Cmd>,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Train a policy and leave a run directory under runs/ (or --out).
+    Train(train::TrainArgs),
+    /// Evaluate a trained run with deterministic actions; prints key=value lines.
+    Eval(train::EvalArgs),
+    /// Drive one episode (a policy, or random actions) into the rerun viewer or an .rrd file.
+    View(train::ViewArgs),
+    /// List the environment ids with their observation and action spaces.
+    Envs,
+    /// Print what the car senses at a pose (LiDAR scan, GPS, IMU) as JSON.
+    Probe(probe::ProbeArgs),
+    /// Measure speed: simulator, envs, learners; prints key=value lines.
+    Bench {
+        /// Short runs (a smoke test, not for reporting).
+        #[arg(long)]
+        quick: bool,
+        /// Also run the learning checks (SAC, PPO with gSDE and Gaussian PPO on pendulum, 5 seeds each, scored on the 100 start states shared with SB3; ~15 minutes on 2 cores).
+        #[arg(long)]
+        learning: bool,
+        /// Only this part: sim, envs, rl, deploy, or learning (the learning checks alone).
+        #[arg(long)]
+        only: Option<String>,
+    },
+}
+
+/// Run the CLI on `args` (the program name first); returns the exit status. `--help`,
+/// `--version` and usage errors print as clap prints them.
+pub fn main_with<I, T>(args: I) -> i32
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return e.exit_code();
+        }
+    };
+    match run(cli) {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            1
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.cmd {
+        None => train::train(train::TrainArgs::default()),
+        Some(Cmd::Train(a)) => train::train(a),
+        Some(Cmd::Eval(a)) => train::eval(a),
+        Some(Cmd::View(a)) => train::view(a),
+        Some(Cmd::Envs) => envs(),
+        Some(Cmd::Probe(a)) => probe::probe(a),
+        Some(Cmd::Bench { quick, learning, only }) => bench(quick, learning, only.as_deref()),
+    }
+}
+
+fn envs() -> Result<()> {
+    for id in agvrl_envs::ENV_IDS {
+        let env = agvrl_envs::make(id, &agvrl_envs::EnvConfig::default())?;
+        let (o, a) = (env.observation_space(), env.action_space());
+        let fmt = |s: &agvrl_envs::BoxSpace| {
+            let lo = s.low.iter().cloned().fold(f32::INFINITY, f32::min);
+            let hi = s.high.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+            format!("Box({}) in [{lo}, {hi}]", s.dim())
+        };
+        println!("{id:<20} obs={:<28} act={}  dt={:.4}s", fmt(&o), fmt(&a), env.dt_s());
+    }
+    Ok(())
+}
+
+fn bench(quick: bool, learning: bool, only: Option<&str>) -> Result<()> {
+    let want = |part: &str| only.is_none_or(|o| o == part);
+    if let Some(o) = only {
+        anyhow::ensure!(
+            ["sim", "envs", "rl", "deploy", "learning"].contains(&o),
+            "--only takes sim, envs, rl, deploy or learning, not '{o}'"
+        );
+    }
+    println!(
+        "build=release quick={quick} threads_available={}",
+        std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+    );
+    if want("sim") {
+        for l in agvrl_sim::bench::run(quick)
+            .into_iter()
+            .chain(agvrl_sim::bench::camera(quick))
+        {
+            println!("{l}");
+        }
+    }
+    if want("envs") {
+        for l in agvrl_envs::bench::run(quick) {
+            println!("{l}");
+        }
+    }
+    if want("rl") {
+        for l in agvrl_rl::bench::run(quick)? {
+            println!("{l}");
+        }
+    }
+    if want("deploy") {
+        for (k, v) in agvrl_deploy::bench::run(quick) {
+            println!("{k}={v}");
+        }
+    }
+    if learning || only == Some("learning") {
+        // Scored as Stable-Baselines3's side (`pendulum_parity.py`): 200-step deterministic
+        // episodes from the 100 shared start states, 5 seeds.
+        type Run = Box<dyn Fn(u64) -> agvrl_rl::Result<f64>>;
+        let runs: [(&str, u64, Run); 3] = [
+            ("sac", 20_000, Box::new(|s| agvrl_rl::learning::sac_parity(s, 20_000))),
+            (
+                "ppo_zoo",
+                100_000,
+                Box::new(|s| agvrl_rl::learning::ppo_parity(true, s, 100_000, &mut |_| {})),
+            ),
+            (
+                "ppo_zoo_gaussian",
+                100_000,
+                Box::new(|s| agvrl_rl::learning::ppo_parity(false, s, 100_000, &mut |_| {})),
+            ),
+        ];
+        for (algo, steps, run) in runs {
+            let mut sum = 0.0;
+            for seed in 0..5 {
+                let r = run(seed)?;
+                sum += r;
+                println!("learning={algo} env=pendulum steps={steps} seed={seed} mean_return={r:.2}");
+            }
+            println!("learning={algo} env=pendulum seeds=5 mean_return={:.2}", sum / 5.0);
+        }
+    }
+    Ok(())
+}
