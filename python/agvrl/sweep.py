@@ -419,42 +419,110 @@ def worker_name(index: int) -> str:
     return f"worker{index}@{socket.gethostname()}"
 
 
+class BudgetLock:
+    """Serialises "count the trials, then start one" across every worker of a study, so the study
+    ends with exactly `trials` trials however many workers race for the last ones: an advisory
+    lock in PostgreSQL, a file lock beside a journal. Other databases run unlocked (a worker
+    may then start a trial or two past the budget)."""
+
+    def __init__(self, storage_url: str, study_name: str):
+        import zlib
+
+        self.key = zlib.crc32(study_name.encode())
+        self.file = None
+        self.conn = None
+        if storage_url.startswith("journal:"):
+            # Not PATH.lock: Optuna's own journal lock uses that name.
+            self.path = storage_url[len("journal:"):] + ".budget-lock"
+        elif storage_url.startswith("postgresql"):
+            import sqlalchemy
+
+            self.engine = sqlalchemy.create_engine(storage_url)
+            self.path = None
+        else:
+            self.path = None
+            self.engine = None
+
+    def __enter__(self):
+        if self.path is not None:
+            import fcntl
+
+            self.file = open(self.path, "a")
+            fcntl.flock(self.file, fcntl.LOCK_EX)
+        elif getattr(self, "engine", None) is not None:
+            import sqlalchemy
+
+            self.conn = self.engine.connect()
+            self.conn.execute(sqlalchemy.text("SELECT pg_advisory_lock(:k)"), {"k": self.key})
+        return self
+
+    def __exit__(self, *exc):
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+        if self.conn is not None:
+            import sqlalchemy
+
+            self.conn.execute(sqlalchemy.text("SELECT pg_advisory_unlock(:k)"), {"k": self.key})
+            self.conn.close()
+            self.conn = None
+
+
+def _heartbeat(trial):
+    """Optuna's heartbeat for the trial (RDB storages with heartbeats on), as `optimize` runs it."""
+    try:
+        from optuna.storages._heartbeat import get_heartbeat_thread
+    except ImportError:  # pragma: no cover - other Optuna versions
+        import contextlib
+
+        return contextlib.nullcontext()
+    return get_heartbeat_thread(trial._trial_id, trial.study._storage)
+
+
 def run_worker(spec, storage_url, study_name, threads, agvrl, index) -> int:
     """Run trials until the study holds `trials` of them; returns how many this worker ran."""
+    import warnings
+
     optuna = _optuna()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
+    TrialState = optuna.trial.TrialState
     study = open_study(spec, storage_url, study_name, index)
     trainer = Trainer(spec, agvrl, threads)
     name = worker_name(index)
+    lock = BudgetLock(storage_url, study_name)
 
     def on_term(signum, frame):
         raise KeyboardInterrupt(f"signal {signum}")
 
     signal.signal(signal.SIGTERM, on_term)
     ran = 0
-    counted = (
-        optuna.trial.TrialState.RUNNING,
-        optuna.trial.TrialState.COMPLETE,
-        optuna.trial.TrialState.PRUNED,
-        optuna.trial.TrialState.FAIL,
-    )
-
-    mine: list[int] = []
-
-    def objective(trial):
-        mine.append(trial._trial_id)
-        trial.set_user_attr("worker", name)
-        return trainer(trial)
-
-    try:
-        while len(study.get_trials(deepcopy=False, states=counted)) < spec["trials"]:
-            study.optimize(objective, n_trials=1, catch=(RuntimeError,))
-            ran += 1
-            t = study._storage.get_trial(mine[-1])
-            print(f"worker={name} trial={t.number} state={t.state.name} value={t.value} {t.user_attrs.get('error', '')}".rstrip(), flush=True)
-    except KeyboardInterrupt:
-        trainer.stop()
-        raise
+    started = (TrialState.RUNNING, TrialState.COMPLETE, TrialState.PRUNED, TrialState.FAIL)
+    while True:
+        if isinstance(study._storage, optuna.storages.RDBStorage):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                optuna.storages.fail_stale_trials(study)
+        with lock:
+            if len(study.get_trials(deepcopy=False, states=started)) >= spec["trials"]:
+                break
+            # Takes an enqueued point first, else a new trial.
+            trial = study.ask()
+            trial.set_user_attr("worker", name)
+        ran += 1
+        value, state, error = None, TrialState.COMPLETE, ""
+        try:
+            with _heartbeat(trial):
+                value = trainer(trial)
+        except optuna.TrialPruned:
+            state = TrialState.PRUNED
+        except RuntimeError as e:
+            state, error = TrialState.FAIL, str(e)
+        except BaseException:
+            trainer.stop()
+            study.tell(trial, state=TrialState.FAIL)
+            raise
+        frozen = study.tell(trial, value, state=None if state == TrialState.COMPLETE else state)
+        print(f"worker={name} trial={frozen.number} state={frozen.state.name} value={frozen.value} {error}".rstrip(), flush=True)
     return ran
 
 
@@ -464,9 +532,10 @@ def run(spec, storage_url, study_name, workers, threads, agvrl) -> None:
     stale = fail_dead_trials(study)
     if stale:
         print(f"marked {stale} trial(s) of a dead sweep as failed")
-    queued = {json.dumps(t.params, sort_keys=True) for t in study.get_trials(deepcopy=False)}
+    # An enqueued point runs once over every re-run: skip it when a trial holds those values.
+    held = [{**t.system_attrs.get("fixed_params", {}), **t.params} for t in study.get_trials(deepcopy=False)]
     for point in spec["enqueue"]:
-        if json.dumps(point, sort_keys=True) not in queued:
+        if not any(all(h.get(k) == v for k, v in point.items()) for h in held):
             study.enqueue_trial(point)
     existing = len(study.trials)
     print(f"study={study_name} storage={storage_url} trials={existing}/{spec['trials']} workers={workers} threads_per_trial={threads}", flush=True)
