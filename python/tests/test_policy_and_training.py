@@ -2,6 +2,7 @@
 
 import json
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -151,3 +152,11 @@ def test_ctrl_c_stops_training_with_a_complete_run_directory(workdir):
     assert "interrupted=true" in eval_txt
     assert (workdir / "run" / "policy.agvrl").is_file()
     assert not (workdir / "run.partial").exists()
+
+
+def test_the_wheel_carries_the_agvrl_command_line(bins):
+    wheel = subprocess.run([sys.executable, "-m", "agvrl", "envs"], capture_output=True, text=True)
+    assert wheel.returncode == 0, wheel.stderr
+    assert wheel.stdout == cli(bins, "envs").stdout
+    bad = subprocess.run([sys.executable, "-m", "agvrl", "train", "--env", "racing-moon"], capture_output=True, text=True)
+    assert bad.returncode == 1 and "unknown env id 'racing-moon'" in bad.stderr

@@ -77,8 +77,12 @@ def agvrl_processes(marker: str) -> list[int]:
     return out
 
 
-def run_sweep(bins, spec: Path, storage: str, workers: int = 2):
+def run_sweep(bins, spec: Path, storage: str, workers: int = 2, wheel_cli: bool = False):
     env = {**os.environ, "AGVRL_BIN": str(bins / "agvrl")}
+    if wheel_cli:
+        # No binary named: the trainings run the wheel's own `agvrl` script.
+        del env["AGVRL_BIN"]
+        env["PATH"] = f"{Path(sys.executable).parent}:/usr/bin:/bin"
     r = subprocess.run(
         [sys.executable, "-m", "agvrl.sweep", "run", str(spec), "--storage", storage, "--workers", str(workers), "--threads", "1"],
         capture_output=True,
@@ -175,7 +179,7 @@ def test_two_workers_share_a_study_in_a_journal_file_and_a_rerun_resumes(bins, t
 def test_report_prints_the_best_trials_and_writes_plots(bins, tmp_path):
     spec = write_sweep(tmp_path, trials=4)
     storage = f"journal:{tmp_path / 'study.journal'}"
-    run_sweep(bins, spec, storage, workers=1)
+    run_sweep(bins, spec, storage, workers=1, wheel_cli=True)
     out = tmp_path / "report"
     r = subprocess.run(
         [sys.executable, "-m", "agvrl.sweep", "report", "--storage", storage, "--study", "pendulum-test", "--out", str(out)],
