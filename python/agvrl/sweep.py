@@ -589,24 +589,28 @@ def report(storage_url: str, study_name: str, out: str | None, top: int = 5) -> 
     import matplotlib
 
     matplotlib.use("Agg")
+    import warnings
+
     import matplotlib.pyplot as plt
     from optuna.visualization import matplotlib as ovm
 
     outdir = Path(out)
     outdir.mkdir(parents=True, exist_ok=True)
-    ax = ovm.plot_optimization_history(study)
-    ax.figure.set_size_inches(8, 5)
-    ax.figure.tight_layout()
-    ax.figure.savefig(outdir / "optimization_history.png", dpi=100)
-    plt.close(ax.figure)
-    print(f"wrote {outdir / 'optimization_history.png'}")
-    if len(done) >= 2 and study.best_trial.params:
-        ax = ovm.plot_param_importances(study)
-        ax.figure.set_size_inches(8, 4)
+
+    def save(plot, name: str, height: float) -> None:
+        with warnings.catch_warnings():
+            # Optuna marks its matplotlib plots experimental.
+            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+            ax = plot(study)
+        ax.figure.set_size_inches(8, height)
         ax.figure.tight_layout()
-        ax.figure.savefig(outdir / "param_importances.png", dpi=100)
+        ax.figure.savefig(outdir / name, dpi=100)
         plt.close(ax.figure)
-        print(f"wrote {outdir / 'param_importances.png'}")
+        print(f"wrote {outdir / name}")
+
+    save(ovm.plot_optimization_history, "optimization_history.png", 5)
+    if len(done) >= 2 and study.best_trial.params:
+        save(ovm.plot_param_importances, "param_importances.png", 4)
 
 
 # ---------------------------------------------------------------- command line
