@@ -168,3 +168,8 @@ def test_a_rust_panic_reaches_python_as_runtime_error():
         _core._panic_for_test("boom")
     # The interpreter and the package carry on.
     assert agvrl.make("pendulum").reset(seed=0)[0].shape == (3,)
+
+
+def test_numpy_scalars_are_settings():
+    env = agvrl.make("search-outdoor-20", max_steps=np.int64(7), lidar={"n_rays": np.int32(36)}, brake_mps2=np.float32(2.0))
+    assert env.observation_space.shape == agvrl.make("search-outdoor-20", max_steps=7, lidar={"n_rays": 36}).observation_space.shape

@@ -34,14 +34,14 @@ fn to_toml(v: &Bound<'_, PyAny>, where_: &str) -> PyResult<Option<Value>> {
         }
         Value::Array(a)
     } else if let Ok(b) = v.extract::<bool>() {
-        // numpy scalars
-        if v.get_type().name()?.to_string().contains("bool") {
-            Value::Boolean(b)
-        } else if let Ok(i) = v.extract::<i64>() {
-            Value::Integer(i)
-        } else {
-            Value::Float(v.extract()?)
-        }
+        // numpy.bool_ (pyo3 reads it as a bool)
+        Value::Boolean(b)
+    } else if let Ok(i) = v.extract::<i64>() {
+        // numpy integers (`__index__`)
+        Value::Integer(i)
+    } else if let Ok(f) = v.extract::<f64>() {
+        // numpy.float32 (`__float__`)
+        Value::Float(f)
     } else {
         return Err(PyValueError::new_err(format!(
             "{where_}: a {} cannot be a setting (use numbers, strings, bools, lists and dicts)",
@@ -122,19 +122,10 @@ pub fn run_config(config: &Bound<'_, PyAny>, overrides: Option<&Bound<'_, PyDict
     RunConfig::from_toml(&text, &origin).map_err(|e| PyValueError::new_err(format!("{e:#}")))
 }
 
-/// `env` and `[env_config]` of a run TOML (a policy's settings file).
+/// `env` and `[env_config]` of a run TOML (a policy's settings file), read as `agvrl eval` reads it.
 pub fn run_file_env(path: &Path) -> PyResult<(String, EnvConfig)> {
-    #[derive(serde::Deserialize)]
-    struct RunFile {
-        env: String,
-        #[serde(default)]
-        env_config: EnvConfig,
-    }
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| PyValueError::new_err(format!("cannot read {}: {e}", path.display())))?;
-    let r: RunFile = toml::from_str(&text)
-        .map_err(|e: toml::de::Error| PyValueError::new_err(format!("{}: {}", path.display(), e.message().trim())))?;
-    Ok((r.env, r.env_config))
+    let cfg = RunConfig::load(path).map_err(|e| PyValueError::new_err(format!("{e:#}")))?;
+    Ok((cfg.env, cfg.env_config))
 }
 
 fn to_py<'py>(py: Python<'py>, v: &Value) -> PyResult<Bound<'py, PyAny>> {

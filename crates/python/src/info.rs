@@ -141,15 +141,11 @@ pub fn batch<'py>(py: Python<'py>, kind: Kind, infos: &[Info], only: Option<&[bo
                     .collect();
                 (v, m)
             };
-            let (laps, m) = r(&|x| x.laps as f64);
-            put(
-                &d,
-                "laps",
-                laps.iter()
-                    .map(|&x| if x.is_nan() { 0 } else { x as i64 })
-                    .collect::<Vec<i64>>(),
-                m,
-            )?;
+            let laps = infos
+                .iter()
+                .map(|i| i.racing.as_ref().map_or(0, |x| i64::from(x.laps)))
+                .collect();
+            put(&d, "laps", laps, r(&|_| 0.0).1)?;
             let (v, m) = r(&|x| x.progress_laps);
             put(&d, "progress_laps", v, m)?;
             for (key, get) in [
