@@ -14,7 +14,18 @@ fn sac_defaults_are_sb3s() {
     assert_eq!(c.tau, 0.005);
     assert_eq!(c.gamma, 0.99);
     assert_eq!(c.train_freq, 1);
-    assert_eq!(c.gradient_steps, 1);
+    // SB3's -1: one gradient step per env step collected, which is SB3's default (1) on one env.
+    assert_eq!(c.gradient_steps, -1);
+    assert_eq!(c.gradient_steps_per_round(1), 1);
+    assert_eq!(c.gradient_steps_per_round(8), 8);
+    let c = SacConfig::from_toml("train_freq = 2\ngradient_steps = 3").unwrap();
+    assert_eq!(c.gradient_steps_per_round(8), 3);
+    let c = SacConfig::from_toml("train_freq = 2").unwrap();
+    assert_eq!(c.gradient_steps_per_round(8), 16);
+    for bad in ["gradient_steps = 0", "gradient_steps = -2"] {
+        let e = SacConfig::from_toml(bad).unwrap_err().to_string();
+        assert!(e.contains("gradient_steps"), "{bad}: {e}");
+    }
     assert_eq!(c.ent_coef, EntCoef::Auto("auto".into()));
     assert_eq!(c.ent_coef.auto_init().unwrap(), Some(1.0));
     assert_eq!(c.target_update_interval, 1);

@@ -53,8 +53,10 @@ pub struct SacConfig {
     pub gamma: f64,
     /// Train every this many vector steps (1).
     pub train_freq: u64,
-    /// Gradient steps per training round (1).
-    pub gradient_steps: u64,
+    /// Gradient steps per training round; -1 (the default): one per env step collected in the
+    /// round (`train_freq` x n_envs, SB3's `gradient_steps = -1`), so SAC keeps one gradient
+    /// step per env step however many envs feed it. With one env this is SB3's default of 1.
+    pub gradient_steps: i64,
     /// Entropy coefficient ("auto": learned, starting at 1.0).
     pub ent_coef: EntCoef,
     /// Update the target critics every this many gradient steps (1).
@@ -81,7 +83,7 @@ impl Default for SacConfig {
             tau: 0.005,
             gamma: 0.99,
             train_freq: 1,
-            gradient_steps: 1,
+            gradient_steps: -1,
             ent_coef: EntCoef::Auto("auto".into()),
             target_update_interval: 1,
             target_entropy: None,
@@ -106,6 +108,14 @@ impl SacConfig {
         toml::to_string(self).unwrap_or_default()
     }
 
+    /// Gradient steps taken every `train_freq` vector steps of `n_envs` envs.
+    pub fn gradient_steps_per_round(&self, n_envs: usize) -> u64 {
+        match u64::try_from(self.gradient_steps) {
+            Ok(n) => n,
+            Err(_) => self.train_freq * n_envs as u64,
+        }
+    }
+
     /// Reject values the learner cannot run with.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(RlError::Config(format!("SAC: {m}")));
@@ -120,6 +130,9 @@ impl SacConfig {
         }
         if self.train_freq == 0 || self.target_update_interval == 0 {
             return bad("train_freq and target_update_interval must be >= 1");
+        }
+        if self.gradient_steps == 0 || self.gradient_steps < -1 {
+            return bad("gradient_steps must be >= 1, or -1 for one per env step collected");
         }
         if self.net_arch.is_empty() || self.net_arch.contains(&0) {
             return bad("net_arch needs at least one non-zero width");

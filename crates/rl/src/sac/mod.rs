@@ -225,6 +225,7 @@ impl<E: Env> Sac<E> {
     pub fn learn(&mut self, steps: u64, callback: &mut dyn FnMut(&Progress<'_>) -> Control) -> Result<()> {
         let target = self.num_timesteps + steps;
         let n_envs = self.env.n_envs();
+        let gradient_steps = self.cfg.gradient_steps_per_round(n_envs);
         let mut vec_steps = 0u64;
         while self.num_timesteps < target {
             let obs = match self.last_obs.take() {
@@ -275,7 +276,7 @@ impl<E: Env> Sac<E> {
             self.last_obs = Some(st.obs);
             vec_steps += 1;
             if self.num_timesteps > self.cfg.learning_starts && vec_steps.is_multiple_of(self.cfg.train_freq) {
-                for _ in 0..self.cfg.gradient_steps {
+                for _ in 0..gradient_steps {
                     self.update()?;
                 }
             }
