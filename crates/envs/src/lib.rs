@@ -27,7 +27,7 @@ pub mod wrappers;
 
 pub use api::{BoxSpace, Control, Env, EnvError, Info, SensorFrame, Step, Vehicle};
 pub use check::check_env;
-pub use registry::{ENV_IDS, EnvConfig, make, make_task, make_vehicle};
+pub use registry::{ENV_IDS, ENVS, EnvConfig, EnvSpec, TaskKind, make, make_task, make_vehicle};
 pub use sim_vehicle::{Randomisation, SimVehicle, SpawnMode};
 pub use task_env::TaskEnv;
 pub use vec_env::{Autoreset, VecEnv, VecStep};

@@ -12,15 +12,85 @@ use agvrl_sim::sensors::LidarConfig;
 use agvrl_sim::{ActionMapping, DynamicsMode, SceneKind, SceneSource, SimConfig};
 use serde::{Deserialize, Serialize};
 
-/// Ids `make` knows.
-pub const ENV_IDS: &[&str] = &[
-    "search-outdoor-20",
-    "search-outdoor-50",
-    "search-urban-20",
-    "search-urban-50",
-    "racing-oval",
-    "pendulum",
+/// The task an env id poses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TaskKind {
+    /// Explore a scene without colliding ([`crate::task::Search`]).
+    Search,
+    /// Lap the oval ([`crate::task::Racing`]).
+    Racing,
+    /// Gymnasium's Pendulum-v1 (no vehicle).
+    Pendulum,
+}
+
+/// One env `make` knows: its id, task and scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EnvSpec {
+    /// The id `make` takes.
+    pub id: &'static str,
+    /// The task.
+    pub task: TaskKind,
+    /// The built-in scene the vehicle drives in (None: no vehicle).
+    pub scene: Option<&'static str>,
+    /// The generator family and inner half size (m) of procedural layouts like the scene
+    /// (`layout_seed`); None where the scene has no procedural counterpart.
+    pub procedural: Option<(SceneKind, f32)>,
+    /// AutoVRL's code penalises slow driving in this scene only (`search_reward = "autovrl_code"`).
+    pub autovrl_slow_penalty: bool,
+}
+
+const fn search(id: &'static str, scene: &'static str, kind: SceneKind, half_m: f32) -> EnvSpec {
+    EnvSpec {
+        id,
+        task: TaskKind::Search,
+        scene: Some(scene),
+        procedural: Some((kind, half_m)),
+        autovrl_slow_penalty: false,
+    }
+}
+
+/// Every env agvrl ships.
+pub const ENVS: [EnvSpec; 6] = [
+    search("search-outdoor-20", "outdoor-20", SceneKind::Outdoor, 10.0),
+    EnvSpec {
+        autovrl_slow_penalty: true,
+        ..search("search-outdoor-50", "outdoor-50", SceneKind::Outdoor, 25.0)
+    },
+    search("search-urban-20", "urban-20", SceneKind::Urban, 10.0),
+    search("search-urban-50", "urban-50", SceneKind::Urban, 25.0),
+    EnvSpec {
+        id: "racing-oval",
+        task: TaskKind::Racing,
+        scene: Some("oval"),
+        procedural: None,
+        autovrl_slow_penalty: false,
+    },
+    EnvSpec {
+        id: "pendulum",
+        task: TaskKind::Pendulum,
+        scene: None,
+        procedural: None,
+        autovrl_slow_penalty: false,
+    },
 ];
+
+const ENV_ID_ARRAY: [&str; ENVS.len()] = {
+    let mut ids = [""; ENVS.len()];
+    let mut i = 0;
+    while i < ENVS.len() {
+        ids[i] = ENVS[i].id;
+        i += 1;
+    }
+    ids
+};
+
+/// Ids `make` knows, in [`ENVS`]' order.
+pub const ENV_IDS: &[&str] = &ENV_ID_ARRAY;
+
+/// The table entry of `id`.
+pub fn spec(id: &str) -> Option<&'static EnvSpec> {
+    ENVS.iter().find(|s| s.id == id)
+}
 
 /// Settings of the vehicle envs (ignored by `pendulum`). Loadable from TOML; unknown keys are
 /// an error.
@@ -141,14 +211,7 @@ impl EnvConfig {
 
 /// The built-in scene behind a vehicle env id.
 pub fn scene_of(id: &str) -> Option<&'static str> {
-    Some(match id {
-        "search-outdoor-20" => "outdoor-20",
-        "search-outdoor-50" => "outdoor-50",
-        "search-urban-20" => "urban-20",
-        "search-urban-50" => "urban-50",
-        "racing-oval" => "oval",
-        _ => return None,
-    })
+    spec(id).and_then(|s| s.scene)
 }
 
 fn unknown(id: &str) -> EnvError {
@@ -158,24 +221,14 @@ fn unknown(id: &str) -> EnvError {
     }
 }
 
-/// The generator family and inner half size of a built-in scene, for procedural layouts.
-fn procedural_of(scene: &str) -> (SceneKind, f32) {
-    match scene {
-        "outdoor-20" => (SceneKind::Outdoor, 10.0),
-        "outdoor-50" => (SceneKind::Outdoor, 25.0),
-        "urban-20" => (SceneKind::Urban, 10.0),
-        "urban-50" => (SceneKind::Urban, 25.0),
-        _ => (SceneKind::Track, 0.0),
-    }
-}
-
 /// The vehicle of env `id` (no task), for tools that drive a vehicle directly.
 pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvError> {
-    let scene = scene_of(id).ok_or_else(|| unknown(id))?;
+    let spec = spec(id).filter(|s| s.scene.is_some()).ok_or_else(|| unknown(id))?;
+    let scene = spec.scene.unwrap_or_default();
     let source = match cfg.layout_seed {
         None => SceneSource::Builtin(scene.into()),
         Some(seed) => {
-            let (kind, half_m) = procedural_of(scene);
+            let (kind, half_m) = spec.procedural.unwrap_or((SceneKind::Track, 0.0));
             SceneSource::Procedural {
                 kind,
                 seed: crate::heldout::split(seed, cfg.held_out),
@@ -215,7 +268,7 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
 /// The task of vehicle env `id` with `cfg`, for a vehicle whose steering limit is
 /// `steering_limit_rad` (the deploy loop pairs it with any `Vehicle`).
 pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<Box<dyn crate::task::Task>, EnvError> {
-    scene_of(id).ok_or_else(|| unknown(id))?;
+    let spec = spec(id).filter(|s| s.scene.is_some()).ok_or_else(|| unknown(id))?;
     cfg.safe_reward.validate().map_err(EnvError::Config)?;
     if !(cfg.clearance_fov_deg.is_finite() && (0.0..=360.0).contains(&cfg.clearance_fov_deg)) {
         return Err(EnvError::Config(format!(
@@ -229,7 +282,7 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
         n_rays: cfg.lidar.n_rays,
         range_max_m: cfg.lidar.range_max_m,
     };
-    Ok(if id == "racing-oval" {
+    Ok(if spec.task == TaskKind::Racing {
         Box::new(Racing::new(
             RacingConfig {
                 common,
@@ -244,7 +297,7 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
                 reward: cfg.search_reward,
                 safe: cfg.safe_reward,
                 clearance_fov_deg: cfg.clearance_fov_deg,
-                slow_penalty: id == "search-outdoor-50" && cfg.search_reward == SearchReward::AutovrlCode,
+                slow_penalty: spec.autovrl_slow_penalty && cfg.search_reward == SearchReward::AutovrlCode,
                 ..SearchConfig::default()
             },
             steering_limit_rad,
@@ -255,7 +308,7 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
 /// Build the env registered under `id` with `cfg` (`EnvConfig::default()` for the standard
 /// setup), wrapped in its time limit.
 pub fn make(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
-    if id == "pendulum" {
+    if spec(id).is_some_and(|s| s.task == TaskKind::Pendulum) {
         return Ok(Box::new(TimeLimit::new(Pendulum::new(), 200)));
     }
     let vehicle = make_vehicle(id, cfg)?;

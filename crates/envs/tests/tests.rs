@@ -1,4 +1,5 @@
-//! Issue 3 acceptance tests.
+//! agvrl-envs: the Env contract, episodes and rewards, vector envs and noise, camera frames,
+//! image observations.
 
 use agvrl_envs::api::{Control, MapInfo, SensorFrame, TerminationCause};
 use agvrl_envs::pendulum::{Pendulum, angle_normalize};
@@ -21,6 +22,37 @@ mod env_contract {
                 let name = format!("{id} {:?}", cfg.spawn);
                 let mut env = make(id, &EnvConfig { max_steps: 60, ..cfg }).unwrap();
                 check_env(env.as_mut(), 150).unwrap_or_else(|e| panic!("{name}: {e}"));
+            }
+        }
+    }
+
+    #[test]
+    fn the_env_table_is_what_make_builds() {
+        use agvrl_envs::registry::{scene_of, spec};
+        use agvrl_envs::{ENVS, TaskKind, make_vehicle};
+        assert_eq!(ENV_IDS, ENVS.iter().map(|s| s.id).collect::<Vec<_>>());
+        for s in ENVS {
+            assert_eq!(spec(s.id), Some(&s));
+            assert_eq!(scene_of(s.id), s.scene);
+            // A vehicle exactly where the table names a scene.
+            assert_eq!(
+                make_vehicle(s.id, &EnvConfig::default()).is_ok(),
+                s.scene.is_some(),
+                "{}",
+                s.id
+            );
+            // Procedural layouts like the scene exactly where the table names a generator.
+            let procedural = EnvConfig {
+                layout_seed: Some(3),
+                ..EnvConfig::default()
+            };
+            if s.procedural.is_some() {
+                make_vehicle(s.id, &procedural).unwrap_or_else(|e| panic!("{}: {e}", s.id));
+            }
+            let (o, _) = make(s.id, &EnvConfig::default()).unwrap().reset(Some(0)).unwrap();
+            match s.task {
+                TaskKind::Pendulum => assert_eq!(o.len(), 3),
+                TaskKind::Search | TaskKind::Racing => assert!(o.len() > 3 && s.scene.is_some(), "{}", s.id),
             }
         }
     }

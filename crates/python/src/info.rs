@@ -48,12 +48,10 @@ pub enum Kind {
 
 impl Kind {
     pub fn of(id: &str) -> Self {
-        if id.starts_with("racing") {
-            Kind::Racing
-        } else if id.starts_with("search") {
-            Kind::Search
-        } else {
-            Kind::Other
+        match agvrl_envs::registry::spec(id).map(|s| s.task) {
+            Some(agvrl_envs::TaskKind::Racing) => Kind::Racing,
+            Some(agvrl_envs::TaskKind::Search) => Kind::Search,
+            _ => Kind::Other,
         }
     }
 }
