@@ -73,6 +73,7 @@ pub use cnn::ImageSpec;
 pub use device::{CpuBackend, default_device, device_by_name};
 pub use error::{Result, RlError};
 pub use eval::evaluate;
+pub use file::write_atomic;
 pub use normalize::ObsNormalizer;
 pub use policy::{Algorithm, EncoderData, POLICY_FORMAT_VERSION, Policy, PolicyData};
 #[cfg(feature = "train")]
