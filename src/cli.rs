@@ -31,10 +31,20 @@ enum Cmd {
         /// Also run the learning checks (SAC, PPO with gSDE and Gaussian PPO on pendulum, 5 seeds each, scored on the 100 start states shared with SB3; ~15 minutes on 2 cores).
         #[arg(long)]
         learning: bool,
-        /// Only this part: sim, envs, rl, deploy, or learning (the learning checks alone).
-        #[arg(long)]
-        only: Option<String>,
+        /// Only this part (learning: the learning checks alone).
+        #[arg(long, value_enum)]
+        only: Option<BenchPart>,
     },
+}
+
+/// A part of `agvrl bench`.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum BenchPart {
+    Sim,
+    Envs,
+    Rl,
+    Deploy,
+    Learning,
 }
 
 /// Run the CLI on `args` (the program name first); returns the exit status. `--help`,
@@ -68,7 +78,7 @@ fn run(cli: Cli) -> Result<()> {
         Some(Cmd::View(a)) => train::view(a),
         Some(Cmd::Envs) => envs(),
         Some(Cmd::Probe(a)) => probe::probe(a),
-        Some(Cmd::Bench { quick, learning, only }) => bench(quick, learning, only.as_deref()),
+        Some(Cmd::Bench { quick, learning, only }) => bench(quick, learning, only),
     }
 }
 
@@ -86,19 +96,13 @@ fn envs() -> Result<()> {
     Ok(())
 }
 
-fn bench(quick: bool, learning: bool, only: Option<&str>) -> Result<()> {
-    let want = |part: &str| only.is_none_or(|o| o == part);
-    if let Some(o) = only {
-        anyhow::ensure!(
-            ["sim", "envs", "rl", "deploy", "learning"].contains(&o),
-            "--only takes sim, envs, rl, deploy or learning, not '{o}'"
-        );
-    }
+fn bench(quick: bool, learning: bool, only: Option<BenchPart>) -> Result<()> {
+    let want = |part: BenchPart| only.is_none_or(|o| o == part);
     println!(
         "build=release quick={quick} threads_available={}",
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );
-    if want("sim") {
+    if want(BenchPart::Sim) {
         for l in agvrl_sim::bench::run(quick)
             .into_iter()
             .chain(agvrl_sim::bench::camera(quick))
@@ -106,22 +110,22 @@ fn bench(quick: bool, learning: bool, only: Option<&str>) -> Result<()> {
             println!("{l}");
         }
     }
-    if want("envs") {
+    if want(BenchPart::Envs) {
         for l in agvrl_envs::bench::run(quick) {
             println!("{l}");
         }
     }
-    if want("rl") {
+    if want(BenchPart::Rl) {
         for l in agvrl_rl::bench::run(quick)? {
             println!("{l}");
         }
     }
-    if want("deploy") {
+    if want(BenchPart::Deploy) {
         for (k, v) in agvrl_deploy::bench::run(quick) {
             println!("{k}={v}");
         }
     }
-    if learning || only == Some("learning") {
+    if learning || only == Some(BenchPart::Learning) {
         // Scored as Stable-Baselines3's side (`pendulum_parity.py`): 200-step deterministic
         // episodes from the 100 shared start states, 5 seeds.
         type Run = Box<dyn Fn(u64) -> agvrl_rl::Result<f64>>;
@@ -149,4 +153,15 @@ fn bench(quick: bool, learning: bool, only: Option<&str>) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+
+    #[test]
+    fn command_line_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
 }

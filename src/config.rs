@@ -1,7 +1,7 @@
 //! The run configuration: one TOML file says which env, which algorithm and which settings.
 
 use agvrl_envs::EnvConfig;
-use agvrl_rl::{PpoConfig, SacConfig};
+use agvrl_rl::{Algorithm, PpoConfig, SacConfig};
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -19,7 +19,7 @@ pub struct RunConfig {
     /// must share `env`'s spaces. Empty: every training env is `env`.
     pub train_envs: Vec<String>,
     /// `ppo` or `sac`.
-    pub algo: String,
+    pub algo: Algorithm,
     /// Environment steps to train.
     pub steps: u64,
     /// Seed of everything.
@@ -49,7 +49,7 @@ impl Default for RunConfig {
         Self {
             env: "racing-oval".into(),
             train_envs: Vec::new(),
-            algo: "ppo".into(),
+            algo: Algorithm::Ppo,
             steps: 100_000,
             seed: 0,
             n_envs: 8,
@@ -128,9 +128,6 @@ impl RunConfig {
         }
         if self.env_config.held_out {
             bail!("env_config.held_out is for evaluation only: training never draws held-out episodes");
-        }
-        if self.algo != "ppo" && self.algo != "sac" {
-            bail!("unknown algo '{}'; use ppo or sac", self.algo);
         }
         if self.n_envs == 0 || self.threads == 0 || self.steps == 0 {
             bail!("steps, n_envs and threads must be at least 1");

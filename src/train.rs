@@ -6,7 +6,7 @@ use crate::plots::{self, Path2};
 use crate::runs::{RunDir, stamp, write_atomic};
 use crate::viz::{self, Recorder, Sink};
 use agvrl_envs::{Env, EnvConfig, Step, VecEnv, make};
-use agvrl_rl::{Control, Policy, Ppo, Progress, Sac};
+use agvrl_rl::{Algorithm, Control, Policy, Ppo, Progress, Sac};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -18,21 +18,49 @@ use std::time::Instant;
 /// Name of the policy file in a run directory.
 pub const POLICY_FILE: &str = "policy.agvrl";
 
+/// `--device`: the Burn device learners train on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum DeviceArg {
+    /// burn-flex on the CPU.
+    #[default]
+    Flex,
+    /// burn-ndarray on the CPU (agvrl-rl's `ndarray` feature).
+    Ndarray,
+    /// CUDA GPU (the `cuda` feature).
+    Cuda,
+    /// wgpu GPU (the `wgpu` feature).
+    Wgpu,
+}
+
+impl DeviceArg {
+    /// The name `agvrl_rl::device_by_name` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Flex => "flex",
+            Self::Ndarray => "ndarray",
+            Self::Cuda => "cuda",
+            Self::Wgpu => "wgpu",
+        }
+    }
+}
+
 #[derive(Args, Default)]
 pub struct TrainArgs {
     /// Environment id (see `agvrl envs`).
     #[arg(long)]
     pub env: Option<String>,
-    /// Algorithm: ppo or sac.
+    /// Algorithm: ppo or sac. SAC takes one gradient step per env step collected, however
+    /// many envs run (`sac.gradient_steps = -1`, Stable-Baselines3's ratio on one env).
     #[arg(long)]
-    pub algo: Option<String>,
+    pub algo: Option<Algorithm>,
     /// Environment steps to train.
     #[arg(long)]
     pub steps: Option<u64>,
     /// Seed of the whole run.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Number of parallel environments.
+    /// Number of parallel environments (default: the config's n_envs, 8 in
+    /// configs/default.toml).
     #[arg(long)]
     pub n_envs: Option<usize>,
     /// Run configuration TOML (default: configs/default.toml).
@@ -42,8 +70,8 @@ pub struct TrainArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Compute device: flex or ndarray (CPU), cuda or wgpu (builds with that feature).
-    #[arg(long, default_value = "flex")]
-    pub device: String,
+    #[arg(long, value_enum, default_value_t = DeviceArg::Flex)]
+    pub device: DeviceArg,
     /// Continue an interrupted (or finished) run directory up to its configured steps, or
     /// --steps more.
     #[arg(long, conflicts_with_all = ["env", "algo", "seed", "n_envs", "config", "out", "set"])]
@@ -204,8 +232,8 @@ fn resolve(a: &TrainArgs) -> Result<RunConfig> {
     if let Some(v) = &a.env {
         cfg.env = v.clone();
     }
-    if let Some(v) = &a.algo {
-        cfg.algo = v.clone();
+    if let Some(v) = a.algo {
+        cfg.algo = v;
     }
     if let Some(v) = a.steps {
         cfg.steps = v;
@@ -256,11 +284,11 @@ pub fn train(a: TrainArgs) -> Result<()> {
         });
     }
     if let Some(dir) = &a.resume {
-        let device = agvrl_rl::device_by_name(if a.device.is_empty() { "flex" } else { &a.device })?;
+        let device = agvrl_rl::device_by_name(a.device.name())?;
         let cfg = RunConfig::load(&dir.join("config.toml"))
             .with_context(|| format!("{} is not a run directory", dir.display()))?;
         let ckpt = dir.join("checkpoint.ckpt");
-        let mut learner: Box<dyn Learner> = if cfg.algo == "ppo" {
+        let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
             Box::new(Ppo::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?)
         } else {
             Box::new(Sac::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?)
@@ -285,7 +313,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
     if a.progress == ProgressMode::Json {
         stop_with_parent(&STOP);
     }
-    let (dir, text) = train_run(cfg, a.out.clone(), &a.device, &STOP, a.progress)?;
+    let (dir, text) = train_run(cfg, a.out.clone(), a.device.name(), &STOP, a.progress)?;
     if a.progress == ProgressMode::Json {
         println!("{}", done_json(&dir, &text));
     } else {
@@ -363,7 +391,7 @@ pub fn train_run(
         "training {} on {} for {} steps (seed {}, {} envs)",
         cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs
     );
-    let mut learner: Box<dyn Learner> = if cfg.algo == "ppo" {
+    let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
         Box::new(Ppo::new(cfg.ppo.clone(), vec_env(&cfg)?, device, cfg.seed)?)
     } else {
         Box::new(Sac::new(cfg.sac.clone(), vec_env(&cfg)?, device, cfg.seed)?)
@@ -412,6 +440,7 @@ fn run_learner(
                     "event": "progress",
                     "steps": p.steps,
                     "target_steps": target,
+                    "updates": p.updates,
                     "episodes": p.episodes,
                     "mean_return": mean.filter(|m| m.is_finite()),
                     "wall_s": t0.elapsed().as_secs_f64(),
@@ -638,7 +667,7 @@ pub fn evaluate(
         }
     }
     s.mean_return /= episodes.max(1) as f64;
-    if env_id.starts_with("search") {
+    if agvrl_envs::registry::spec(env_id).is_some_and(|s| s.task == agvrl_envs::TaskKind::Search) {
         s.coverage = Some(cov_sum / episodes.max(1) as f64);
     }
     Ok(s)
@@ -709,7 +738,7 @@ fn eval_source(a: &EvalArgs) -> Result<EvalSource> {
             policy_path: dir.join(POLICY_FILE),
             env: Some(cfg.env.clone()),
             env_config: cfg.eval_env_config(),
-            algo: cfg.algo.clone(),
+            algo: cfg.algo.to_string(),
             seed: cfg.seed + 2_000_000,
             settings: dir.join("config.toml").display().to_string(),
         });
@@ -723,7 +752,7 @@ fn eval_source(a: &EvalArgs) -> Result<EvalSource> {
             (
                 Some(cfg.env.clone()),
                 cfg.eval_env_config(),
-                cfg.algo.clone(),
+                cfg.algo.to_string(),
                 side.display().to_string(),
             )
         }
@@ -759,7 +788,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     // Every evaluation draws held-out episodes, whatever the settings came from.
     env_cfg.held_out = true;
     if a.layouts == "procedural" {
-        if agvrl_envs::registry::scene_of(&env_id).is_none_or(|s| s == "oval") {
+        if agvrl_envs::registry::spec(&env_id).is_none_or(|s| s.procedural.is_none()) {
             bail!("--layouts procedural needs a search env (outdoor or urban)");
         }
         env_cfg.layout_seed = Some(0);

@@ -24,13 +24,32 @@ const POLICY_READS: [u32; 2] = [1, 2];
 const POLICY_MAGIC: &[u8; 8] = b"AGVRLPOL";
 
 /// Which algorithm trained a policy.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase", try_from = "String")]
 pub enum Algorithm {
     /// Soft Actor-Critic.
     Sac,
     /// Proximal Policy Optimisation.
+    #[default]
     Ppo,
+}
+
+impl std::str::FromStr for Algorithm {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "sac" => Ok(Self::Sac),
+            "ppo" => Ok(Self::Ppo),
+            _ => Err(format!("unknown algo '{s}'; use ppo or sac")),
+        }
+    }
+}
+
+impl TryFrom<String> for Algorithm {
+    type Error = String;
+    fn try_from(s: String) -> std::result::Result<Self, String> {
+        s.parse()
+    }
 }
 
 impl std::fmt::Display for Algorithm {
