@@ -1,4 +1,4 @@
-//! The learning checks: `cargo run --release -p agvrl-rl --example learning -- [sac|ppo|ppo-gsde|ppo-gaussian|all] [steps] [seeds, e.g. 0,1,2]`.
+//! The learning checks on pendulum: `cargo run --release -p agvrl-rl --example learning -- [sac|ppo|ppo-gsde|ppo-gaussian|all] [steps] [seeds, e.g. 0,1,2]`.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

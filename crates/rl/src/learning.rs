@@ -10,7 +10,7 @@ use crate::sac::{Sac, SacConfig};
 use agvrl_envs::pendulum::Pendulum;
 use agvrl_envs::{Env, VecEnv, make};
 
-/// Episodes per evaluation (the protocol).
+/// Episodes per evaluation of the learning checks.
 pub const EVAL_EPISODES: usize = 10;
 
 /// `n` pendulum envs stepped on the caller's thread (the parity runs' vector env).

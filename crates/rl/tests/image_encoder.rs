@@ -1,4 +1,4 @@
-//! Issue 6: the NatureCNN image encoder in PPO and SAC: shapes, policy files and checkpoints
+//! The NatureCNN image encoder in PPO and SAC: shapes, policy files and checkpoints
 //! with an encoder, and a task only the image can solve.
 
 use agvrl_envs::api::validate_action;

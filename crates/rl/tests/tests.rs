@@ -1,8 +1,8 @@
 //! agvrl-rl integration tests (one binary).
 
-mod cnn;
 mod config;
 mod files;
+mod image_encoder;
 mod learning;
 mod reach;
 mod sb3_numerics;

@@ -1,4 +1,4 @@
-//! Issue 2 acceptance tests: physics against closed forms, sensors, determinism, scenes, errors.
+//! agvrl-sim: physics against closed forms, sensors, determinism, scenes, errors.
 
 use agvrl_sim::assets::AssetSource;
 use agvrl_sim::rapier3d::prelude::*;
