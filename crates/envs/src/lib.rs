@@ -25,8 +25,10 @@ pub mod task_env;
 pub mod vec_env;
 pub mod wrappers;
 
+/// Order statistics (agvrl-sim's), for the crates above.
+pub use agvrl_sim::stats;
 pub use api::{BoxSpace, Control, Env, EnvError, Info, SensorFrame, Step, Vehicle};
-pub use check::check_env;
+pub use check::{CheckError, check_env};
 pub use registry::{ENV_IDS, ENVS, EnvConfig, EnvSpec, TaskKind, make, make_task, make_vehicle};
 pub use sim_vehicle::{Randomisation, SimVehicle, SpawnMode};
 pub use task_env::TaskEnv;

@@ -359,7 +359,7 @@ impl<E: Env> VecEnv<E> {
             let mut c = sh
                 .cmd
                 .lock()
-                .map_err(|_| EnvError::Config("VecEnv lock poisoned".into()))?;
+                .map_err(|_| EnvError::Internal("VecEnv lock poisoned by a panic in an env"))?;
             // Every env of the last round is done, so no thread still counts into `finished`.
             sh.finished.store(0, Ordering::Relaxed);
             c.0 += 1;
@@ -386,7 +386,7 @@ impl<E: Env> VecEnv<E> {
                 .lock()
                 .ok()
                 .and_then(|mut s| s.out.take())
-                .unwrap_or_else(|| Err(EnvError::Config("VecEnv lost a result".into())));
+                .unwrap_or_else(|| Err(EnvError::Internal("VecEnv lost a result (a panic in an env?)")));
             match r {
                 Ok(st) => out.push(st),
                 Err(e) => {

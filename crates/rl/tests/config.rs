@@ -64,10 +64,10 @@ fn toml_overrides_a_subset_and_round_trips() {
     let c = PpoConfig::from_toml("n_steps = 1024\ngamma = 0.9\nlearning_rate = 1e-3\n").unwrap();
     assert_eq!((c.n_steps, c.gamma, c.learning_rate), (1024, 0.9, 1e-3));
     assert_eq!(c.batch_size, 64);
-    assert_eq!(PpoConfig::from_toml(&c.to_toml()).unwrap(), c);
+    assert_eq!(PpoConfig::from_toml(&c.to_toml().unwrap()).unwrap(), c);
     let s = SacConfig::from_toml("ent_coef = 0.1\nnet_arch = [64, 64]\n").unwrap();
     assert_eq!(s.ent_coef, EntCoef::Fixed(0.1));
-    assert_eq!(SacConfig::from_toml(&s.to_toml()).unwrap(), s);
+    assert_eq!(SacConfig::from_toml(&s.to_toml().unwrap()).unwrap(), s);
     assert_eq!(
         SacConfig::from_toml("ent_coef = \"auto_0.1\"")
             .unwrap()

@@ -129,10 +129,10 @@ fn image_config_in_toml() {
     let c = PpoConfig::from_toml("n_steps = 64\nimage = { channels = 1, height = 48, width = 64 }\n").unwrap();
     assert_eq!(c.image, Some(ImageSpec::new(1, 48, 64)));
     assert_eq!(c.image.unwrap().features_dim, 256);
-    assert_eq!(PpoConfig::from_toml(&c.to_toml()).unwrap(), c);
+    assert_eq!(PpoConfig::from_toml(&c.to_toml().unwrap()).unwrap(), c);
     let s = SacConfig::from_toml("[image]\nchannels = 3\nheight = 36\nwidth = 36\nfeatures_dim = 64\n").unwrap();
     assert_eq!(s.image.unwrap().features_dim, 64);
-    assert_eq!(SacConfig::from_toml(&s.to_toml()).unwrap(), s);
+    assert_eq!(SacConfig::from_toml(&s.to_toml().unwrap()).unwrap(), s);
     assert!(PpoConfig::from_toml("image = { channels = 1, height = 48, width = 64, depth = 1 }").is_err());
     assert_eq!(PpoConfig::default().image, None);
     // An image wider than the observation is refused when the learner is built.

@@ -48,6 +48,10 @@ pub enum EnvError {
         /// What went wrong there.
         source: Box<EnvError>,
     },
+    /// A bug or an earlier panic left agvrl's own state unusable (a poisoned lock, a lost
+    /// worker result); not something a setting can fix.
+    #[error("internal error: {0}")]
+    Internal(&'static str),
 }
 
 impl EnvError {

@@ -93,9 +93,8 @@ impl PpoConfig {
     }
 
     /// The configuration as TOML.
-    pub fn to_toml(&self) -> String {
-        // A struct of plain numbers, strings and lists always serialises.
-        toml::to_string(self).unwrap_or_default()
+    pub fn to_toml(&self) -> Result<String> {
+        toml::to_string(self).map_err(|e| RlError::Config(format!("PPO config to TOML: {e}")))
     }
 
     /// Reject values the learner cannot run with.

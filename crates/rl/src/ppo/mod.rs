@@ -72,6 +72,8 @@ pub(crate) fn sde_variance(latent: &[f32], sigma_sq: &[f64], a: usize, out: &mut
 /// A PPO learner bound to a vector env.
 pub struct Ppo<E: Env> {
     cfg: PpoConfig,
+    /// `cfg` as TOML, for policy files (serialised once, where a failure can be reported).
+    cfg_toml: String,
     env: VecEnv<E>,
     device: Device,
     obs_dim: usize,
@@ -168,6 +170,7 @@ impl<E: Env> Ppo<E> {
             }
         }
         Ok(Self {
+            cfg_toml: cfg.to_toml()?,
             opt: Adam::new(&params, cfg.learning_rate, 1e-5),
             normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(vec_dim)),
             device: device.clone().without_autodiff(),
@@ -420,7 +423,7 @@ impl<E: Env> Ppo<E> {
                 }
             },
             normalizer: self.normalizer.clone(),
-            config_toml: self.cfg.to_toml(),
+            config_toml: self.cfg_toml.clone(),
             encoder,
         }
     }

@@ -103,9 +103,8 @@ impl SacConfig {
     }
 
     /// The configuration as TOML (what a run saves as `config.resolved.toml`).
-    pub fn to_toml(&self) -> String {
-        // A struct of plain numbers, strings and lists always serialises.
-        toml::to_string(self).unwrap_or_default()
+    pub fn to_toml(&self) -> Result<String> {
+        toml::to_string(self).map_err(|e| RlError::Config(format!("SAC config to TOML: {e}")))
     }
 
     /// Gradient steps taken every `train_freq` vector steps of `n_envs` envs.

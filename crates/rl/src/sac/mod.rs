@@ -34,6 +34,8 @@ use std::path::Path;
 /// A SAC learner bound to a vector env.
 pub struct Sac<E: Env> {
     cfg: SacConfig,
+    /// `cfg` as TOML, for policy files (serialised once, where a failure can be reported).
+    cfg_toml: String,
     env: VecEnv<E>,
     device: Device,
     obs_dim: usize,
@@ -155,6 +157,7 @@ impl<E: Env> Sac<E> {
             buffer: ReplayBuffer::new(cfg.buffer_size, obs_dim, act_dim),
             normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(vec_dim)),
             threads: 1,
+            cfg_toml: cfg.to_toml()?,
             actor_dev: vec![],
             critic_dev: vec![],
             target_dev: vec![],
@@ -340,7 +343,7 @@ impl<E: Env> Sac<E> {
             params: part(0..k),
             head: ActionHead::SquashedGaussian,
             normalizer: self.normalizer.clone(),
-            config_toml: self.cfg.to_toml(),
+            config_toml: self.cfg_toml.clone(),
             encoder: self.cfg.image.map(|spec| EncoderData {
                 spec,
                 params: part(k..n),
