@@ -1,7 +1,8 @@
 //! Deploy figures for `agvrl bench`: watchdog + observation + inference latency per tick,
 //! CPU and memory of `agvrl-drive` driving at 30 Hz in real time, its binary size, and the
-//! ROS 2 loopback rate. Also the /proc readers the binary uses for its summary line.
+//! ROS 2 loopback rate.
 
+use crate::stats::quantile;
 use crate::{DriveConfig, DriveLoop};
 use agvrl_envs::{EnvConfig, make_task, make_vehicle};
 use agvrl_rl::Policy;
@@ -14,25 +15,6 @@ pub fn shipped_policy() -> PathBuf {
         env!("CARGO_MANIFEST_DIR"),
         "/../../assets/policies/racing-oval-ppo.agvrl"
     ))
-}
-
-/// CPU time (user + system) this process has used, seconds (/proc/self/stat; Linux only).
-pub fn cpu_time_s() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
-    let rest = &s[s.rfind(')')? + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
-    // USER_HZ is 100 on every Linux ABI /proc reports in.
-    Some(ticks / 100.0)
-}
-
-/// Resident set size of this process, MB (/proc/self/status VmRSS).
-pub fn rss_mb() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmRSS:"))?;
-    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb / 1024.0)
 }
 
 /// Bytes of an ELF64 file's sections that are loaded into memory (what `strip` keeps, near
@@ -55,16 +37,6 @@ pub fn elf_loaded_bytes(b: &[u8]) -> Option<u64> {
         }
     }
     Some(total)
-}
-
-/// The `q` quantile (0..=1) of `v` (nearest rank; NaN for none).
-pub fn quantile(v: &[f64], q: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    s[((q * s.len() as f64).ceil() as usize).clamp(1, s.len()) - 1]
 }
 
 fn kv(k: &str, v: impl std::fmt::Display) -> (String, String) {

@@ -16,6 +16,7 @@
 pub mod bench;
 pub mod hardware;
 pub mod run_loop;
+pub mod stats;
 
 pub use run_loop::{DeployError, DriveConfig, DriveLoop, Event, Tick};
 

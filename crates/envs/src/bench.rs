@@ -24,9 +24,8 @@ fn timed_s(f: impl FnOnce()) -> f64 {
     t0.elapsed().as_secs_f64()
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+fn median(v: Vec<f64>) -> f64 {
+    agvrl_sim::stats::median(&v)
 }
 
 /// Env figures. `quick` shortens the runs.

@@ -90,9 +90,8 @@ impl Env for RandomEnv {
     }
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+fn median(v: Vec<f64>) -> f64 {
+    agvrl_envs::stats::median(&v)
 }
 
 /// Matrix-product FLOPs of one SAC update (batch `b`, obs `o`, action `a`, hidden `h`):

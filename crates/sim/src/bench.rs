@@ -7,15 +7,14 @@ use std::time::Instant;
 
 /// Median of `reps` timings (seconds) of `f`.
 pub fn median_s(reps: usize, mut f: impl FnMut()) -> f64 {
-    let mut t: Vec<f64> = (0..reps)
+    let t: Vec<f64> = (0..reps)
         .map(|_| {
             let t0 = Instant::now();
             f();
             t0.elapsed().as_secs_f64()
         })
         .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
+    crate::stats::median(&t)
 }
 
 /// A deterministic pseudo-random control sequence (logistic map), so every run drives the same.

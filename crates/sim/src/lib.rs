@@ -20,6 +20,7 @@ pub mod msg;
 pub mod scene;
 pub mod sensors;
 mod sim;
+pub mod stats;
 pub mod urdf;
 pub mod vehicle;
 pub mod world;

@@ -5,7 +5,7 @@
 //! car.toml` drives a ROS 2 car; `--serve-sim racing-oval` is the simulated car behind ROS 2
 //! topics. Each tick prints one `key=value` line, the run ends with a summary line.
 
-use agvrl_deploy::bench::{cpu_time_s, quantile, rss_mb};
+use agvrl_deploy::stats::{cpu_time_s, quantile, rss_mb};
 use agvrl_deploy::{DriveConfig, DriveLoop};
 use agvrl_envs::api::Vehicle;
 use agvrl_envs::task::Task;
