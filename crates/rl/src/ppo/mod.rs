@@ -31,29 +31,55 @@ use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// Index of the first head tensor in the parameter list (after the 2-member trunk).
-fn head_idx(cfg: &PpoConfig) -> usize {
-    2 * cfg.net_arch.len()
+/// Where each part of PPO's networks sits in the one flat parameter list that Adam, the
+/// gradient clipping and checkpoints walk as a whole:
+/// `[trunk..., pi_w, pi_b, vf_w, vf_b, log_std, encoder...]`. The trunk is a 2-member stack
+/// (member 0 the actor's MLP, member 1 the critic's); `log_std` is `[1, 1, a]`, or
+/// `[1, latent, a]` with gSDE; the encoder tensors are there with `image`. Adding a part means
+/// adding a field here, not renumbering uses.
+#[derive(Clone, Debug)]
+pub(crate) struct Layout {
+    /// The actor and critic MLPs (weights and biases, layer by layer).
+    pub(crate) trunk: std::ops::Range<usize>,
+    /// The action-mean head, weight and bias.
+    pub(crate) pi_w: usize,
+    pub(crate) pi_b: usize,
+    /// The value head, weight and bias.
+    pub(crate) vf_w: usize,
+    pub(crate) vf_b: usize,
+    /// The exploration log std (state-independent, or gSDE's per latent unit).
+    pub(crate) log_std: usize,
+    /// The NatureCNN's tensors (empty without `image`).
+    pub(crate) encoder: std::ops::RangeFrom<usize>,
 }
 
-/// Index of the first image-encoder tensor (after `log_std`).
-fn encoder_idx(cfg: &PpoConfig) -> usize {
-    head_idx(cfg) + 5
+impl Layout {
+    pub(crate) fn of(cfg: &PpoConfig) -> Self {
+        let h = 2 * cfg.net_arch.len();
+        Self {
+            trunk: 0..h,
+            pi_w: h,
+            pi_b: h + 1,
+            vf_w: h + 2,
+            vf_b: h + 3,
+            log_std: h + 4,
+            encoder: h + 5..,
+        }
+    }
 }
 
 /// `(mean [1, b, a], value [1, b, 1], actor latent [1, b, latent])` for observations
-/// `x [1, b, o]`. `params` is `[trunk..., pi_w, pi_b, vf_w, vf_b, log_std, encoder...]`;
-/// `log_std` is `[1, 1, a]`, or `[1, latent, a]` with gSDE; the encoder is there with `image`.
+/// `x [1, b, o]`, with `params` laid out as [`Layout`].
 pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (Tensor<3>, Tensor<3>, Tensor<3>) {
-    let h0 = head_idx(cfg);
+    let l = Layout::of(cfg);
     let x = match &cfg.image {
-        Some(spec) => encode(&params[encoder_idx(cfg)..], spec, x),
+        Some(spec) => encode(&params[l.encoder], spec, x),
         None => x,
     };
-    let h = mlp_forward(&params[..h0], x, cfg.activation_fn, true);
+    let h = mlp_forward(&params[l.trunk], x, cfg.activation_fn, true);
     let latent = h.clone().narrow(0, 0, 1);
-    let mean = latent.clone().matmul(params[h0].clone()) + params[h0 + 1].clone();
-    let value = h.narrow(0, 1, 1).matmul(params[h0 + 2].clone()) + params[h0 + 3].clone();
+    let mean = latent.clone().matmul(params[l.pi_w].clone()) + params[l.pi_b].clone();
+    let value = h.narrow(0, 1, 1).matmul(params[l.vf_w].clone()) + params[l.vf_b].clone();
     (mean, value, latent)
 }
 
@@ -162,6 +188,7 @@ impl<E: Env> Ppo<E> {
         params.push([1, 1, 1], b);
         let rows = if cfg.use_sde { last } else { 1 };
         params.push([1, rows, act_dim], vec![cfg.log_std_init as f32; rows * act_dim]);
+        debug_assert_eq!(params.shapes.len(), Layout::of(&cfg).log_std + 1);
         if let Some(spec) = &cfg.image {
             // Drawn last, so MLP-only runs draw exactly what they always did.
             let enc = spec.init(hidden, &mut rng)?;
@@ -248,7 +275,7 @@ impl<E: Env> Ppo<E> {
         let total = n_steps * n_envs;
         let dev = self.device.clone();
         let params = self.params.to_device(&dev);
-        let log_std = self.params.data[head_idx(&self.cfg) + 4].clone();
+        let log_std = self.params.data[Layout::of(&self.cfg).log_std].clone();
         let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
         // log N(x; m, s) summed over elements = sum(-z^2/2) - sum(log s) - a ln(2 pi)/2
         let lp_const = -log_std.iter().sum::<f32>() - a as f32 * 0.918_938_5;
@@ -379,24 +406,27 @@ impl<E: Env> Ppo<E> {
 
     /// The current policy (actor member, log std, normaliser) as host data.
     pub fn policy_data(&self) -> PolicyData {
-        let h0 = head_idx(&self.cfg);
+        let l = Layout::of(&self.cfg);
         let mut params = HostParams {
             shapes: vec![],
             data: vec![],
         };
         // Member 0 of each trunk tensor is the actor's.
-        for (s, d) in self.params.shapes[..h0].iter().zip(&self.params.data[..h0]) {
+        for (s, d) in self.params.shapes[l.trunk.clone()]
+            .iter()
+            .zip(&self.params.data[l.trunk.clone()])
+        {
             let per = s[1] * s[2];
             params.push([1, s[1], s[2]], d[..per].to_vec());
         }
-        params.push(self.params.shapes[h0], self.params.data[h0].clone());
-        params.push(self.params.shapes[h0 + 1], self.params.data[h0 + 1].clone());
-        let e0 = encoder_idx(&self.cfg);
+        for i in [l.pi_w, l.pi_b] {
+            params.push(self.params.shapes[i], self.params.data[i].clone());
+        }
         let encoder = self.cfg.image.map(|spec| EncoderData {
             spec,
             params: HostParams {
-                shapes: self.params.shapes[e0..].to_vec(),
-                data: self.params.data[e0..].to_vec(),
+                shapes: self.params.shapes[l.encoder.clone()].to_vec(),
+                data: self.params.data[l.encoder.clone()].to_vec(),
             },
         });
         let mut sizes = vec![self.params.shapes[0][1]];
@@ -415,11 +445,11 @@ impl<E: Env> Ppo<E> {
             params,
             head: if self.cfg.use_sde {
                 ActionHead::StateDependent {
-                    log_std: self.params.data[h0 + 4].clone(),
+                    log_std: self.params.data[l.log_std].clone(),
                 }
             } else {
                 ActionHead::Gaussian {
-                    log_std: self.params.data[h0 + 4].clone(),
+                    log_std: self.params.data[l.log_std].clone(),
                 }
             },
             normalizer: self.normalizer.clone(),

@@ -9,7 +9,7 @@
 //! (each a Burn dispatch plus its backward) by 5; `tests::fused_head_matches_autodiff` checks
 //! the result against the plain autodiff formulation.
 
-use super::{Ppo, Rollout, forward, head_idx};
+use super::{Layout, Ppo, Rollout, forward};
 use crate::error::{Result, RlError};
 use crate::nets::{Adam, grads_of, to_vec};
 use agvrl_envs::Env;
@@ -195,7 +195,7 @@ impl<E: Env> Ppo<E> {
     ) -> Result<(Head, Vec<Vec<f32>>)> {
         let (o, a, n) = (self.obs_dim, self.act_dim, old_lp.len());
         let ad = self.device.clone().autodiff();
-        let log_std_idx = head_idx(&self.cfg) + 4;
+        let log_std_idx = Layout::of(&self.cfg).log_std;
         let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
         // log_std's gradient comes from the host head; only the networks are tracked.
         let mut params: Vec<Tensor<3>> = self.params.to_tracked(&ad);
@@ -299,7 +299,7 @@ impl<E: Env> Ppo<E> {
         let (o, a) = (self.obs_dim, self.act_dim);
         let total = r.log_probs.len();
         let bs = self.cfg.batch_size.min(total);
-        let log_std_idx = head_idx(&self.cfg) + 4;
+        let log_std_idx = Layout::of(&self.cfg).log_std;
         let mut idx: Vec<usize> = (0..total).collect();
         let (mut pg_sum, mut vf_sum, mut clip_sum, mut ent_sum, mut n_mb) = (0.0, 0.0, 0.0, 0.0, 0usize);
         let (mut gn_sum, mut n_steps) = (0.0, 0usize);
