@@ -99,6 +99,23 @@ def main():
         json.dump(golden, open(out, "w"))
         print(f"wrote {out}")
 
+    # SB3's log-probabilities of agvrl's rollout actions at the weights the rollout was collected
+    # with, against the ones agvrl stored at collection time (the ratios' denominators).
+    with th.no_grad():
+        Pb = lambda i: np.array(d["params_before"][i], dtype=np.float32).reshape(shapes[i])
+        for t, i, k in mapping:
+            w = Pb(i)[k]
+            t.copy_(th.from_numpy(w.T.copy()).reshape(t.shape) if t.dim() == 2 else th.from_numpy(w.reshape(-1)))
+        pol.log_std.copy_(th.from_numpy(Pb(8)[0].reshape(pol.log_std.shape)))
+        r_obs = th.tensor(d["rollout_obs"], dtype=th.float32).reshape(len(d["rollout_log_prob"]), -1)
+        r_act = th.tensor(d["rollout_actions"], dtype=th.float32).reshape(len(d["rollout_log_prob"]), -1)
+        _, lp_sb3, _ = pol.evaluate_actions(r_obs, r_act)
+        lp_ours = th.tensor(d["rollout_log_prob"], dtype=th.float32)
+        dlp = (lp_sb3 - lp_ours).abs()
+        print(f"rollout_log_prob max_abs_diff={dlp.max().item():.3g} mean_abs_diff={dlp.mean().item():.3g} "
+              f"(log-probs from {lp_ours.min().item():.3g} to {lp_ours.max().item():.3g}; "
+              f"std {th.exp(pol.log_std).mean().item():.4f})")
+
     # SB3's GAE (RolloutBuffer.compute_returns_and_advantage) on agvrl's rewards and values.
     rb = m.rollout_buffer
     T, E = rb.buffer_size, rb.n_envs
@@ -144,6 +161,8 @@ def main():
         v = m.logger.name_to_value
         print(f"sb3_train_on_agvrl_rollout rep={rep} approx_kl={v['train/approx_kl']:.5f} "
               f"clip_fraction={v['train/clip_fraction']:.4f} std={v.get('train/std', float('nan')):.4f}")
+    # (From a fresh Adam on both sides only for the first rollout; after --after, agvrl's Adam
+    # carries its moments, so these two lines agree only roughly.)
     print(f"agvrl_update_on_same_rollout approx_kl={d['update_approx_kl']:.5f} "
           f"clip_fraction={d['update_clip_fraction']:.4f} std={d['update_std']:.4f}")
 

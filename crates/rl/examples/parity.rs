@@ -9,9 +9,10 @@
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let trace = args.iter().any(|a| a == "--trace");
-    // `--dump-grads FILE [sde|gaussian] [seed] [--no-shuffle]`: the first rollout, one minibatch's
-    // loss and gradients at the start weights, and what the first update reported
-    // (tools/parity/sb3_gradient_check.py replays it in SB3).
+    // `--dump-grads FILE [sde|gaussian] [seed] [--no-shuffle] [--after STEPS]`: a rollout, one
+    // minibatch's loss and gradients at the weights after its update, and what that update
+    // reported (tools/parity/sb3_gradient_check.py replays it in SB3); `--after` trains that
+    // many env steps first, so the probe sees late training (small std, saturated latents).
     if let Some(i) = args.iter().position(|a| a == "--dump-grads") {
         let path = args.get(i + 1).ok_or("--dump-grads FILE")?;
         let sde = args.get(i + 2).is_none_or(|s| s != "gaussian");
@@ -19,6 +20,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let cfg = agvrl_rl::learning::zoo_pendulum_ppo_config(sde);
         let envs = agvrl_rl::learning::pendulum_envs(4)?;
         let mut ppo = agvrl_rl::Ppo::new(cfg, envs, &agvrl_rl::default_device(), seed)?;
+        if let Some(k) = args.iter().position(|a| a == "--after") {
+            let steps: u64 = args.get(k + 1).ok_or("--after STEPS")?.parse()?;
+            ppo.learn(steps, &mut |_| agvrl_rl::Control::Continue)?;
+        }
         ppo.set_minibatch_shuffle(!args.iter().any(|a| a == "--no-shuffle"));
         let probe = ppo.gradient_probe()?;
         std::fs::write(path, serde_json::to_string(&probe)?)?;
