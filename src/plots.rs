@@ -1,10 +1,10 @@
 //! PNG plots of a run: the learning curve and a top view of the evaluated paths.
 
 use agvrl_sim::Scene;
-use agvrl_sim::rapier3d::prelude::{Pose, SharedShape, Vector};
 use anyhow::{Context, Result, anyhow};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
+use rapier3d::prelude::{Pose, SharedShape, Vector};
 use std::path::Path;
 
 static FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");

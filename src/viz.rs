@@ -4,8 +4,8 @@
 
 use crate::episode::{StepView, speed_mps};
 use agvrl_sim::Sim;
-use agvrl_sim::rapier3d::prelude::{Pose, Rotation, SharedShape};
 use anyhow::{Context, Result};
+use rapier3d::prelude::{Pose, Rotation, SharedShape};
 use rerun::RecordingStream;
 use std::path::PathBuf;
 
@@ -121,7 +121,7 @@ impl Recorder {
     fn mesh(
         &self,
         path: &str,
-        v: impl Iterator<Item = agvrl_sim::rapier3d::prelude::Vector>,
+        v: impl Iterator<Item = rapier3d::prelude::Vector>,
         idx: Vec<[u32; 3]>,
         c: [f32; 3],
     ) -> Result<()> {

@@ -5,11 +5,11 @@ use crate::pendulum::Pendulum;
 use crate::sim_vehicle::{Randomisation, SimVehicle, SpawnMode};
 use crate::task::racing::RacingConfig;
 use crate::task::search::SearchConfig;
-use crate::task::{CommonConfig, ObsConfig, Racing, SafeShaping, Search, SearchReward};
+use crate::task::{ActionMapping, CommonConfig, ObsConfig, Racing, SafeShaping, Search, SearchReward};
 use crate::task_env::TaskEnv;
 use crate::wrappers::{NoiseConfig, Noisy, TimeLimit};
 use agvrl_sim::sensors::LidarConfig;
-use agvrl_sim::{ActionMapping, DynamicsMode, SceneKind, SceneSource, SimConfig};
+use agvrl_sim::{DynamicsMode, SceneKind, SceneSource, SimConfig};
 use serde::{Deserialize, Serialize};
 
 /// The task an env id poses.

@@ -26,7 +26,6 @@ pub mod vehicle;
 pub mod world;
 
 pub use error::SimError;
-pub use rapier3d;
 pub use scene::{SCENE_IDS, Scene, SceneKind};
 pub use sim::{PlanarPose, SceneSource, Sim, SimConfig, VehicleParams};
-pub use vehicle::{ActionMapping, Control, DriveModel, DynamicsMode};
+pub use vehicle::{Control, DriveModel, DynamicsMode};

@@ -1,8 +1,8 @@
 //! agvrl-sim: physics against closed forms, sensors, determinism, scenes, errors.
 
 use agvrl_sim::assets::AssetSource;
-use agvrl_sim::rapier3d::prelude::*;
 use agvrl_sim::*;
+use rapier3d::prelude::*;
 use std::path::PathBuf;
 
 const MODES: [DynamicsMode; 2] = [DynamicsMode::Raycast, DynamicsMode::Multibody];

@@ -1,12 +1,13 @@
 //! Tasks turn a `SensorFrame` into observation, reward and termination: the same code in
 //! simulation and on the car.
 
+mod action;
 pub mod racing;
 pub mod reward;
 pub mod search;
 
 use crate::api::{BoxSpace, Control, MapInfo, RewardTerms, SensorFrame, SensorNeeds, TerminationCause};
-use agvrl_sim::ActionMapping;
+pub use action::ActionMapping;
 use serde::{Deserialize, Serialize};
 
 pub use racing::Racing;

@@ -1,47 +1,10 @@
-//! The paper's actuation (section 5): action -> throttle and steering, AutoVRL's wheel-speed
-//! model, and the Ackermann split of the steering angle between the front wheels.
+//! The paper's actuation (section 5): AutoVRL's wheel-speed model and the Ackermann split of
+//! the steering angle between the front wheels. (How an action becomes a control is the task
+//! layer's: agvrl-envs' `ActionMapping`.)
 
 use serde::{Deserialize, Serialize};
 
-/// How an action `a in [-1, 1]^2` becomes throttle and steering.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ActionMapping {
-    /// The paper and AutoVRL: T = clamp(a0, 0, 1), delta = clamp(a1, -delta_max, delta_max) with
-    /// a1 read as radians (half of a0's range coasts, most of a1's saturates).
-    Paper,
-    /// T = (a0 + 1) / 2, delta = a1 * delta_max: every part of the action range does something.
-    #[default]
-    Scaled,
-    /// T = clamp(a0, 0, 1), delta = a1 * delta_max: the lower half of a0 asks for a standstill,
-    /// so with a braking drive a car can stop and stay stopped under exploration noise.
-    ScaledStop,
-}
-
 pub use crate::msg::Control;
-
-impl ActionMapping {
-    /// Map a (finite) action to a control. Non-finite inputs give a safe zero control.
-    pub fn control(self, a0: f64, a1: f64, delta_max_rad: f64) -> Control {
-        if !a0.is_finite() || !a1.is_finite() {
-            return Control::default();
-        }
-        match self {
-            ActionMapping::Paper => Control {
-                throttle: a0.clamp(0.0, 1.0),
-                steering_rad: a1.clamp(-delta_max_rad, delta_max_rad),
-            },
-            ActionMapping::Scaled => Control {
-                throttle: ((a0.clamp(-1.0, 1.0) + 1.0) / 2.0),
-                steering_rad: a1.clamp(-1.0, 1.0) * delta_max_rad,
-            },
-            ActionMapping::ScaledStop => Control {
-                throttle: a0.clamp(0.0, 1.0),
-                steering_rad: a1.clamp(-1.0, 1.0) * delta_max_rad,
-            },
-        }
-    }
-}
 
 /// AutoVRL's wheel-speed model, integrated once per control period:
 /// `w <- max(0, w + t_s (c_t T - w (c_d w + c_r)))`, w in rad/s.
@@ -104,62 +67,6 @@ pub fn ackermann_split(delta: f64, wheelbase_m: f64, track_m: f64, ackermann: bo
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn paper_mapping_clips_like_autovrl() {
-        let c = ActionMapping::Paper.control(-0.5, 0.9, 0.36);
-        assert_eq!(
-            c,
-            Control {
-                throttle: 0.0,
-                steering_rad: 0.36
-            }
-        );
-        let c = ActionMapping::Paper.control(0.25, -0.1, 0.36);
-        assert_eq!(
-            c,
-            Control {
-                throttle: 0.25,
-                steering_rad: -0.1
-            }
-        );
-    }
-
-    #[test]
-    fn scaled_mapping_uses_the_whole_range() {
-        let c = ActionMapping::Scaled.control(-1.0, -1.0, 0.36);
-        assert_eq!(
-            c,
-            Control {
-                throttle: 0.0,
-                steering_rad: -0.36
-            }
-        );
-        let c = ActionMapping::Scaled.control(0.0, 0.5, 0.36);
-        assert_eq!(
-            c,
-            Control {
-                throttle: 0.5,
-                steering_rad: 0.18
-            }
-        );
-        assert_eq!(ActionMapping::Scaled.control(f64::NAN, 0.0, 0.36), Control::default());
-        let stop = ActionMapping::ScaledStop;
-        assert_eq!(
-            stop.control(-0.3, -1.0, 0.36),
-            Control {
-                throttle: 0.0,
-                steering_rad: -0.36
-            }
-        );
-        assert_eq!(
-            stop.control(0.5, 0.5, 0.36),
-            Control {
-                throttle: 0.5,
-                steering_rad: 0.18
-            }
-        );
-    }
 
     #[test]
     fn drive_model_converges_to_autovrl_terminal_speed() {

@@ -4,6 +4,6 @@ pub mod actuation;
 pub(crate) mod body;
 pub mod spec;
 
-pub use actuation::{ActionMapping, Control, DriveModel, ackermann_split};
+pub use actuation::{Control, DriveModel, ackermann_split};
 pub use body::{BodyParams, DynamicsMode};
 pub use spec::{DriveSpec, SteeringSpec, VehicleModel, VehicleSpec, WheelGeom, WheelSpec};
