@@ -469,8 +469,7 @@ mod cli {
         assert!(o.status.success(), "{}", stderr(&o));
         let last = stdout(&o)
             .lines()
-            .filter(|l| l.contains("\"event\":\"progress\""))
-            .last()
+            .rfind(|l| l.contains("\"event\":\"progress\""))
             .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
             .expect("progress lines");
         // Learning starts after 100 env steps: 38 vector steps of 8 envs train, 8 steps each.

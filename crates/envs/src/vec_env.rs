@@ -386,7 +386,7 @@ impl<E: Env> VecEnv<E> {
                 .lock()
                 .ok()
                 .and_then(|mut s| s.out.take())
-                .unwrap_or_else(|| Err(EnvError::Internal("VecEnv lost a result (a panic in an env?)")));
+                .unwrap_or(Err(EnvError::Internal("VecEnv lost a result (a panic in an env?)")));
             match r {
                 Ok(st) => out.push(st),
                 Err(e) => {
