@@ -13,7 +13,7 @@
 //! Entry points: [`Sac::new`] / [`Ppo::new`] (config, `VecEnv`, device, seed), `learn(steps,
 //! callback)` with [`Progress`] and [`Control`], `save_policy`, `save_checkpoint` /
 //! `load_checkpoint`, [`Policy::load`] + [`Policy::act`], [`evaluate`], [`bench::run`],
-//! [`learning::pendulum_sac`] / [`learning::pendulum_ppo`].
+//! [`learning::sac_parity`] / [`learning::ppo_parity`].
 //!
 //! Invariants:
 //! - The learners know nothing of vehicles: observations and actions are flat `f32` rows; the
