@@ -1,6 +1,6 @@
 //! The `agvrl` command line (the `agvrl` binary, and the `agvrl` script of the Python wheel).
 
-use crate::{probe, train};
+use crate::{eval, probe, train, view};
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
@@ -16,9 +16,9 @@ enum Cmd {
     /// Train a policy and leave a run directory under runs/ (or --out).
     Train(train::TrainArgs),
     /// Evaluate a trained run with deterministic actions; prints key=value lines.
-    Eval(train::EvalArgs),
+    Eval(eval::EvalArgs),
     /// Drive one episode (a policy, or random actions) into the rerun viewer or an .rrd file.
-    View(train::ViewArgs),
+    View(view::ViewArgs),
     /// List the environment ids with their observation and action spaces.
     Envs,
     /// Print what the car senses at a pose (LiDAR scan, GPS, IMU) as JSON.
@@ -74,8 +74,8 @@ fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
         None => train::train(train::TrainArgs::default()),
         Some(Cmd::Train(a)) => train::train(a),
-        Some(Cmd::Eval(a)) => train::eval(a),
-        Some(Cmd::View(a)) => train::view(a),
+        Some(Cmd::Eval(a)) => eval::eval(a),
+        Some(Cmd::View(a)) => view::view(a),
         Some(Cmd::Envs) => envs(),
         Some(Cmd::Probe(a)) => probe::probe(a),
         Some(Cmd::Bench { quick, learning, only }) => bench(quick, learning, only),

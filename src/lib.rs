@@ -6,11 +6,14 @@ pub mod config;
 // Without rerun, nothing reads what only recordings use.
 #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
 pub mod episode;
+pub mod eval;
 pub mod plots;
 pub mod probe;
 pub mod runs;
 #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
 pub mod sink;
 pub mod train;
+#[cfg_attr(not(feature = "rerun"), allow(dead_code))]
+pub mod view;
 #[cfg_attr(not(feature = "rerun"), path = "viz_off.rs")]
 pub mod viz;

@@ -1,0 +1,381 @@
+//! `agvrl eval`: deterministic evaluation of a policy on held-out episodes, its summary lines,
+//! trajectory plot and recording (training runs it at the end too).
+
+use crate::config::RunConfig;
+use crate::episode::{Observer, RandomActions, StepView, drive, make_sim_env};
+use crate::plots::{self, Path2};
+use crate::train::POLICY_FILE;
+use crate::viz::{self, Recorder};
+use agvrl_envs::{Env, EnvConfig, Step, make};
+use agvrl_rl::Policy;
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct EvalArgs {
+    /// A run directory written by `agvrl train` (its policy, env and env settings).
+    #[arg(long, required_unless_present = "policy", conflicts_with = "policy")]
+    pub run: Option<PathBuf>,
+    /// A policy file; env and env settings come from FILE.toml beside it when present (a run's
+    /// config.toml, as shipped in assets/policies), else from the config.toml of the run
+    /// directory holding it (runs/<dir>/policy.agvrl), else --env with the default settings.
+    #[arg(long)]
+    pub policy: Option<PathBuf>,
+    /// Base of the evaluation episodes' seeds: episode k resets with seed S + k, drawn from the
+    /// held-out half of the seed space that training never uses (default: the run's seed +
+    /// 2,000,000, or 0 for --policy).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Maps: builtin (the env's own map) or procedural (a new held-out layout of the env's kind
+    /// and size every episode, never one a training run drew).
+    #[arg(long, default_value = "builtin", value_parser = ["builtin", "procedural"])]
+    pub layouts: String,
+    /// Env preset applied on top of the policy's env settings: sim2real adds sensor noise,
+    /// latency and domain randomisation.
+    #[arg(long, value_parser = ["sim2real"])]
+    pub preset: Option<String>,
+    /// Episode length limit, control steps (default: the run's evaluation limit).
+    #[arg(long)]
+    pub max_steps: Option<u64>,
+    /// Number of deterministic episodes.
+    #[arg(long, default_value_t = 5)]
+    pub episodes: usize,
+    /// Record the episodes into this rerun file (.rrd; open it with `rerun FILE`).
+    #[arg(long, value_name = "FILE.rrd", conflicts_with = "spawn_viewer")]
+    pub rerun: Option<PathBuf>,
+    /// Stream the episodes to a rerun viewer started from `rerun` on your PATH.
+    #[arg(long)]
+    pub spawn_viewer: bool,
+    /// Also draw the evaluated paths over the map into this PNG.
+    #[arg(long, value_name = "FILE.png")]
+    pub plot: Option<PathBuf>,
+    /// Evaluate on another env with the same spaces (a generalisation test, e.g. a policy
+    /// trained on search-outdoor-20 run on search-urban-50); the run's env settings are kept.
+    #[arg(long, value_name = "ID")]
+    pub env: Option<String>,
+    /// Drive uniform random actions instead of the policy, on the same episodes: the baseline
+    /// the policy should beat (e.g. its coverage).
+    #[arg(long)]
+    pub random: bool,
+}
+
+/// What deterministic evaluation found.
+pub struct Summary {
+    pub episodes: usize,
+    pub mean_return: f64,
+    pub collisions: usize,
+    pub laps: u32,
+    pub best_lap_s: Option<f64>,
+    pub coverage: Option<f64>,
+    /// Subjects found / placed, summed over episodes, and the find times.
+    pub subjects: (usize, usize, Vec<f64>),
+    pub racing: bool,
+    /// Why each episode ended, in order.
+    pub ended: Vec<&'static str>,
+}
+
+impl Summary {
+    pub fn lines(&self) -> Vec<String> {
+        let mut v = vec![
+            format!("mean_return={:.2}", self.mean_return),
+            format!("episodes={}", self.episodes),
+            format!("collisions={}", self.collisions),
+            format!("ended={}", self.ended.join(",")),
+        ];
+        if self.subjects.1 > 0 {
+            v.push(format!("subjects_found={}/{}", self.subjects.0, self.subjects.1));
+            let t = &self.subjects.2;
+            if !t.is_empty() {
+                v.push(format!("mean_find_s={:.2}", t.iter().sum::<f64>() / t.len() as f64));
+            }
+        }
+        if let Some(c) = self.coverage {
+            v.push(format!("coverage={c:.3}"));
+        }
+        if self.racing {
+            v.push(format!("laps={}", self.laps));
+            v.push(format!(
+                "best_lap_s={}",
+                self.best_lap_s
+                    .map(|b| format!("{b:.2}"))
+                    .unwrap_or_else(|| "none".into())
+            ));
+        }
+        v
+    }
+}
+
+fn account(s: &mut Summary, st: &Step, cov_sum: &mut f64) {
+    if st.terminated {
+        s.collisions += 1;
+    }
+    use agvrl_envs::api::TerminationCause as C;
+    s.ended.push(match (st.terminated, st.info.termination) {
+        (false, _) => "time_limit",
+        (true, Some(C::Contact)) => "contact",
+        (true, Some(C::TooClose)) => "too_close",
+        (true, Some(C::Flipped)) => "flipped",
+        (true, Some(C::OutOfBounds)) => "out_of_bounds",
+        (true, None) => "terminated",
+    });
+    if let Some(r) = &st.info.racing {
+        s.racing = true;
+        s.laps += r.laps;
+        if let Some(b) = r.best_lap_s {
+            s.best_lap_s = Some(s.best_lap_s.map_or(b, |x: f64| x.min(b)));
+        }
+    }
+    if let Some(c) = &st.info.search {
+        *cov_sum += c.coverage;
+        s.subjects.0 += c.subjects_found;
+        s.subjects.1 += c.subjects_total;
+        s.subjects.2.extend(&c.find_times_s);
+    }
+}
+
+/// Deterministic evaluation; `obs` sees every step of vehicle envs.
+pub fn evaluate(
+    mut policy: Option<&mut Policy>,
+    env_id: &str,
+    env_cfg: &EnvConfig,
+    episodes: usize,
+    seed: u64,
+    obs: &mut Observer<'_>,
+) -> Result<Summary> {
+    let mut s = Summary {
+        episodes,
+        mean_return: 0.0,
+        collisions: 0,
+        laps: 0,
+        best_lap_s: None,
+        coverage: None,
+        subjects: (0, 0, Vec::new()),
+        racing: false,
+        ended: Vec::new(),
+    };
+    let mut cov_sum = 0.0;
+    let check = |o: &agvrl_envs::BoxSpace, a: &agvrl_envs::BoxSpace, p: &Option<&mut Policy>| match p {
+        Some(p) => p.check_spaces(o, a).context("the policy does not fit this env"),
+        None => Ok(()),
+    };
+    // Without a policy: uniform random actions, the baseline a policy should beat.
+    let mut random = RandomActions::new(seed);
+    let mut act_of = |policy: &mut Option<&mut Policy>, space: &agvrl_envs::BoxSpace, o: &[f32]| -> Result<Vec<f32>> {
+        Ok(match policy {
+            Some(p) => p.act(o, true)?,
+            None => random.sample(&space.low, &space.high),
+        })
+    };
+    match make_sim_env(env_id, env_cfg)? {
+        Some(mut env) => {
+            check(&env.observation_space(), &env.action_space(), &policy)?;
+            let space = env.action_space();
+            for k in 0..episodes {
+                let mut act = |o: &[f32]| act_of(&mut policy, &space, o);
+                let (ret, last) = drive(&mut env, seed + k as u64, k, &mut act, obs)?;
+                s.mean_return += ret;
+                account(&mut s, &last, &mut cov_sum);
+            }
+        }
+        None => {
+            let mut env = make(env_id, env_cfg)?;
+            check(&env.observation_space(), &env.action_space(), &policy)?;
+            let space = env.action_space();
+            for k in 0..episodes {
+                let (mut o, _) = env.reset(Some(seed + k as u64))?;
+                loop {
+                    let st = env.step(&act_of(&mut policy, &space, &o)?)?;
+                    s.mean_return += st.reward;
+                    if st.done() {
+                        account(&mut s, &st, &mut cov_sum);
+                        break;
+                    }
+                    o = st.obs;
+                }
+            }
+        }
+    }
+    s.mean_return /= episodes.max(1) as f64;
+    if agvrl_envs::registry::spec(env_id).is_some_and(|s| s.task == agvrl_envs::TaskKind::Search) {
+        s.coverage = Some(cov_sum / episodes.max(1) as f64);
+    }
+    Ok(s)
+}
+
+/// Collects evaluated paths (and the scene) for trajectory.png, and records into rerun.
+#[derive(Default)]
+pub(crate) struct Watch {
+    pub(crate) paths: Vec<Path2>,
+    pub(crate) scene: Option<agvrl_sim::Scene>,
+    pub(crate) rec: Option<Recorder>,
+    /// Record only episodes below this index.
+    pub(crate) rec_episodes: usize,
+    /// Draw only the paths of episodes below this index.
+    pub(crate) plot_episodes: usize,
+}
+
+impl Watch {
+    pub(crate) fn see(&mut self, v: &StepView<'_>) -> Result<()> {
+        if self.scene.is_none() {
+            self.scene = Some(v.sim.scene().clone());
+        }
+        if v.step == 0 && v.episode < self.plot_episodes {
+            self.paths.push(Path2 {
+                xy: Vec::new(),
+                collided: false,
+            });
+        }
+        if v.episode < self.plot_episodes
+            && let Some(p) = self.paths.last_mut()
+        {
+            let t = v.sim.base_pose().translation;
+            p.xy.push((t.x, t.y));
+            p.collided |= v.terminated;
+        }
+        if v.episode < self.rec_episodes
+            && let Some(r) = &mut self.rec
+        {
+            r.step(v)?;
+        }
+        Ok(())
+    }
+
+    pub(crate) fn plot(&self, path: &std::path::Path, title: &str) -> Result<bool> {
+        match &self.scene {
+            Some(scene) => plots::trajectory(path, scene, &self.paths, title).map(|_| true),
+            None => Ok(false),
+        }
+    }
+}
+
+/// Where `agvrl eval` takes its policy and settings from.
+struct EvalSource {
+    policy_path: PathBuf,
+    env: Option<String>,
+    env_config: EnvConfig,
+    algo: String,
+    seed: u64,
+    /// Where the env settings came from (a TOML path, or `default`).
+    settings: String,
+}
+
+fn eval_source(a: &EvalArgs) -> Result<EvalSource> {
+    if let Some(dir) = &a.run {
+        let cfg = RunConfig::load(&dir.join("config.toml"))
+            .with_context(|| format!("{} is not a run directory", dir.display()))?;
+        return Ok(EvalSource {
+            policy_path: dir.join(POLICY_FILE),
+            env: Some(cfg.env.clone()),
+            env_config: cfg.eval_env_config(),
+            algo: cfg.algo.to_string(),
+            seed: cfg.seed + 2_000_000,
+            settings: dir.join("config.toml").display().to_string(),
+        });
+    }
+    let Some(path) = &a.policy else {
+        bail!("give --run DIR or --policy FILE");
+    };
+    let (env, env_config, algo, settings) = match agvrl_deploy::settings_beside(path) {
+        Some(side) => {
+            let cfg = RunConfig::load(&side).with_context(|| format!("reading {}", side.display()))?;
+            (
+                Some(cfg.env.clone()),
+                cfg.eval_env_config(),
+                cfg.algo.to_string(),
+                side.display().to_string(),
+            )
+        }
+        None => (None, EnvConfig::default(), "policy".to_string(), "default".to_string()),
+    };
+    Ok(EvalSource {
+        policy_path: path.clone(),
+        env,
+        env_config,
+        algo,
+        seed: 0,
+        settings,
+    })
+}
+
+pub fn eval(a: EvalArgs) -> Result<()> {
+    if a.episodes == 0 {
+        bail!("--episodes must be at least 1");
+    }
+    let src = eval_source(&a)?;
+    let mut policy = match a.random {
+        true => None,
+        false => {
+            Some(Policy::load(&src.policy_path).with_context(|| format!("loading {}", src.policy_path.display()))?)
+        }
+    };
+    let env_id = a
+        .env
+        .clone()
+        .or(src.env.clone())
+        .context("--env is needed: the policy has no FILE.toml beside it naming its env")?;
+    let mut env_cfg = src.env_config.clone();
+    // Every evaluation draws held-out episodes, whatever the settings came from.
+    env_cfg.held_out = true;
+    if a.layouts == "procedural" {
+        if agvrl_envs::registry::spec(&env_id).is_none_or(|s| s.procedural.is_none()) {
+            bail!("--layouts procedural needs a search env (outdoor or urban)");
+        }
+        env_cfg.layout_seed = Some(0);
+        env_cfg.new_layout_each_episode = true;
+    }
+    if a.preset.as_deref() == Some("sim2real") {
+        let s2r = EnvConfig::sim2real();
+        env_cfg.noise = s2r.noise;
+        env_cfg.randomisation = s2r.randomisation;
+    }
+    if let Some(n) = a.max_steps {
+        if n == 0 {
+            bail!("--max-steps must be at least 1");
+        }
+        env_cfg.max_steps = n;
+    }
+    let seed = a.seed.unwrap_or(src.seed);
+    let mut watch = Watch {
+        rec_episodes: a.episodes,
+        // Every episode of procedural layouts drives another map: draw the first one only.
+        plot_episodes: if a.layouts == "procedural" { 1 } else { usize::MAX },
+        ..Watch::default()
+    };
+    if let Some(sink) = viz::sink_of(a.rerun.as_deref(), a.spawn_viewer) {
+        watch.rec = Some(Recorder::new(sink, &format!("{} eval", src.policy_path.display()))?);
+    }
+    let s = evaluate(policy.as_mut(), &env_id, &env_cfg, a.episodes, seed, &mut |v| {
+        watch.see(v)
+    })?;
+    println!("env={env_id}");
+    println!(
+        "policy={}",
+        if a.random {
+            "random".to_string()
+        } else if a.run.is_some() {
+            POLICY_FILE.to_string()
+        } else {
+            src.policy_path.display().to_string()
+        }
+    );
+    println!("settings={}", src.settings);
+    println!("seed={seed}");
+    println!("layouts={}", a.layouts);
+    println!("preset={}", a.preset.as_deref().unwrap_or("none"));
+    for l in s.lines() {
+        println!("{l}");
+    }
+    if let Some(r) = watch.rec.take()
+        && let Some(p) = r.finish()?
+    {
+        println!("rrd={}", p.display());
+    }
+    if let Some(p) = &a.plot {
+        if !watch.plot(p, &format!("{env_id} {}: deterministic evaluation", src.algo))? {
+            bail!("{env_id} has no map to draw");
+        }
+        println!("plot={}", p.display());
+    }
+    Ok(())
+}

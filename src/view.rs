@@ -1,0 +1,99 @@
+//! `agvrl view`: drive one episode (a policy or random actions) into the rerun viewer or an
+//! .rrd file.
+
+use crate::config::RunConfig;
+use crate::episode::{RandomActions, drive, make_sim_env};
+use crate::train::POLICY_FILE;
+use crate::viz::{self, Recorder, Sink};
+use agvrl_envs::{Env, EnvConfig};
+use agvrl_rl::Policy;
+use anyhow::{Context, Result};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct ViewArgs {
+    /// Environment id (see `agvrl envs`).
+    #[arg(long, required_unless_present = "run")]
+    pub env: Option<String>,
+    /// Drive with this policy file (default: uniform random actions).
+    #[arg(long)]
+    pub policy: Option<PathBuf>,
+    /// Take env, env settings and policy from a run directory.
+    #[arg(long, conflicts_with_all = ["env"])]
+    pub run: Option<PathBuf>,
+    /// Seed of the episode (spawn, random actions).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Episode length limit, control steps (default: the env's).
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Write the recording here (default: view-<env>.rrd).
+    #[arg(long, value_name = "FILE.rrd", conflicts_with = "spawn_viewer")]
+    pub rerun: Option<PathBuf>,
+    /// Stream to a rerun viewer started from `rerun` on your PATH instead of a file.
+    #[arg(long)]
+    pub spawn_viewer: bool,
+    /// Mount the vehicle camera (160x120, 80 degrees) and record its RGB, depth and
+    /// segmentation images.
+    #[arg(long)]
+    pub camera: bool,
+}
+
+/// Drive one episode (policy or random actions) into rerun.
+pub fn view(a: ViewArgs) -> Result<()> {
+    let (env_id, mut env_cfg, policy_path) = match &a.run {
+        Some(dir) => {
+            let cfg = RunConfig::load(&dir.join("config.toml"))
+                .with_context(|| format!("{} is not a run directory", dir.display()))?;
+            let p = a.policy.clone().unwrap_or_else(|| dir.join(POLICY_FILE));
+            (cfg.env.clone(), cfg.eval_env_config(), Some(p))
+        }
+        None => (
+            a.env.clone().unwrap_or_default(),
+            EnvConfig::default(),
+            a.policy.clone(),
+        ),
+    };
+    if let Some(n) = a.steps {
+        env_cfg.max_steps = n;
+    }
+    if a.camera && env_cfg.camera.is_none() {
+        env_cfg.camera = Some(Default::default());
+    }
+    let mut env = make_sim_env(&env_id, &env_cfg)?.with_context(|| format!("{env_id} has no vehicle to view"))?;
+    let mut policy = match &policy_path {
+        Some(p) => {
+            let pol = Policy::load(p).with_context(|| format!("loading {}", p.display()))?;
+            pol.check_spaces(&env.observation_space(), &env.action_space())
+                .context("the policy does not fit this env")?;
+            Some(pol)
+        }
+        None => None,
+    };
+    let sink = viz::sink_of(a.rerun.as_deref(), a.spawn_viewer)
+        .unwrap_or_else(|| Sink::File(PathBuf::from(format!("view-{env_id}.rrd"))));
+    let mut rec = Recorder::new(sink, &format!("{env_id} view"))?;
+    let space = env.action_space();
+    let mut rng = RandomActions::new(a.seed);
+    let mut act = |o: &[f32]| -> Result<Vec<f32>> {
+        match &mut policy {
+            Some(p) => Ok(p.act(o, true)?),
+            None => Ok(rng.sample(&space.low, &space.high)),
+        }
+    };
+    let (ret, last) = drive(&mut env, a.seed, 0, &mut act, &mut |v| rec.step(v))?;
+    println!("env={env_id}");
+    println!(
+        "policy={}",
+        policy_path.map_or("random".into(), |p| p.display().to_string())
+    );
+    println!("steps={}", env.elapsed());
+    println!("return={ret:.2}");
+    println!("terminated={}", last.terminated);
+    if let Some(p) = rec.finish()? {
+        println!("rrd={}", p.display());
+        eprintln!("open it with: rerun {}", p.display());
+    }
+    Ok(())
+}
