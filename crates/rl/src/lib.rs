@@ -53,6 +53,8 @@ mod error;
 pub mod eval;
 mod file;
 #[cfg(feature = "train")]
+mod gaussian;
+#[cfg(feature = "train")]
 pub mod learning;
 pub mod nets;
 pub mod normalize;

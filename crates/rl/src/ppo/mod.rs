@@ -21,6 +21,7 @@ pub use update::GradientProbe;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter};
 use crate::cnn::encode;
 use crate::error::Result;
+use crate::gaussian::HALF_LN_2PI_F32;
 use crate::nets::{Adam, HostParams, Init, MlpSpec, init_layer, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
 use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, check_space};
@@ -278,7 +279,7 @@ impl<E: Env> Ppo<E> {
         let log_std = self.params.data[Layout::of(&self.cfg).log_std].clone();
         let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
         // log N(x; m, s) summed over elements = sum(-z^2/2) - sum(log s) - a ln(2 pi)/2
-        let lp_const = -log_std.iter().sum::<f32>() - a as f32 * 0.918_938_5;
+        let lp_const = -log_std.iter().sum::<f32>() - a as f32 * HALF_LN_2PI_F32;
         let latent_dim = *self.cfg.net_arch.last().unwrap_or(&o);
         let sigma_sq: Vec<f64> = log_std.iter().map(|l| (2.0 * *l as f64).exp()).collect();
         let mut expl = vec![0.0f32; n_envs * latent_dim * a];
@@ -331,7 +332,7 @@ impl<E: Env> Ppo<E> {
                 if sde {
                     let h = &latent[e * latent_dim..(e + 1) * latent_dim];
                     sde_variance(h, &sigma_sq, a, &mut var);
-                    lp = -(a as f32) * 0.918_938_5;
+                    lp = -(a as f32) * HALF_LN_2PI_F32;
                     for j in 0..a {
                         let m = &expl[e * latent_dim * a..(e + 1) * latent_dim * a];
                         let noise: f32 = h.iter().enumerate().map(|(k, hk)| hk * m[k * a + j]).sum();

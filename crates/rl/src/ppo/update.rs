@@ -11,11 +11,10 @@
 
 use super::{Layout, Ppo, Rollout, forward};
 use crate::error::{Result, RlError};
+use crate::gaussian::HALF_LN_2PI;
 use crate::nets::{Adam, grads_of, to_vec};
 use agvrl_envs::Env;
 use burn::tensor::{Tensor, TensorData};
-
-const HALF_LN_2PI: f64 = 0.918_938_533_204_672_7;
 
 /// What [`Ppo::gradient_probe`] returns (weights in agvrl's layout: `[members, in, out]`).
 #[doc(hidden)]

@@ -14,12 +14,11 @@
 use super::Sac;
 use crate::cnn::{ImageSpec, encode};
 use crate::error::{Result, RlError};
+use crate::gaussian::HALF_LN_2PI_F32 as HALF_LN_2PI;
 use crate::nets::{Activation, grads_of, mlp_forward, to_vec};
 use crate::policy::{LOG_STD_MAX, LOG_STD_MIN};
 use agvrl_envs::Env;
 use burn::tensor::{Device, Tensor, TensorData};
-
-const HALF_LN_2PI: f32 = 0.918_938_5;
 
 /// `(tanh action [m, b, a], log_prob [m, b, 1])` of the squashed Gaussian with
 /// reparameterisation noise `eps`, from actor outputs `[m, b, 2a]`.
