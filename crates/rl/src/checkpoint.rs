@@ -5,9 +5,10 @@
 //! (env reset with a seed derived from the run seed and the step count); everything the
 //! learner owns continues exactly.
 
+use crate::adam::Adam;
 use crate::error::{Result, RlError};
 use crate::file;
-use crate::nets::{Adam, HostParams};
+use crate::nets::HostParams;
 use crate::policy::Algorithm;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};

@@ -41,6 +41,7 @@
 
 #![warn(missing_docs)]
 
+pub mod adam;
 #[cfg(feature = "train")]
 pub mod bench;
 #[cfg(feature = "train")]

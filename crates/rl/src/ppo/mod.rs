@@ -18,11 +18,12 @@ pub use config::PpoConfig;
 #[doc(hidden)]
 pub use update::GradientProbe;
 
+use crate::adam::Adam;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter};
 use crate::cnn::encode;
 use crate::error::Result;
 use crate::gaussian::HALF_LN_2PI_F32;
-use crate::nets::{Adam, HostParams, Init, MlpSpec, init_layer, mlp_forward, to_vec};
+use crate::nets::{HostParams, Init, MlpSpec, init_layer, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
 use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, check_space};
 use crate::progress::{Control, Episodes, Losses, Progress};

@@ -10,9 +10,10 @@
 //! the result against the plain autodiff formulation.
 
 use super::{Layout, Ppo, Rollout, forward};
+use crate::adam::Adam;
 use crate::error::{Result, RlError};
 use crate::gaussian::HALF_LN_2PI;
-use crate::nets::{Adam, grads_of, to_vec};
+use crate::nets::{grads_of, to_vec};
 use agvrl_envs::Env;
 use burn::tensor::{Tensor, TensorData};
 

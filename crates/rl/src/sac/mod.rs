@@ -17,11 +17,12 @@ mod update;
 
 pub use config::{EntCoef, SacConfig};
 
+use crate::adam::Adam;
 use crate::buffer::ReplayBuffer;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter};
 use crate::cnn::encode;
 use crate::error::{Result, RlError};
-use crate::nets::{Activation, Adam, HostParams, Init, MlpSpec, mlp_forward, to_vec};
+use crate::nets::{Activation, HostParams, Init, MlpSpec, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
 use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, check_space, unsquash};
 use crate::progress::{Control, Episodes, Losses, Progress};
