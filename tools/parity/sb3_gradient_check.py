@@ -29,7 +29,6 @@ def main():
     m = PPO("MlpPolicy", make_vec_env("Pendulum-v1", n_envs=4, seed=0), device="cpu", use_sde=sde,
             n_steps=1024, gamma=0.9, learning_rate=1e-3, sde_sample_freq=4)
     pol = m.policy
-    P = lambda i: np.array(params[i], dtype=np.float32).reshape(shapes[i])
     # agvrl: [members, in, out] row-major; torch Linear: weight [out, in].
     mapping = [  # (torch parameter, agvrl tensor index, member)
         (pol.mlp_extractor.policy_net[0].weight, 0, 0), (pol.mlp_extractor.policy_net[0].bias, 1, 0),
@@ -39,11 +38,17 @@ def main():
         (pol.action_net.weight, 4, 0), (pol.action_net.bias, 5, 0),
         (pol.value_net.weight, 6, 0), (pol.value_net.bias, 7, 0),
     ]
-    with th.no_grad():
-        for t, i, k in mapping:
-            w = P(i)[k]  # [in, out]
-            t.copy_(th.from_numpy(w.T.copy()).reshape(t.shape) if t.dim() == 2 else th.from_numpy(w.reshape(-1)))
-        pol.log_std.copy_(th.from_numpy(P(8)[0].reshape(pol.log_std.shape)))
+
+    def load(weights):
+        """agvrl's tensors (layout [members, in, out]) into SB3's policy."""
+        W = lambda i: np.array(weights[i], dtype=np.float32).reshape(shapes[i])
+        with th.no_grad():
+            for t, i, k in mapping:
+                w = W(i)[k]  # [in, out]
+                t.copy_(th.from_numpy(w.T.copy()).reshape(t.shape) if t.dim() == 2 else th.from_numpy(w.reshape(-1)))
+            pol.log_std.copy_(th.from_numpy(W(8)[0].reshape(pol.log_std.shape)))
+
+    load(params)
     pol.set_training_mode(True)
     n = len(d["old_log_prob"])
     obs = th.tensor(d["obs"], dtype=th.float32).reshape(n, -1)
@@ -101,12 +106,8 @@ def main():
 
     # SB3's log-probabilities of agvrl's rollout actions at the weights the rollout was collected
     # with, against the ones agvrl stored at collection time (the ratios' denominators).
+    load(d["params_before"])
     with th.no_grad():
-        Pb = lambda i: np.array(d["params_before"][i], dtype=np.float32).reshape(shapes[i])
-        for t, i, k in mapping:
-            w = Pb(i)[k]
-            t.copy_(th.from_numpy(w.T.copy()).reshape(t.shape) if t.dim() == 2 else th.from_numpy(w.reshape(-1)))
-        pol.log_std.copy_(th.from_numpy(Pb(8)[0].reshape(pol.log_std.shape)))
         r_obs = th.tensor(d["rollout_obs"], dtype=th.float32).reshape(len(d["rollout_log_prob"]), -1)
         r_act = th.tensor(d["rollout_actions"], dtype=th.float32).reshape(len(d["rollout_log_prob"]), -1)
         _, lp_sb3, _ = pol.evaluate_actions(r_obs, r_act)
@@ -141,12 +142,7 @@ def main():
     rb.full = True
     from stable_baselines3.common.logger import configure
     m.set_logger(configure(None, []))
-    with th.no_grad():
-        Pb = lambda i: np.array(d["params_before"][i], dtype=np.float32).reshape(shapes[i])
-        for t, i, k in mapping:
-            w = Pb(i)[k]
-            t.copy_(th.from_numpy(w.T.copy()).reshape(t.shape) if t.dim() == 2 else th.from_numpy(w.reshape(-1)))
-        pol.log_std.copy_(th.from_numpy(Pb(8)[0].reshape(pol.log_std.shape)))
+    load(d["params_before"])
     start = {k: v.clone() for k, v in pol.state_dict().items()}
     for rep in range(1):
         pol.load_state_dict(start)
