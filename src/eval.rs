@@ -35,6 +35,10 @@ pub struct EvalArgs {
     /// latency and domain randomisation.
     #[arg(long, value_parser = ["sim2real"])]
     pub preset: Option<String>,
+    /// Turn the LiDAR safety filter between policy and drive on or off, whatever the policy's
+    /// settings say (`off`: the network's own actions reach the drive).
+    #[arg(long, value_parser = ["on", "off"])]
+    pub safety_filter: Option<String>,
     /// Episode length limit, control steps (default: the run's evaluation limit).
     #[arg(long)]
     pub max_steps: Option<u64>,
@@ -73,6 +77,8 @@ pub struct Summary {
     pub racing: bool,
     /// Why each episode ended, in order.
     pub ended: Vec<&'static str>,
+    /// Steps whose control the safety filter changed, summed over episodes (`None`: no filter).
+    pub filter_interventions: Option<u64>,
 }
 
 impl Summary {
@@ -92,6 +98,12 @@ impl Summary {
         }
         if let Some(c) = self.coverage {
             v.push(format!("coverage={c:.3}"));
+        }
+        if let Some(n) = self.filter_interventions {
+            v.push(format!(
+                "filter_interventions_per_episode={:.1}",
+                n as f64 / self.episodes.max(1) as f64
+            ));
         }
         if self.racing {
             v.push(format!("laps={}", self.laps));
@@ -131,6 +143,9 @@ fn account(s: &mut Summary, st: &Step, cov_sum: &mut f64) {
         s.subjects.0 += c.subjects_found;
         s.subjects.1 += c.subjects_total;
         s.subjects.2.extend(&c.find_times_s);
+        if let Some(n) = &mut s.filter_interventions {
+            *n += c.filter_interventions;
+        }
     }
 }
 
@@ -153,7 +168,12 @@ pub fn evaluate(
         subjects: (0, 0, Vec::new()),
         racing: false,
         ended: Vec::new(),
+        filter_interventions: None,
     };
+    let search = agvrl_envs::registry::spec(env_id).is_some_and(|s| s.task == agvrl_envs::TaskKind::Search);
+    if search && env_cfg.safety_filter.enabled {
+        s.filter_interventions = Some(0);
+    }
     let mut cov_sum = 0.0;
     let check = |o: &agvrl_envs::BoxSpace, a: &agvrl_envs::BoxSpace, p: &Option<&mut Policy>| match p {
         Some(p) => p.check_spaces(o, a).context("the policy does not fit this env"),
@@ -197,7 +217,7 @@ pub fn evaluate(
         }
     }
     s.mean_return /= episodes.max(1) as f64;
-    if agvrl_envs::registry::spec(env_id).is_some_and(|s| s.task == agvrl_envs::TaskKind::Search) {
+    if search {
         s.coverage = Some(cov_sum / episodes.max(1) as f64);
     }
     Ok(s)
@@ -329,6 +349,9 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         env_cfg.noise = s2r.noise;
         env_cfg.randomisation = s2r.randomisation;
     }
+    if let Some(f) = &a.safety_filter {
+        env_cfg.safety_filter.enabled = f == "on";
+    }
     if let Some(n) = a.max_steps {
         if n == 0 {
             bail!("--max-steps must be at least 1");
@@ -363,6 +386,10 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     println!("seed={seed}");
     println!("layouts={}", a.layouts);
     println!("preset={}", a.preset.as_deref().unwrap_or("none"));
+    println!(
+        "safety_filter={}",
+        if env_cfg.safety_filter.enabled { "on" } else { "off" }
+    );
     for l in s.lines() {
         println!("{l}");
     }

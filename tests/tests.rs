@@ -508,6 +508,8 @@ mod cli {
         assert!(o.status.success(), "{}", stderr(&o));
         let out = stdout(&o);
         assert_eq!(key(&out, "episodes"), "3");
+        // Its settings file turns the safety filter on.
+        assert_eq!(key(&out, "safety_filter"), "on");
         assert_eq!(key(&out, "ended"), "time_limit,time_limit,time_limit", "{out}");
         assert_eq!(key(&out, "collisions"), "0");
         let cov: f64 = key(&out, "coverage").parse().unwrap();

@@ -26,7 +26,7 @@ class AgvrlEnv(gymnasium.Env):
     values: ``reward_terms``, ``termination`` (on a terminating step: one of
     ``agvrl.TERMINATION_CAUSES``), racing (``laps``, ``progress_laps``, ``last_lap_s``,
     ``best_lap_s``) or search (``coverage``, ``distance_m``, ``subjects_found``,
-    ``subjects_total``, ``find_times_s``) metrics, and ``episode`` (``r``, ``l``) when an
+    ``subjects_total``, ``find_times_s``, ``filter_interventions``) metrics, and ``episode`` (``r``, ``l``) when an
     episode ends.
 
     ``render_mode="rgb_array"``: ``render()`` returns the scene from above with the car and its

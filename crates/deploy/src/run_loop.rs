@@ -1,7 +1,7 @@
 //! The fixed-rate control loop and its watchdog.
 
 use agvrl_envs::api::{Control, EnvError, RacingInfo, SensorFrame, TerminationCause, Vehicle};
-use agvrl_envs::task::Task;
+use agvrl_envs::task::{Intervention, Task};
 use agvrl_rl::Policy;
 use std::time::{Duration, Instant};
 use thiserror::Error;
@@ -98,6 +98,8 @@ pub struct Tick {
     pub control: Control,
     /// Set when the watchdog or the policy forced a safe stop.
     pub event: Option<Event>,
+    /// What the task's safety filter did to the policy's control.
+    pub intervention: Intervention,
     /// Watchdog checks + observation + inference time, microseconds.
     pub infer_us: f64,
     /// What the task says about the frame (a car without a map has no laps).
@@ -213,13 +215,15 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
         };
         let checked = self.check(&frame, now_s);
         let fresh = checked.is_ok();
+        let mut intervention = Intervention::None;
         let (control, event, inference) = match checked {
             Err(ev) => (Control::default(), Some(ev), None),
             Ok(()) => {
                 let obs = self.task.observe(&frame);
                 match self.policy.act(&obs, true) {
                     Ok(a) if a.iter().all(|v| v.is_finite()) => {
-                        let c = self.task.control(&a, self.vehicle.steering_limit_rad());
+                        let c = self.task.control(&a, self.vehicle.steering_limit_rad(), &frame);
+                        intervention = self.task.intervention();
                         (c, None, Some((obs, a)))
                     }
                     Ok(a) => (
@@ -248,6 +252,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             stamp_s: frame.stamp_s,
             control,
             event,
+            intervention,
             infer_us,
             racing: outcome.as_ref().and_then(|o| o.racing.clone()),
             termination: outcome.and_then(|o| o.termination),

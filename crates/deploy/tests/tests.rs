@@ -5,6 +5,11 @@ use agvrl_envs::api::{Control, EnvError, MapInfo, SensorFrame, Vehicle};
 use agvrl_envs::{EnvConfig, VecEnv, make, make_task, make_vehicle};
 use agvrl_rl::{Policy, Ppo, PpoConfig, default_device};
 
+/// A shipped policy of assets/policies.
+fn shipped_policy(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../assets/policies/{name}.agvrl"))
+}
+
 /// An untrained policy with the spaces of `id`.
 fn policy_for(id: &str) -> Policy {
     let env = make(id, &EnvConfig::default()).unwrap();
@@ -134,8 +139,6 @@ mod ros2_loopback {
     use agvrl_deploy::hardware::{Faults, Pace, RobotHandle, Ros2Config, Ros2Vehicle, SimRobot};
     use std::sync::atomic::{AtomicU16, Ordering};
 
-    /// A DDS domain no other test (or process) of this run uses: a random base per process,
-    /// then one step per call.
     /// A DDS domain of its own for each test: tests in this process step through domains from
     /// one base (drawn once, so two tests never meet), and the base differs between processes.
     fn domain() -> u16 {
@@ -180,7 +183,7 @@ mod ros2_loopback {
         let realtime = pace == Pace::Realtime;
         let v = Ros2Vehicle::new(cfg.clone(), !realtime).unwrap();
         let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
-        let policy = Policy::load(&agvrl_deploy::bench::shipped_policy()).unwrap();
+        let policy = Policy::load(&shipped_policy("racing-oval-ppo")).unwrap();
         let drive = DriveConfig {
             realtime,
             ..DriveConfig::default()
@@ -438,7 +441,7 @@ fn a_trace_replays_to_the_same_actions_and_a_changed_action_is_caught() {
     let dir = std::env::temp_dir().join(format!("agvrl-trace-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let trace = dir.join("run.jsonl");
-    let policy = agvrl_deploy::bench::shipped_policy();
+    let policy = shipped_policy("racing-oval-ppo");
     let drive = |args: &[&std::ffi::OsStr]| {
         std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
             .arg("--policy")
@@ -483,10 +486,28 @@ fn a_trace_replays_to_the_same_actions_and_a_changed_action_is_caught() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The shipped search policy, with its settings file (the safety filter on), drives every
+/// search scene in `agvrl-drive` on the simulated car without a termination or a watchdog stop.
 #[test]
-fn elf_loaded_size_of_this_test_binary() {
-    let b = std::fs::read(std::env::current_exe().unwrap()).unwrap();
-    let n = agvrl_deploy::bench::elf_loaded_bytes(&b).unwrap();
-    assert!(n > 100_000 && n < b.len() as u64, "{n} of {}", b.len());
-    assert_eq!(agvrl_deploy::bench::elf_loaded_bytes(b"not an ELF file at all"), None);
+fn the_shipped_search_policy_drives_every_search_scene_in_agvrl_drive() {
+    let policy = shipped_policy("search");
+    for env in [
+        "search-outdoor-20",
+        "search-urban-20",
+        "search-outdoor-50",
+        "search-urban-50",
+    ] {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
+            .arg("--policy")
+            .arg(&policy)
+            .args(["--env", env, "--steps", "1000", "--seed", "3", "--quiet"])
+            .output()
+            .unwrap();
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{env}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(
+            out.contains("summary ticks=1000 events=0 terminations=0 filter_interventions="),
+            "{env}: {out}"
+        );
+    }
 }

@@ -5,7 +5,9 @@ use crate::pendulum::Pendulum;
 use crate::sim_vehicle::{Randomisation, SimVehicle, SpawnMode};
 use crate::task::racing::RacingConfig;
 use crate::task::search::SearchConfig;
-use crate::task::{ActionMapping, CommonConfig, ObsConfig, Racing, SafeShaping, Search, SearchReward};
+use crate::task::{
+    ActionMapping, CommonConfig, ObsConfig, Racing, SafeShaping, SafetyFilterConfig, Search, SearchReward,
+};
 use crate::task_env::TaskEnv;
 use crate::wrappers::{NoiseConfig, Noisy, TimeLimit};
 use agvrl_sim::sensors::LidarConfig;
@@ -127,6 +129,9 @@ pub struct EnvConfig {
     /// this of straight ahead, degrees; 0 (the default): every ray. 90 keeps AutoVRL's r_m
     /// with a wider LiDAR, whose side rays then only feed the observation.
     pub clearance_fov_deg: f32,
+    /// The LiDAR safety filter between the policy's action and the drive (off by default; needs
+    /// `brake_mps2 > 0`, whose deceleration it plans with unless it sets its own).
+    pub safety_filter: SafetyFilterConfig,
     /// Where episodes start.
     pub spawn: SpawnMode,
     /// Sensor noise and latency.
@@ -164,6 +169,7 @@ impl Default for EnvConfig {
             search_reward: SearchReward::AutovrlCode,
             safe_reward: SafeShaping::default(),
             clearance_fov_deg: 0.0,
+            safety_filter: SafetyFilterConfig::default(),
             spawn: SpawnMode::Random,
             noise: NoiseConfig::default(),
             randomisation: Randomisation::default(),
@@ -276,11 +282,27 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
             cfg.clearance_fov_deg
         )));
     }
+    let mut safety_filter = cfg.safety_filter;
+    if safety_filter.decel_mps2 == 0.0 {
+        safety_filter.decel_mps2 = cfg.brake_mps2 as f32;
+    }
+    safety_filter.validate().map_err(EnvError::Config)?;
+    let ends_below_m = match spec.task {
+        TaskKind::Racing => RacingConfig::default().terminate_below_m,
+        _ => SearchConfig::default().terminate_below_m,
+    };
+    if safety_filter.enabled && safety_filter.clearance_m <= ends_below_m {
+        return Err(EnvError::Config(format!(
+            "safety_filter.clearance_m = {} must exceed the {} m at which {id} ends an episode",
+            safety_filter.clearance_m, ends_below_m
+        )));
+    }
     let common = CommonConfig {
         observation: cfg.observation,
         action_mapping: cfg.action_mapping,
         n_rays: cfg.lidar.n_rays,
         range_max_m: cfg.lidar.range_max_m,
+        safety_filter,
     };
     Ok(if spec.task == TaskKind::Racing {
         Box::new(Racing::new(

@@ -91,7 +91,8 @@ impl<V: Vehicle, T: Task> Env for TaskEnv<V, T> {
         }
         let mut a = action.to_vec();
         space.clamp(&mut a);
-        let control = self.task.control(&a, self.vehicle.steering_limit_rad());
+        let frame = self.last.as_ref().ok_or(EnvError::NeedsReset)?;
+        let control = self.task.control(&a, self.vehicle.steering_limit_rad(), frame);
         self.vehicle.actuate(control)?;
         let frame = self.vehicle.sense()?;
         self.task.needs().check(&frame)?;

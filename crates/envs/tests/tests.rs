@@ -806,3 +806,104 @@ mod image_observations {
         assert!(e.contains("camera"), "{e}");
     }
 }
+
+mod safety_filter {
+    use super::*;
+    use agvrl_envs::task::SafetyFilterConfig;
+    use rand::rngs::StdRng;
+    use rand::{RngExt, SeedableRng};
+
+    fn filtered(enabled: bool) -> EnvConfig {
+        EnvConfig {
+            brake_mps2: 3.0,
+            safety_filter: SafetyFilterConfig {
+                enabled,
+                ..SafetyFilterConfig::default()
+            },
+            ..quick_cfg()
+        }
+    }
+
+    /// Episodes of uniform random actions; returns (terminations, interventions).
+    fn random_episodes(id: &str, cfg: &EnvConfig, episodes: u64) -> (usize, u64) {
+        let mut env = make(id, cfg).unwrap();
+        let mut rng = StdRng::seed_from_u64(7);
+        let (mut ended, mut interventions) = (0, 0);
+        for k in 0..episodes {
+            env.reset(Some(k)).unwrap();
+            loop {
+                let st = env
+                    .step(&[rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)])
+                    .unwrap();
+                if st.done() {
+                    ended += st.terminated as usize;
+                    interventions += st.info.search.map_or(0, |s| s.filter_interventions);
+                    break;
+                }
+            }
+        }
+        (ended, interventions)
+    }
+
+    #[test]
+    fn random_actions_behind_the_filter_never_crash_where_they_crash_without_it() {
+        for id in ["search-outdoor-20", "search-urban-20"] {
+            let cfg = EnvConfig {
+                max_steps: 600,
+                ..filtered(false)
+            };
+            let (raw, _) = random_episodes(id, &cfg, 4);
+            assert!(
+                raw >= 2,
+                "{id}: random actions should crash without the filter ({raw} of 4)"
+            );
+            let cfg = EnvConfig {
+                max_steps: 600,
+                ..filtered(true)
+            };
+            let (ended, interventions) = random_episodes(id, &cfg, 4);
+            assert_eq!(ended, 0, "{id}: a filtered episode terminated");
+            assert!(interventions > 0, "{id}: the filter never acted");
+        }
+    }
+
+    #[test]
+    fn a_car_sent_straight_at_a_wall_stops_short_of_it() {
+        // The oval's outer wall ahead, full throttle, no steering: the filter brakes or steers
+        // away, and the LiDAR never comes within the racing task's 0.8 m.
+        let cfg = EnvConfig {
+            spawn: SpawnMode::Fixed,
+            safety_filter: SafetyFilterConfig {
+                clearance_m: 0.9,
+                ..filtered(true).safety_filter
+            },
+            ..filtered(true)
+        };
+        let mut env = make("racing-oval", &cfg).unwrap();
+        env.reset(Some(0)).unwrap();
+        for t in 0..600 {
+            let st = env.step(&[1.0, 0.0]).unwrap();
+            assert!(!st.terminated, "terminated at step {t}: {:?}", st.info.termination);
+            if st.truncated {
+                break;
+            }
+        }
+    }
+
+    #[test]
+    fn a_filter_on_a_coasting_drive_is_refused() {
+        let cfg = EnvConfig {
+            brake_mps2: 0.0,
+            ..filtered(true)
+        };
+        let err = make("search-outdoor-20", &cfg)
+            .err()
+            .expect("a coasting car cannot be filtered");
+        assert!(err.to_string().contains("brake_mps2"), "{err}");
+        // Racing ends at 0.8 m: the default 0.75 m clearance would plan into terminations.
+        let err = make("racing-oval", &filtered(true))
+            .err()
+            .expect("clearance under the termination range");
+        assert!(err.to_string().contains("clearance_m"), "{err}");
+    }
+}

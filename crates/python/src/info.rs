@@ -58,7 +58,7 @@ impl Kind {
 
 /// One env's info: `reward_terms` (a dict), `termination` (a cause name, on a terminating step),
 /// racing (`laps`, `progress_laps`, `last_lap_s`, `best_lap_s`) or search (`coverage`,
-/// `distance_m`, `subjects_found`, `subjects_total`, `find_times_s`) metrics, and `episode`
+/// `distance_m`, `subjects_found`, `subjects_total`, `find_times_s`, `filter_interventions`) metrics, and `episode`
 /// (`r`, `l`) on the step that ends an episode.
 pub fn single<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
@@ -86,6 +86,7 @@ pub fn single<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>>
         d.set_item("subjects_found", s.subjects_found)?;
         d.set_item("subjects_total", s.subjects_total)?;
         d.set_item("find_times_s", s.find_times_s.clone())?;
+        d.set_item("filter_interventions", s.filter_interventions)?;
     }
     if let Some(e) = &info.episode {
         let ep = PyDict::new(py);
@@ -176,7 +177,8 @@ pub fn batch<'py>(py: Python<'py>, kind: Kind, infos: &[Info], only: Option<&[bo
                 infos.iter().map(|i| i.search.as_ref().map_or(0, f) as i64).collect()
             };
             put(&d, "subjects_found", c(&|x| x.subjects_found), m.clone())?;
-            put(&d, "subjects_total", c(&|x| x.subjects_total), m)?;
+            put(&d, "subjects_total", c(&|x| x.subjects_total), m.clone())?;
+            put(&d, "filter_interventions", c(&|x| x.filter_interventions as usize), m)?;
         }
         Kind::Other => {}
     }

@@ -8,7 +8,7 @@
 use agvrl_deploy::stats::{cpu_time_s, quantile, rss_mb};
 use agvrl_deploy::{DriveConfig, DriveLoop};
 use agvrl_envs::api::Vehicle;
-use agvrl_envs::task::Task;
+use agvrl_envs::task::{Intervention, Task};
 use agvrl_envs::{EnvConfig, make_task, make_vehicle};
 use agvrl_rl::Policy;
 use anyhow::{Context, Result, bail};
@@ -204,7 +204,7 @@ fn drive_ros2(_: &Args, _: &str, _: &EnvConfig, _: Policy, _: DriveConfig) -> Re
 
 fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<()> {
     let (cpu0, t0) = (cpu_time_s(), Instant::now());
-    let (mut k, mut events, mut terminations) = (0u64, 0u64, 0u64);
+    let (mut k, mut events, mut terminations, mut filtered) = (0u64, 0u64, 0u64, 0u64);
     let mut infer_us = Vec::new();
     let mut racing = None;
     let mut trace = a.trace.as_deref().map(TraceWriter::create).transpose()?;
@@ -216,6 +216,7 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<
         k += 1;
         events += u64::from(t.event.is_some());
         terminations += u64::from(t.termination.is_some());
+        filtered += u64::from(t.intervention != Intervention::None);
         infer_us.push(t.infer_us);
         if t.racing.is_some() {
             racing = t.racing.clone();
@@ -223,13 +224,18 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<
         if !a.quiet {
             let ev = t.event.as_ref().map(|e| format!(" event={e:?}")).unwrap_or_default();
             let term = t.termination.map(|c| format!(" termination={c:?}")).unwrap_or_default();
+            let filter = match t.intervention {
+                Intervention::None => "",
+                Intervention::Steered => " filter=steered",
+                Intervention::Braked => " filter=braked",
+            };
             let laps = t
                 .racing
                 .as_ref()
                 .map(|r| format!(" laps={}", r.laps))
                 .unwrap_or_default();
             println!(
-                "tick={} stamp_s={:.3} throttle={:.3} steering_rad={:.3} infer_us={:.1}{laps}{ev}{term}",
+                "tick={} stamp_s={:.3} throttle={:.3} steering_rad={:.3} infer_us={:.1}{laps}{filter}{ev}{term}",
                 t.index, t.stamp_s, t.control.throttle, t.control.steering_rad, t.infer_us
             );
         }
@@ -251,7 +257,7 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<
         )
     });
     println!(
-        "summary ticks={k} events={events} terminations={terminations}{laps} infer_us_p50={:.1} infer_us_p99={:.1} wall_s={wall_s:.2} cpu_pct={cpu} rss_mb={rss}",
+        "summary ticks={k} events={events} terminations={terminations} filter_interventions={filtered}{laps} infer_us_p50={:.1} infer_us_p99={:.1} wall_s={wall_s:.2} cpu_pct={cpu} rss_mb={rss}",
         quantile(&infer_us, 0.5),
         quantile(&infer_us, 0.99)
     );

@@ -111,6 +111,8 @@ pub struct SearchInfo {
     pub subjects_total: usize,
     /// Time from reset to each find, seconds, in the order found.
     pub find_times_s: Vec<f64>,
+    /// Steps since reset whose control the safety filter changed.
+    pub filter_interventions: u64,
 }
 
 /// Why an episode terminated.

@@ -7,6 +7,7 @@ mod action;
 mod observation;
 pub mod racing;
 pub mod reward;
+pub mod safety;
 pub mod search;
 mod termination;
 
@@ -18,6 +19,7 @@ pub use termination::{common_termination, min_range_ahead_m, min_range_m, termin
 
 pub use racing::Racing;
 pub use reward::{SafeShaping, SearchReward};
+pub use safety::{Intervention, SafetyFilter, SafetyFilterConfig};
 pub use search::Search;
 
 /// What a task concluded about one step.
@@ -39,8 +41,13 @@ pub trait Task: Send {
     fn needs(&self) -> SensorNeeds;
     /// Observation space.
     fn observation_space(&self) -> BoxSpace;
-    /// Map a (finite, in-range) action to a control.
-    fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control;
+    /// Map a (finite, in-range) action to a control, given the frame the action was chosen
+    /// from (a safety filter may change the control).
+    fn control(&mut self, action: &[f32], steering_limit_rad: f64, frame: &SensorFrame) -> Control;
+    /// What the safety filter did to the last control.
+    fn intervention(&self) -> Intervention {
+        Intervention::None
+    }
     /// Start an episode from its first frame.
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>);
     /// The observation of a frame.
@@ -56,8 +63,11 @@ impl<T: Task + ?Sized> Task for Box<T> {
     fn observation_space(&self) -> BoxSpace {
         (**self).observation_space()
     }
-    fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
-        (**self).control(action, steering_limit_rad)
+    fn control(&mut self, action: &[f32], steering_limit_rad: f64, frame: &SensorFrame) -> Control {
+        (**self).control(action, steering_limit_rad, frame)
+    }
+    fn intervention(&self) -> Intervention {
+        (**self).intervention()
     }
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         (**self).reset(frame, map)
@@ -82,6 +92,8 @@ pub struct CommonConfig {
     pub n_rays: usize,
     /// LiDAR range_max, metres.
     pub range_max_m: f32,
+    /// The LiDAR safety filter between action and drive (off by default).
+    pub safety_filter: SafetyFilterConfig,
 }
 
 impl Default for CommonConfig {
@@ -91,14 +103,17 @@ impl Default for CommonConfig {
             action_mapping: ActionMapping::Scaled,
             n_rays: 100,
             range_max_m: 12.0,
+            safety_filter: SafetyFilterConfig::default(),
         }
     }
 }
 
 impl CommonConfig {
-    /// Sensors the observation needs.
+    /// Sensors the observation (and the safety filter's odometry) needs.
     pub fn needs(&self) -> SensorNeeds {
-        self.observation.needs()
+        let mut n = self.observation.needs();
+        n.imu |= self.safety_filter.enabled;
+        n
     }
 
     /// The observation space.

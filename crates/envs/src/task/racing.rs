@@ -2,7 +2,7 @@
 //! 0.8 m). Reports laps, lap times and progress along the centre line.
 
 use super::reward;
-use super::{CommonConfig, Outcome, Task, min_range_m, terminate};
+use super::{CommonConfig, Intervention, Outcome, SafetyFilter, Task, min_range_m, terminate};
 use crate::api::{BoxSpace, Control, MapInfo, RacingInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -34,6 +34,7 @@ pub struct Racing {
     progress_m: f64,
     info: RacingInfo,
     lap_start_s: f64,
+    filter: SafetyFilter,
 }
 
 impl Racing {
@@ -46,6 +47,7 @@ impl Racing {
             progress_m: 0.0,
             info: RacingInfo::default(),
             lap_start_s: 0.0,
+            filter: SafetyFilter::new(cfg.common.safety_filter),
         }
     }
 }
@@ -59,11 +61,17 @@ impl Task for Racing {
         self.cfg.common.space()
     }
 
-    fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
-        self.cfg.common.control(action, steering_limit_rad)
+    fn control(&mut self, action: &[f32], steering_limit_rad: f64, frame: &SensorFrame) -> Control {
+        let proposed = self.cfg.common.control(action, steering_limit_rad);
+        self.filter.filter(frame, proposed, steering_limit_rad, None)
+    }
+
+    fn intervention(&self) -> Intervention {
+        self.filter.last_intervention()
     }
 
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
+        self.filter.reset();
         self.info = RacingInfo::default();
         self.progress_m = 0.0;
         self.lap_start_s = frame.stamp_s;

@@ -2,7 +2,7 @@
 //! obstacles. Reports coverage of the free map and the distance travelled.
 
 use super::reward::{self, SafeShaping, SearchReward};
-use super::{CommonConfig, Outcome, Task, min_range_ahead_m, terminate};
+use super::{CommonConfig, Intervention, Outcome, SafetyFilter, Task, min_range_ahead_m, terminate};
 use crate::api::{BoxSpace, Control, MapInfo, SearchInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -61,6 +61,8 @@ pub struct Search {
     start_s: f64,
     found: Vec<(u32, f64)>,
     n_subjects: usize,
+    filter: SafetyFilter,
+    interventions: u64,
 }
 
 #[derive(Default)]
@@ -87,6 +89,8 @@ impl Search {
             start_s: 0.0,
             found: vec![],
             n_subjects: 0,
+            filter: SafetyFilter::new(cfg.common.safety_filter),
+            interventions: 0,
         }
     }
 
@@ -153,6 +157,7 @@ impl Search {
             subjects_found: self.found.len(),
             subjects_total: self.n_subjects,
             find_times_s: self.found.iter().map(|(_, t)| *t).collect(),
+            filter_interventions: self.interventions,
         }
     }
 }
@@ -166,11 +171,23 @@ impl Task for Search {
         self.cfg.common.space()
     }
 
-    fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
-        self.cfg.common.control(action, steering_limit_rad)
+    fn control(&mut self, action: &[f32], steering_limit_rad: f64, frame: &SensorFrame) -> Control {
+        let proposed = self.cfg.common.control(action, steering_limit_rad);
+        let fan = (self.cfg.clearance_fov_deg > 0.0).then(|| 0.5 * self.cfg.clearance_fov_deg.to_radians());
+        let c = self.filter.filter(frame, proposed, steering_limit_rad, fan);
+        if self.filter.last_intervention() != Intervention::None {
+            self.interventions += 1;
+        }
+        c
+    }
+
+    fn intervention(&self) -> Intervention {
+        self.filter.last_intervention()
     }
 
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
+        self.filter.reset();
+        self.interventions = 0;
         self.grid = Grid::default();
         self.start_s = frame.stamp_s;
         self.found.clear();
