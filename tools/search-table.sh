@@ -2,29 +2,40 @@
 # The held-out search table of the README: a policy and the uniform random policy on the same
 # 100 held-out episodes (1,000 steps) of every search scene, on the built-in maps and on new
 # procedural layouts, without and with sim2real noise and randomisation.
-#   tools/search-table.sh [POLICY] [EPISODES] [SEED]
+#   tools/search-table.sh [POLICY] [EPISODES] [SEED] [FILTER]
 # POLICY defaults to the shipped assets/policies/search.agvrl; SEED is the base of the
-# evaluation seeds (`agvrl eval --seed`).
+# evaluation seeds (`agvrl eval --seed`); FILTER (on or off) overrides the policy's safety
+# filter setting for both the policy and the random policy (`agvrl eval --safety-filter`).
+# RANDOM_POLICY=off skips the random policy (its columns print "-"), for comparing trainings.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 policy="${1:-assets/policies/search.agvrl}"
 episodes="${2:-100}"
 seed="${3:-0}"
+filter="${4:-}"
 bin="${AGVRL:-${CARGO_TARGET_DIR:-target}/release/agvrl}"
 [ -x "$bin" ] || cargo build --release -q
 key() { sed -n "s/^$1=//p" <<<"$2"; }
-echo "| scene | maps | preset | policy: terminations / $episodes | coverage | random: terminations | coverage | coverage ratio |"
-echo "|---|---|---|---|---|---|---|---|"
+echo "| scene | maps | preset | policy: terminations / $episodes | coverage | filter interventions / episode | random: terminations | coverage | coverage ratio |"
+echo "|---|---|---|---|---|---|---|---|---|"
 for preset in none sim2real; do
   for layouts in builtin procedural; do
     for env in search-outdoor-20 search-urban-20 search-outdoor-50 search-urban-50; do
       args=(eval --policy "$policy" --env "$env" --episodes "$episodes" --seed "$seed" --layouts "$layouts" --max-steps 1000)
       [ "$preset" = none ] || args+=(--preset "$preset")
+      [ -z "$filter" ] || args+=(--safety-filter "$filter")
       p=$("$bin" "${args[@]}")
-      r=$("$bin" "${args[@]}" --random)
-      pc=$(key coverage "$p"); rc=$(key coverage "$r")
-      ratio=$(python3 -c "print(f'{$pc / max($rc, 1e-9):.1f}x')")
-      echo "| $env | $layouts | $preset | $(key collisions "$p") | $pc | $(key collisions "$r") | $rc | $ratio |"
+      pc=$(key coverage "$p")
+      if [ "${RANDOM_POLICY:-on}" = off ]; then
+        r="collisions=-
+coverage=-"; rc=-; ratio=-
+      else
+        r=$("$bin" "${args[@]}" --random)
+        rc=$(key coverage "$r")
+        ratio=$(python3 -c "print(f'{$pc / max($rc, 1e-9):.1f}x')")
+      fi
+      fi=$(key filter_interventions_per_episode "$p"); fi="${fi:-off}"
+      echo "| $env | $layouts | $preset | $(key collisions "$p") | $pc | $fi | $(key collisions "$r") | $rc | $ratio |"
     done
   done
 done
