@@ -1,5 +1,6 @@
 //! The `agvrl` command line (the `agvrl` binary, and the `agvrl` script of the Python wheel).
 
+use crate::bench::{self, BenchPart};
 use crate::{eval, probe, train, view};
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -34,17 +35,10 @@ enum Cmd {
         /// Only this part (learning: the learning checks alone).
         #[arg(long, value_enum)]
         only: Option<BenchPart>,
+        /// CPU backend of the learner figures (flex or ndarray).
+        #[arg(long, default_value = "flex")]
+        backend: String,
     },
-}
-
-/// A part of `agvrl bench`.
-#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-enum BenchPart {
-    Sim,
-    Envs,
-    Rl,
-    Deploy,
-    Learning,
 }
 
 /// Run the CLI on `args` (the program name first); returns the exit status. `--help`,
@@ -78,7 +72,12 @@ fn run(cli: Cli) -> Result<()> {
         Some(Cmd::View(a)) => view::view(a),
         Some(Cmd::Envs) => envs(),
         Some(Cmd::Probe(a)) => probe::probe(a),
-        Some(Cmd::Bench { quick, learning, only }) => bench(quick, learning, only),
+        Some(Cmd::Bench {
+            quick,
+            learning,
+            only,
+            backend,
+        }) => bench::run(quick, learning, only, agvrl_rl::CpuBackend::parse(&backend)?),
     }
 }
 
@@ -92,65 +91,6 @@ fn envs() -> Result<()> {
             format!("Box({}) in [{lo}, {hi}]", s.dim())
         };
         println!("{id:<20} obs={:<28} act={}  dt={:.4}s", fmt(&o), fmt(&a), env.dt_s());
-    }
-    Ok(())
-}
-
-fn bench(quick: bool, learning: bool, only: Option<BenchPart>) -> Result<()> {
-    let want = |part: BenchPart| only.is_none_or(|o| o == part);
-    println!(
-        "build=release quick={quick} threads_available={}",
-        std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
-    );
-    if want(BenchPart::Sim) {
-        for l in agvrl_sim::bench::run(quick)
-            .into_iter()
-            .chain(agvrl_sim::bench::camera(quick))
-        {
-            println!("{l}");
-        }
-    }
-    if want(BenchPart::Envs) {
-        for l in agvrl_envs::bench::run(quick) {
-            println!("{l}");
-        }
-    }
-    if want(BenchPart::Rl) {
-        for l in agvrl_rl::bench::run(quick)? {
-            println!("{l}");
-        }
-    }
-    if want(BenchPart::Deploy) {
-        for (k, v) in agvrl_deploy::bench::run(quick) {
-            println!("{k}={v}");
-        }
-    }
-    if learning || only == Some(BenchPart::Learning) {
-        // Scored as Stable-Baselines3's side (`pendulum_parity.py`): 200-step deterministic
-        // episodes from the 100 shared start states, 5 seeds.
-        type Run = Box<dyn Fn(u64) -> agvrl_rl::Result<f64>>;
-        let runs: [(&str, u64, Run); 3] = [
-            ("sac", 20_000, Box::new(|s| agvrl_rl::learning::sac_parity(s, 20_000))),
-            (
-                "ppo_zoo",
-                100_000,
-                Box::new(|s| agvrl_rl::learning::ppo_parity(true, s, 100_000, &mut |_| {})),
-            ),
-            (
-                "ppo_zoo_gaussian",
-                100_000,
-                Box::new(|s| agvrl_rl::learning::ppo_parity(false, s, 100_000, &mut |_| {})),
-            ),
-        ];
-        for (algo, steps, run) in runs {
-            let mut sum = 0.0;
-            for seed in 0..5 {
-                let r = run(seed)?;
-                sum += r;
-                println!("learning={algo} env=pendulum steps={steps} seed={seed} mean_return={r:.2}");
-            }
-            println!("learning={algo} env=pendulum seeds=5 mean_return={:.2}", sum / 5.0);
-        }
     }
     Ok(())
 }

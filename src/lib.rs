@@ -1,6 +1,7 @@
 //! The agvrl application layer, shared by the `agvrl` CLI and the Python package: run
 //! configurations, training into run directories, evaluation, plots and recordings.
 
+pub mod bench;
 pub mod cli;
 pub mod config;
 // Without rerun, nothing reads what only recordings use.

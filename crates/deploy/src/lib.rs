@@ -13,7 +13,6 @@
 
 #![warn(missing_docs)]
 
-pub mod bench;
 pub mod hardware;
 pub mod run_loop;
 pub mod stats;

@@ -14,7 +14,6 @@
 #![warn(missing_docs)]
 
 pub mod api;
-pub mod bench;
 pub mod check;
 pub mod heldout;
 pub mod pendulum;

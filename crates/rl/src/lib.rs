@@ -12,7 +12,7 @@
 //!
 //! Entry points: [`Sac::new`] / [`Ppo::new`] (config, `VecEnv`, device, seed), `learn(steps,
 //! callback)` with [`Progress`] and [`Control`], `save_policy`, `save_checkpoint` /
-//! `load_checkpoint`, [`Policy::load`] + [`Policy::act`], [`evaluate`], [`bench::run`],
+//! `load_checkpoint`, [`Policy::load`] + [`Policy::act`], [`evaluate`],
 //! [`learning::sac_parity`] / [`learning::ppo_parity`].
 //!
 //! Invariants:
@@ -30,7 +30,7 @@
 //!   corrupted or mismatching file is an error, never a silently wrong policy.
 //!
 //! Features (both default): `train`, the learners and everything that needs Burn's autodiff
-//! (SAC, PPO, checkpoints, `bench`, `learning`); `ndarray`, a second CPU backend beside flex,
+//! (SAC, PPO, checkpoints, `learning`); `ndarray`, a second CPU backend beside flex,
 //! picked at run time with [`CpuBackend`]. Without them the crate is inference only
 //! ([`Policy`], [`evaluate`], on flex), which is what agvrl-drive links.
 //!
@@ -42,8 +42,6 @@
 #![warn(missing_docs)]
 
 pub mod adam;
-#[cfg(feature = "train")]
-pub mod bench;
 #[cfg(feature = "train")]
 mod buffer;
 #[cfg(feature = "train")]

@@ -107,8 +107,26 @@ fn policy_for_another_env_is_rejected() {
 
 #[test]
 fn a_large_sac_policy_file_stays_under_10_mb() {
-    // obs 100, act 2, [256, 256]: the benchmark's size.
-    let env = agvrl_envs::VecEnv::new(vec![agvrl_rl::bench::RandomEnv::new(100, 2)], 1).unwrap();
+    // obs 100, act 2, [256, 256]: the size `agvrl bench` times.
+    struct Wide;
+    impl Env for Wide {
+        fn observation_space(&self) -> agvrl_envs::BoxSpace {
+            agvrl_envs::BoxSpace::uniform(100, -1.0, 1.0)
+        }
+        fn action_space(&self) -> agvrl_envs::BoxSpace {
+            agvrl_envs::BoxSpace::uniform(2, -1.0, 1.0)
+        }
+        fn reset(&mut self, _: Option<u64>) -> Result<(Vec<f32>, agvrl_envs::Info), agvrl_envs::EnvError> {
+            Ok((vec![0.0; 100], agvrl_envs::Info::default()))
+        }
+        fn step(&mut self, _: &[f32]) -> Result<agvrl_envs::Step, agvrl_envs::EnvError> {
+            unreachable!("only the spaces are used")
+        }
+        fn dt_s(&self) -> f64 {
+            0.05
+        }
+    }
+    let env = agvrl_envs::VecEnv::new(vec![Wide], 1).unwrap();
     let sac = Sac::new(SacConfig::default(), env, &default_device(), 0).unwrap();
     let bytes = sac.policy_data().to_bytes().unwrap();
     assert!(bytes.len() < 10 * 1024 * 1024, "{}", bytes.len());

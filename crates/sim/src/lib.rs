@@ -14,7 +14,6 @@
 #![warn(missing_docs)]
 
 pub mod assets;
-pub mod bench;
 mod error;
 pub mod msg;
 pub mod scene;

@@ -3,7 +3,7 @@
 //! the line says `threads=2`.
 //!
 //! `sac_gflops` counts the matrix-product FLOPs one update of `sac/update.rs` performs
-//! ([`sac_update_flops`]); `sgemm_gflops` is a plain 256x256x256 product on the same device,
+//! (`sac_update_flops`); `sgemm_gflops` is a plain 256x256x256 product on the same device,
 //! the ceiling those figures are bounded by.
 //!
 //! What profiling showed (perf, 2-core AVX-512 machine): SAC's update is ~70 % GEMM, so the
@@ -17,26 +17,22 @@
 //! `cnn_forward_us` times the NatureCNN encoder alone (batch 1, one 1x48x64 image);
 //! `ppo_cnn_steps_per_s` a small PPO run with it (rollout and update) on random observations.
 
-use crate::cnn::{Encoder, ImageSpec};
-use crate::device::CpuBackend;
-use crate::error::Result;
-use crate::nets::{Activation, Init, MlpSpec};
-use crate::policy::{ActionHead, Algorithm, Policy, PolicyData};
-use crate::ppo::{Ppo, PpoConfig};
-use crate::progress::Control;
-use crate::rng::Rng;
-use crate::sac::{Sac, SacConfig};
 use agvrl_envs::{BoxSpace, Env, EnvError, Info, Step, VecEnv, make};
+use agvrl_rl::cnn::{Encoder, ImageSpec};
+use agvrl_rl::nets::{Activation, Init, MlpSpec};
+use agvrl_rl::policy::{ActionHead, Algorithm, Policy, PolicyData};
+use agvrl_rl::rng::Rng;
+use agvrl_rl::{Control, CpuBackend, Ppo, PpoConfig, Result, Sac, SacConfig};
 use burn::tensor::{Tensor, TensorData};
 use std::time::Instant;
 
 /// Observation width of the SAC and inference benchmarks.
-pub const BENCH_OBS_DIM: usize = 100;
+const BENCH_OBS_DIM: usize = 100;
 /// Action width of the SAC and inference benchmarks.
-pub const BENCH_ACT_DIM: usize = 2;
+const BENCH_ACT_DIM: usize = 2;
 
 /// An env with random observations, for timing learners without simulation cost.
-pub struct RandomEnv {
+struct RandomEnv {
     rng: Rng,
     obs_dim: usize,
     act_dim: usize,
@@ -45,7 +41,7 @@ pub struct RandomEnv {
 
 impl RandomEnv {
     /// Observations of `obs_dim` random values, actions of `act_dim` in [-1, 1], 1000-step episodes.
-    pub fn new(obs_dim: usize, act_dim: usize) -> Self {
+    fn new(obs_dim: usize, act_dim: usize) -> Self {
         Self {
             rng: Rng::new(0),
             obs_dim,
@@ -98,7 +94,7 @@ fn median(v: Vec<f64>) -> f64 {
 /// actor forward on `[obs; next_obs]` and again on `obs` with gradients, target critics forward, critics forward and backward (no input
 /// gradient at the first layer), critics forward and input-backward for the actor loss,
 /// actor backward.
-pub fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
+fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
     let chain = |input: usize, out: usize| -> (usize, usize) {
         // (all layer MACs, MACs of layers after the first)
         let mut sizes = vec![input];
@@ -119,7 +115,7 @@ pub fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
 }
 
 /// The benchmark lines on `backend`. `quick` uses fewer repetitions and iterations.
-pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
+pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
     let device = backend.device();
     let reps = if quick { 3 } else { 7 };
     let mut lines = vec![format!("backend={} reps={reps}", backend.name())];
@@ -137,7 +133,7 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         let run = |(x, y): &(Tensor<2>, Tensor<2>)| -> Result<f32> {
             let mut acc = 0.0f32;
             for _ in 0..inner {
-                acc += crate::nets::to_vec(x.clone().matmul(y.clone()).narrow(0, 0, 1).narrow(1, 0, 1))?[0];
+                acc += agvrl_rl::nets::to_vec(x.clone().matmul(y.clone()).narrow(0, 0, 1).narrow(1, 0, 1))?[0];
             }
             Ok(acc)
         };
@@ -149,7 +145,7 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
                 hs.into_iter()
                     .map(|h| {
                         h.join()
-                            .map_err(|_| crate::RlError::Tensor("bench thread panicked".into()))?
+                            .map_err(|_| agvrl_rl::RlError::Tensor("bench thread panicked".into()))?
                     })
                     .collect()
             });
@@ -241,7 +237,7 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         net,
         params,
         head: ActionHead::SquashedGaussian,
-        normalizer: Some(crate::normalize::ObsNormalizer::new(o)),
+        normalizer: Some(agvrl_rl::ObsNormalizer::new(o)),
         config_toml: String::new(),
         encoder: None,
     };
@@ -304,9 +300,4 @@ pub fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         median(sps)
     ));
     Ok(lines)
-}
-
-/// The benchmark lines on the default CPU backend.
-pub fn run(quick: bool) -> Result<Vec<String>> {
-    run_on(CpuBackend::default(), quick)
 }

@@ -2,9 +2,9 @@
 //! id (random actions, resets included), the task layer's overhead over the bare simulator,
 //! and VecEnv throughput on 1 and 2 threads.
 
-use crate::registry::scene_of;
-use crate::{ENV_IDS, Env, VecEnv, make};
-use agvrl_sim::bench::wander;
+use super::sim::wander;
+use agvrl_envs::registry::scene_of;
+use agvrl_envs::{ENV_IDS, Env, VecEnv, make};
 use agvrl_sim::{SceneSource, Sim, SimConfig};
 use std::hint::black_box;
 use std::ops::Range;
@@ -29,12 +29,12 @@ fn median(v: Vec<f64>) -> f64 {
 }
 
 /// Env figures. `quick` shortens the runs.
-pub fn run(quick: bool) -> Vec<String> {
+pub(super) fn run(quick: bool) -> Vec<String> {
     let reps = if quick { 3 } else { 7 };
     let steps = if quick { 200 } else { 2000 };
     let mut out = Vec::new();
     for id in ENV_IDS {
-        let Ok(mut env) = make(id, &crate::EnvConfig::default()) else {
+        let Ok(mut env) = make(id, &agvrl_envs::EnvConfig::default()) else {
             continue;
         };
         let _ = env.reset(Some(0));
@@ -99,7 +99,7 @@ pub fn run(quick: bool) -> Vec<String> {
 fn envs_of(id: &str, n: usize) -> Option<Vec<Box<dyn Env>>> {
     (0..n)
         .map(|i| {
-            let mut e = make(id, &crate::EnvConfig::default()).ok()?;
+            let mut e = make(id, &agvrl_envs::EnvConfig::default()).ok()?;
             e.reset(Some(i as u64)).ok()?;
             Some(e)
         })

@@ -1,12 +1,12 @@
 //! Speed figures of the simulator as `key=value` lines (medians over repetitions after a
 //! warm-up, single thread). `agvrl bench` prints them.
 
-use crate::{Control, DynamicsMode, PlanarPose, SCENE_IDS, SceneSource, Sim, SimConfig};
+use agvrl_sim::{Control, DynamicsMode, PlanarPose, SCENE_IDS, SceneSource, Sim, SimConfig};
 use std::hint::black_box;
 use std::time::Instant;
 
 /// Median of `reps` timings (seconds) of `f`.
-pub fn median_s(reps: usize, mut f: impl FnMut()) -> f64 {
+pub(super) fn median_s(reps: usize, mut f: impl FnMut()) -> f64 {
     let t: Vec<f64> = (0..reps)
         .map(|_| {
             let t0 = Instant::now();
@@ -14,11 +14,11 @@ pub fn median_s(reps: usize, mut f: impl FnMut()) -> f64 {
             t0.elapsed().as_secs_f64()
         })
         .collect();
-    crate::stats::median(&t)
+    agvrl_sim::stats::median(&t)
 }
 
 /// A deterministic pseudo-random control sequence (logistic map), so every run drives the same.
-pub fn wander(x: &mut f64) -> Control {
+pub(super) fn wander(x: &mut f64) -> Control {
     *x = (*x * 3.9 * (1.0 - *x)).clamp(1e-6, 1.0 - 1e-6);
     Control {
         throttle: 0.4 + 0.6 * *x,
@@ -27,7 +27,7 @@ pub fn wander(x: &mut f64) -> Control {
 }
 
 /// Simulator figures per scene and dynamics mode. `quick` shortens the runs (CI smoke test).
-pub fn run(quick: bool) -> Vec<String> {
+pub(super) fn run(quick: bool) -> Vec<String> {
     let reps = if quick { 3 } else { 7 };
     let steps = if quick { 100 } else { 1000 };
     let mut out = Vec::new();
@@ -87,12 +87,12 @@ pub fn run(quick: bool) -> Vec<String> {
 }
 
 /// Camera figures: RGB + depth + segmentation per frame, milliseconds, at two resolutions.
-pub fn camera(quick: bool) -> Vec<String> {
+pub(super) fn camera(quick: bool) -> Vec<String> {
     let reps = if quick { 3 } else { 9 };
     let mut out = Vec::new();
     for id in ["oval", "outdoor-50", "urban-50"] {
         for (w, h) in [(160u32, 120u32), (400, 400)] {
-            let camera = Some(crate::sensors::CameraConfig {
+            let camera = Some(agvrl_sim::sensors::CameraConfig {
                 width: w,
                 height: h,
                 ..Default::default()

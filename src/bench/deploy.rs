@@ -2,24 +2,24 @@
 //! CPU and memory of `agvrl-drive` driving at 30 Hz in real time, its binary size, and the
 //! ROS 2 loopback rate.
 
-use crate::stats::quantile;
-use crate::{DriveConfig, DriveLoop};
+use agvrl_deploy::stats::quantile;
+use agvrl_deploy::{DriveConfig, DriveLoop};
 use agvrl_envs::{EnvConfig, make_task, make_vehicle};
 use agvrl_rl::Policy;
 use std::path::PathBuf;
 use std::time::Instant;
 
 /// The shipped racing policy (`assets/policies/racing-oval-ppo.agvrl`) in this source tree.
-pub fn shipped_policy() -> PathBuf {
+fn shipped_policy() -> PathBuf {
     PathBuf::from(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../assets/policies/racing-oval-ppo.agvrl"
+        "/assets/policies/racing-oval-ppo.agvrl"
     ))
 }
 
 /// Bytes of an ELF64 file's sections that are loaded into memory (what `strip` keeps, near
 /// enough: the release profile adds line tables, which are not loaded). None if not ELF64 LE.
-pub fn elf_loaded_bytes(b: &[u8]) -> Option<u64> {
+fn elf_loaded_bytes(b: &[u8]) -> Option<u64> {
     let u16_at = |o: usize| Some(u16::from_le_bytes(b.get(o..o + 2)?.try_into().ok()?));
     let u32_at = |o: usize| Some(u32::from_le_bytes(b.get(o..o + 4)?.try_into().ok()?));
     let u64_at = |o: usize| Some(u64::from_le_bytes(b.get(o..o + 8)?.try_into().ok()?));
@@ -44,7 +44,7 @@ fn kv(k: &str, v: impl std::fmt::Display) -> (String, String) {
 }
 
 /// The deploy figures as `key=value` pairs (`quick`: fewer ticks, a smoke test).
-pub fn run(quick: bool) -> Vec<(String, String)> {
+pub(super) fn run(quick: bool) -> Vec<(String, String)> {
     let mut out = Vec::new();
     let policy = shipped_policy();
     // Latency: the simulated car as fast as it goes, the shipped policy.
@@ -139,14 +139,13 @@ pub fn run(quick: bool) -> Vec<(String, String)> {
             "not_built(cargo build --release -p agvrl-deploy)",
         )),
     }
-    #[cfg(feature = "ros2")]
     out.extend(loopback(quick));
     out
 }
 
 /// Where tools/build-drive.sh puts agvrl-drive for each architecture, given the x86_64 target
 /// directory (`CARGO_TARGET_DIR`; aarch64 has its own beside it).
-pub fn shipped_binaries(target_root: &std::path::Path) -> [(&'static str, PathBuf); 2] {
+fn shipped_binaries(target_root: &std::path::Path) -> [(&'static str, PathBuf); 2] {
     let mut a64 = target_root.as_os_str().to_owned();
     a64.push("-aarch64");
     [
@@ -163,9 +162,8 @@ pub fn shipped_binaries(target_root: &std::path::Path) -> [(&'static str, PathBu
 
 /// Ticks per second of the drive loop against the sim-backed robot over DDS on loopback
 /// (lockstep: each tick is a full command -> simulate -> sensors round trip).
-#[cfg(feature = "ros2")]
 fn loopback(quick: bool) -> Vec<(String, String)> {
-    use crate::hardware::{Faults, Pace, Ros2Config, Ros2Vehicle, SimRobot};
+    use agvrl_deploy::hardware::{Faults, Pace, Ros2Config, Ros2Vehicle, SimRobot};
     let r = (|| -> Result<(f64, f64, f64), String> {
         let cfg = Ros2Config {
             // A domain of its own, away from ROS 2's default 0.
@@ -207,5 +205,18 @@ fn loopback(quick: bool) -> Vec<(String, String)> {
             kv("deploy_ros2_tick_us_p99", format!("{p99:.0}")),
         ],
         Err(e) => vec![kv("deploy_ros2_error", e.replace(char::is_whitespace, "_"))],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::elf_loaded_bytes;
+
+    #[test]
+    fn elf_loaded_size_of_this_test_binary() {
+        let b = std::fs::read(std::env::current_exe().unwrap()).unwrap();
+        let n = elf_loaded_bytes(&b).unwrap();
+        assert!(n > 100_000 && n < b.len() as u64, "{n} of {}", b.len());
+        assert_eq!(elf_loaded_bytes(b"not an ELF file at all"), None);
     }
 }
