@@ -149,6 +149,34 @@ pub(crate) struct Rollout {
     pub(crate) gae_inputs: [Vec<f32>; 5],
 }
 
+impl Rollout {
+    /// Advantages and returns by GAE (SB3's `RolloutBuffer.compute_returns_and_advantage`) from
+    /// `[rewards, values, episode_starts, last_values, dones]`: per step (index `step * n_envs +
+    /// env`) the rewards (truncation bootstraps included), the values and whether the step began
+    /// an episode; per env the values and done flags after the last step. Kept in `gae_inputs`.
+    pub(crate) fn compute_gae(&mut self, inputs: [Vec<f32>; 5], g: f32, lam: f32) {
+        let [rewards, values, episode_starts, last_values, dones] = &inputs;
+        let n_envs = last_values.len();
+        let n_steps = rewards.len() / n_envs.max(1);
+        let mut last_gae = vec![0.0f32; n_envs];
+        for t in (0..n_steps).rev() {
+            for e in 0..n_envs {
+                let k = t * n_envs + e;
+                let (next_non_terminal, next_value) = if t + 1 == n_steps {
+                    (1.0 - dones[e], last_values[e])
+                } else {
+                    (1.0 - episode_starts[k + n_envs], values[k + n_envs])
+                };
+                let delta = rewards[k] + g * next_value * next_non_terminal - values[k];
+                last_gae[e] = delta + g * lam * next_non_terminal * last_gae[e];
+                self.advantages[k] = last_gae[e];
+                self.returns[k] = last_gae[e] + values[k];
+            }
+        }
+        self.gae_inputs = inputs;
+    }
+}
+
 impl<E: Env> Ppo<E> {
     /// A fresh learner on plain `device`; `seed` seeds weights, noise, shuffling and the envs.
     pub fn new(cfg: PpoConfig, env: VecEnv<E>, device: &Device, seed: u64) -> Result<Self> {
@@ -383,25 +411,12 @@ impl<E: Env> Ppo<E> {
             obs = st.obs;
         }
         let (_, last_values, _) = value_of(&params, self.normalized(&obs), n_envs, &self.cfg)?;
-        // GAE (SB3's RolloutBuffer.compute_returns_and_advantage).
-        let (g, lam) = (self.cfg.gamma as f32, self.cfg.gae_lambda as f32);
-        let mut last_gae = vec![0.0f32; n_envs];
-        for t in (0..n_steps).rev() {
-            for e in 0..n_envs {
-                let k = t * n_envs + e;
-                let (next_non_terminal, next_value) = if t + 1 == n_steps {
-                    (1.0 - starts[e] as u8 as f32, last_values[e])
-                } else {
-                    (1.0 - episode_starts[k + n_envs], values[k + n_envs])
-                };
-                let delta = rewards[k] + g * next_value * next_non_terminal - values[k];
-                last_gae[e] = delta + g * lam * next_non_terminal * last_gae[e];
-                r.advantages[k] = last_gae[e];
-                r.returns[k] = last_gae[e] + values[k];
-            }
-        }
         let dones = starts.iter().map(|s| *s as u8 as f32).collect();
-        r.gae_inputs = [rewards, values, episode_starts, last_values, dones];
+        r.compute_gae(
+            [rewards, values, episode_starts, last_values, dones],
+            self.cfg.gamma as f32,
+            self.cfg.gae_lambda as f32,
+        );
         self.last = Some((obs, starts));
         Ok(r)
     }
@@ -516,5 +531,34 @@ impl<E: Env> Ppo<E> {
     /// Mean return of `n_episodes` deterministic episodes on `env` (seeded `seed`, `seed + 1`, ...).
     pub fn evaluate<F: Env>(&self, env: &mut F, n_episodes: usize, seed: u64) -> Result<f64> {
         crate::eval::evaluate(&mut self.policy(&self.device), env, n_episodes, seed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Rollout;
+
+    #[test]
+    fn gae_by_hand_stops_at_episode_ends_and_bootstraps_the_last_value() {
+        // Two envs, three steps, gamma = lambda = 0.5. Env 0: its third step starts a new
+        // episode; after the last step it runs on (V = 2). Env 1: done after the last step
+        // (its V = 5 must not count).
+        let mut r = Rollout {
+            obs: vec![],
+            actions: vec![],
+            log_probs: vec![],
+            advantages: vec![0.0; 6],
+            returns: vec![0.0; 6],
+            gae_inputs: Default::default(),
+        };
+        let rewards = vec![1.0, 0.0, 2.0, 0.0, 3.0, 1.0];
+        let values = vec![0.5, 0.0, 1.0, 0.0, 1.5, 0.0];
+        let starts = vec![1.0, 1.0, 0.0, 0.0, 1.0, 0.0];
+        r.compute_gae([rewards, values, starts, vec![2.0, 5.0], vec![0.0, 1.0]], 0.5, 0.5);
+        // Env 0, backwards: 3 + 0.5 * 2 - 1.5 = 2.5; 2 - 1 = 1 (the episode ends); 1 + 0.5 * 1 -
+        // 0.5 + 0.25 * 1 = 1.25. Env 1: 1; 0 + 0.25 * 1; 0.25 * 0.25.
+        assert_eq!(r.advantages, vec![1.25, 0.0625, 1.0, 0.25, 2.5, 1.0]);
+        assert_eq!(r.returns, vec![1.75, 0.0625, 2.0, 0.25, 4.0, 1.0]);
+        assert_eq!(r.gae_inputs[3], vec![2.0, 5.0]);
     }
 }
