@@ -26,16 +26,14 @@ for preset in none sim2real; do
       [ -z "$filter" ] || args+=(--safety-filter "$filter")
       p=$("$bin" "${args[@]}")
       pc=$(key coverage "$p")
-      if [ "${RANDOM_POLICY:-on}" = off ]; then
-        r="collisions=-
-coverage=-"; rc=-; ratio=-
-      else
+      rt=- rc=- ratio=-
+      if [ "${RANDOM_POLICY:-on}" != off ]; then
         r=$("$bin" "${args[@]}" --random)
-        rc=$(key coverage "$r")
+        rt=$(key collisions "$r"); rc=$(key coverage "$r")
         ratio=$(python3 -c "print(f'{$pc / max($rc, 1e-9):.1f}x')")
       fi
       fi=$(key filter_interventions_per_episode "$p"); fi="${fi:-off}"
-      echo "| $env | $layouts | $preset | $(key collisions "$p") | $pc | $fi | $(key collisions "$r") | $rc | $ratio |"
+      echo "| $env | $layouts | $preset | $(key collisions "$p") | $pc | $fi | $rt | $rc | $ratio |"
     done
   done
 done

@@ -2,6 +2,7 @@
 //! id (random actions, resets included), the task layer's overhead over the bare simulator,
 //! and VecEnv throughput on 1 and 2 threads.
 
+use super::median;
 use super::sim::wander;
 use agvrl_envs::registry::scene_of;
 use agvrl_envs::{ENV_IDS, Env, VecEnv, make};
@@ -22,10 +23,6 @@ fn timed_s(f: impl FnOnce()) -> f64 {
     let t0 = Instant::now();
     f();
     t0.elapsed().as_secs_f64()
-}
-
-fn median(v: Vec<f64>) -> f64 {
-    agvrl_sim::stats::median(&v)
 }
 
 /// Env figures. `quick` shortens the runs.

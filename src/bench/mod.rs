@@ -9,6 +9,11 @@ mod sim;
 
 use anyhow::Result;
 
+/// The upper median of timings (the order statistic every figure reports).
+fn median(v: Vec<f64>) -> f64 {
+    agvrl_sim::stats::median(&v)
+}
+
 /// A part of `agvrl bench`.
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum BenchPart {

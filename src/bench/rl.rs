@@ -17,6 +17,7 @@
 //! `cnn_forward_us` times the NatureCNN encoder alone (batch 1, one 1x48x64 image);
 //! `ppo_cnn_steps_per_s` a small PPO run with it (rollout and update) on random observations.
 
+use super::median;
 use agvrl_envs::{BoxSpace, Env, EnvError, Info, Step, VecEnv, make};
 use agvrl_rl::cnn::{Encoder, ImageSpec};
 use agvrl_rl::nets::{Activation, Init, MlpSpec};
@@ -84,10 +85,6 @@ impl Env for RandomEnv {
     fn dt_s(&self) -> f64 {
         0.05
     }
-}
-
-fn median(v: Vec<f64>) -> f64 {
-    agvrl_envs::stats::median(&v)
 }
 
 /// Matrix-product FLOPs of one SAC update (batch `b`, obs `o`, action `a`, hidden `h`):
