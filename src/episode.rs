@@ -3,13 +3,13 @@
 
 use agvrl_envs::task::Task;
 use agvrl_envs::wrappers::TimeLimit;
-use agvrl_envs::{Env, EnvConfig, SensorFrame, Step, TaskEnv, Vehicle, make, make_task, make_vehicle};
+use agvrl_envs::{Env, EnvConfig, SensorFrame, SimCar, Step, TaskEnv, Vehicle, make, make_task, make_vehicle};
 use agvrl_sim::Sim;
 use anyhow::Result;
 
-/// A vehicle env as `agvrl_envs::make` builds it, with its concrete type kept so the
+/// A vehicle env as `agvrl_envs::make` builds it, with its simulated car's type kept so the
 /// simulator behind it can be inspected.
-pub type SimEnv = TimeLimit<TaskEnv<Box<dyn Vehicle>, Box<dyn Task>>>;
+pub type SimEnv = TimeLimit<TaskEnv<SimCar, Box<dyn Task>>>;
 
 /// Build vehicle env `id` like `agvrl_envs::make` does; `None` for envs without a vehicle.
 pub fn make_sim_env(id: &str, cfg: &EnvConfig) -> Result<Option<SimEnv>> {
@@ -58,7 +58,8 @@ pub fn observe(
     terminated: bool,
 ) -> Result<()> {
     let inner = env.inner();
-    if let (Some(frame), Some(sim)) = (inner.last_frame(), inner.vehicle().sim()) {
+    if let Some(frame) = inner.last_frame() {
+        let sim = inner.vehicle().sim();
         obs(&StepView {
             episode,
             step,

@@ -4,7 +4,7 @@
 
 use agvrl_deploy::stats::quantile;
 use agvrl_deploy::{DriveConfig, DriveLoop};
-use agvrl_envs::{EnvConfig, make_task, make_vehicle};
+use agvrl_envs::{EnvConfig, Vehicle, make_task, make_vehicle};
 use agvrl_rl::Policy;
 use std::path::PathBuf;
 use std::time::Instant;

@@ -29,7 +29,7 @@ pub use agvrl_sim::stats;
 pub use api::{BoxSpace, Control, Env, EnvError, Info, SensorFrame, Step, Vehicle};
 pub use check::{CheckError, check_env};
 pub use registry::{ENV_IDS, ENVS, EnvConfig, EnvSpec, TaskKind, make, make_task, make_vehicle};
-pub use sim_vehicle::{Randomisation, SimVehicle, SpawnMode};
+pub use sim_vehicle::{Randomisation, SimCar, SimVehicle, SpawnMode};
 pub use task::ActionMapping;
 pub use task_env::TaskEnv;
 pub use vec_env::{Autoreset, VecEnv, VecStep};

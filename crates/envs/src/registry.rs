@@ -2,7 +2,7 @@
 
 use crate::api::{Env, EnvError, Vehicle};
 use crate::pendulum::Pendulum;
-use crate::sim_vehicle::{Randomisation, SimVehicle, SpawnMode};
+use crate::sim_vehicle::{Randomisation, SimCar, SimVehicle, SpawnMode};
 use crate::task::racing::RacingConfig;
 use crate::task::search::SearchConfig;
 use crate::task::{
@@ -228,7 +228,7 @@ fn unknown(id: &str) -> EnvError {
 }
 
 /// The vehicle of env `id` (no task), for tools that drive a vehicle directly.
-pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvError> {
+pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<SimCar, EnvError> {
     let spec = spec(id).filter(|s| s.scene.is_some()).ok_or_else(|| unknown(id))?;
     let scene = spec.scene.unwrap_or_default();
     let source = match cfg.layout_seed {
@@ -265,9 +265,9 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Vehicle>, EnvEr
     let v =
         SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?.with_new_layout_each_episode(cfg.new_layout_each_episode);
     Ok(if cfg.noise.is_off() {
-        Box::new(v)
+        SimCar::Exact(v)
     } else {
-        Box::new(Noisy::new(v, cfg.noise))
+        SimCar::Noisy(Noisy::new(v, cfg.noise))
     })
 }
 

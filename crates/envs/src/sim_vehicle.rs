@@ -275,8 +275,64 @@ impl Vehicle for SimVehicle {
     fn map(&self) -> Option<&MapInfo> {
         Some(&self.map)
     }
+}
 
-    fn sim(&self) -> Option<&agvrl_sim::Sim> {
-        Some(&self.sim)
+/// A simulated car as the registry builds it: the simulator, behind sensor noise and latency
+/// when the config asks for them. Viewers and plots reach the simulator through
+/// [`SimCar::sim`]; a task only ever sees the [`Vehicle`] seam.
+pub enum SimCar {
+    /// Exact sensors, immediate commands.
+    Exact(SimVehicle),
+    /// Noisy sensors and delayed commands.
+    Noisy(crate::wrappers::Noisy<SimVehicle>),
+}
+
+impl SimCar {
+    /// The simulated vehicle under any noise layer.
+    pub fn sim_vehicle(&self) -> &SimVehicle {
+        match self {
+            Self::Exact(v) => v,
+            Self::Noisy(n) => n.inner(),
+        }
+    }
+
+    /// The simulator (read-only).
+    pub fn sim(&self) -> &Sim {
+        self.sim_vehicle().sim()
+    }
+
+    fn vehicle_mut(&mut self) -> &mut dyn Vehicle {
+        match self {
+            Self::Exact(v) => v,
+            Self::Noisy(n) => n,
+        }
+    }
+
+    fn vehicle(&self) -> &dyn Vehicle {
+        match self {
+            Self::Exact(v) => v,
+            Self::Noisy(n) => n,
+        }
+    }
+}
+
+impl Vehicle for SimCar {
+    fn reset(&mut self, seed: u64) -> Result<SensorFrame, EnvError> {
+        self.vehicle_mut().reset(seed)
+    }
+    fn actuate(&mut self, control: Control) -> Result<(), EnvError> {
+        self.vehicle_mut().actuate(control)
+    }
+    fn sense(&mut self) -> Result<SensorFrame, EnvError> {
+        self.vehicle_mut().sense()
+    }
+    fn control_period_s(&self) -> f64 {
+        self.vehicle().control_period_s()
+    }
+    fn steering_limit_rad(&self) -> f64 {
+        self.vehicle().steering_limit_rad()
+    }
+    fn map(&self) -> Option<&MapInfo> {
+        self.vehicle().map()
     }
 }

@@ -207,7 +207,7 @@ mod episodes {
     #[test]
     fn a_new_layout_each_episode_comes_from_the_episode_seed_and_its_half() {
         // The map a reset builds, seen as the free cells of the coverage grid.
-        let free = |v: &mut Box<dyn agvrl_envs::Vehicle>, seed: u64| {
+        let free = |v: &mut agvrl_envs::SimCar, seed: u64| {
             v.reset(seed).unwrap();
             v.map().unwrap().free_cells.clone()
         };

@@ -230,9 +230,7 @@ impl Env {
                     {
                         return Ok(Some((img.rgb.clone(), img.width, img.height)));
                     }
-                    let Some(sim) = inner.vehicle().sim() else {
-                        return Ok(None);
-                    };
+                    let sim = inner.vehicle().sim();
                     let scan = frame.and_then(|f| f.scan.as_ref());
                     agvrl::plots::top_view(sim, scan, size.clamp(32, 4096))
                         .map(Some)

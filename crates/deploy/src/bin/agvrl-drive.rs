@@ -181,17 +181,14 @@ fn drive_ros2(a: &Args, env: &str, env_cfg: &EnvConfig, policy: Policy, drive: D
     let mut cfg = ros2_config(a)?;
     cfg.check_lidar(&env_cfg.lidar)?;
     // Full throttle is the trained car's top speed unless the car's TOML says otherwise.
-    let trained = make_vehicle(env, env_cfg)?;
-    if let Some(sim) = trained.sim() {
-        let top = sim.vehicle().top_speed_mps();
-        if let Some(w) = cfg.drive.for_trained_top_speed(top) {
-            eprintln!("warning: {w}");
-        }
-        eprintln!(
-            "full throttle commands {:.2} m/s (trained top speed {top:.2} m/s)",
-            cfg.drive.full_throttle_mps()
-        );
+    let top = make_vehicle(env, env_cfg)?.sim().vehicle().top_speed_mps();
+    if let Some(w) = cfg.drive.for_trained_top_speed(top) {
+        eprintln!("warning: {w}");
     }
+    eprintln!(
+        "full throttle commands {:.2} m/s (trained top speed {top:.2} m/s)",
+        cfg.drive.full_throttle_mps()
+    );
     let task = make_task(env, env_cfg, cfg.drive.steering_limit_rad)?;
     let vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime)?;
     drive_loop(a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?)

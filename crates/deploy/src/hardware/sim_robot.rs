@@ -102,7 +102,7 @@ impl RobotHandle {
 /// The simulated car behind ROS 2 topics.
 pub struct SimRobot {
     cfg: Ros2Config,
-    vehicle: Box<dyn Vehicle>,
+    vehicle: agvrl_envs::SimCar,
     task: Box<dyn Task>,
     node: Node,
     /// Added to simulated time in the published stamps (wall-clock epoch time in real time).
@@ -135,10 +135,8 @@ impl SimRobot {
         let err = |e: agvrl_envs::EnvError| DeployError::Vehicle(e.to_string());
         let mut vehicle = make_vehicle(env, env_cfg).map_err(err)?;
         let mut cfg = cfg;
-        if let Some(sim) = vehicle.sim() {
-            // The robot serves its own car: an explicit max_speed_mps is honoured as set.
-            let _ = cfg.drive.for_trained_top_speed(sim.vehicle().top_speed_mps());
-        }
+        // The robot serves its own car: an explicit max_speed_mps is honoured as set.
+        let _ = cfg.drive.for_trained_top_speed(vehicle.sim().vehicle().top_speed_mps());
         let mut task = make_task(env, env_cfg, vehicle.steering_limit_rad()).map_err(err)?;
         let frame = vehicle.reset(seed).map_err(err)?;
         task.reset(&frame, vehicle.map());

@@ -87,11 +87,6 @@ pub trait Vehicle: Send {
     fn map(&self) -> Option<&MapInfo> {
         None
     }
-    /// The simulator behind the vehicle, for viewers and plots (never for a task: a real car
-    /// has none).
-    fn sim(&self) -> Option<&agvrl_sim::Sim> {
-        None
-    }
 }
 
 impl<V: Vehicle + ?Sized> Vehicle for Box<V> {
@@ -112,8 +107,5 @@ impl<V: Vehicle + ?Sized> Vehicle for Box<V> {
     }
     fn map(&self) -> Option<&MapInfo> {
         (**self).map()
-    }
-    fn sim(&self) -> Option<&agvrl_sim::Sim> {
-        (**self).sim()
     }
 }

@@ -157,8 +157,4 @@ impl<V: Vehicle> Vehicle for Noisy<V> {
     fn map(&self) -> Option<&MapInfo> {
         self.inner.map()
     }
-
-    fn sim(&self) -> Option<&agvrl_sim::Sim> {
-        self.inner.sim()
-    }
 }
