@@ -9,7 +9,11 @@ use crate::adam::Adam;
 use crate::error::{Result, RlError};
 use crate::file;
 use crate::nets::HostParams;
-use crate::policy::Algorithm;
+use crate::normalize::ObsNormalizer;
+use crate::policy::{Algorithm, check_space};
+use crate::progress::Episodes;
+use crate::rng::Rng;
+use agvrl_envs::BoxSpace;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -19,6 +23,60 @@ pub const CHECKPOINT_FORMAT_VERSION: u32 = 2;
 /// Versions this build reads: 1 has no image encoder (its configs lack `image`), 2 may have one.
 const CHECKPOINT_READS: [u32; 2] = [1, 2];
 const CHECKPOINT_MAGIC: &[u8; 8] = b"AGVRLCKP";
+
+/// The part of a checkpoint header every learner writes: spaces, seed, counters, episode
+/// statistics, RNG and normaliser. Flattened into each learner's header, so the JSON keeps one
+/// flat object.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(crate) struct Common {
+    observation_space: BoxSpace,
+    action_space: BoxSpace,
+    pub(crate) seed: u64,
+    pub(crate) num_timesteps: u64,
+    pub(crate) n_updates: u64,
+    episodes: u64,
+    recent_returns: Vec<f64>,
+    pub(crate) rng: Rng,
+    pub(crate) normalizer: Option<ObsNormalizer>,
+}
+
+impl Common {
+    /// The state of a learner on `spaces` (observation, action).
+    pub(crate) fn new(
+        spaces: (&BoxSpace, &BoxSpace),
+        seed: u64,
+        counters: (u64, u64),
+        episodes: &Episodes,
+        rng: &Rng,
+        normalizer: &Option<ObsNormalizer>,
+    ) -> Self {
+        Self {
+            observation_space: spaces.0.clone(),
+            action_space: spaces.1.clone(),
+            seed,
+            num_timesteps: counters.0,
+            n_updates: counters.1,
+            episodes: episodes.count,
+            recent_returns: episodes.recent.iter().copied().collect(),
+            rng: rng.clone(),
+            normalizer: normalizer.clone(),
+        }
+    }
+
+    /// The episode statistics.
+    pub(crate) fn episodes(&self) -> Episodes {
+        Episodes {
+            count: self.episodes,
+            recent: self.recent_returns.iter().copied().collect(),
+        }
+    }
+}
+
+/// A learner's checkpoint header: [`Common`] plus its own parts.
+pub(crate) trait Header: DeserializeOwned {
+    /// The common part.
+    fn common(&self) -> &Common;
+}
 
 /// Adam's scalars; its moments travel as arrays.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -118,8 +176,13 @@ pub(crate) fn write<H: Serialize>(path: &Path, header: &H, arrays: &ArrayWriter<
     file::write_atomic(path, &bytes)
 }
 
-/// Read a checkpoint written by `algorithm`: its header and a reader over its arrays.
-pub(crate) fn read<'p, H: DeserializeOwned>(path: &'p Path, algorithm: Algorithm) -> Result<(H, ArrayReader<'p>)> {
+/// Read a checkpoint written by `algorithm` for an env with `spaces` (observation, action): its
+/// header and a reader over its arrays.
+pub(crate) fn read<'p, H: Header>(
+    path: &'p Path,
+    algorithm: Algorithm,
+    spaces: (&BoxSpace, &BoxSpace),
+) -> Result<(H, ArrayReader<'p>)> {
     let (h, arrays): (serde_json::Value, _) = file::read(path, CHECKPOINT_MAGIC, &CHECKPOINT_READS, "checkpoint")?;
     let found = h
         .get("algorithm")
@@ -133,10 +196,12 @@ pub(crate) fn read<'p, H: DeserializeOwned>(path: &'p Path, algorithm: Algorithm
             env: algorithm.to_string(),
         });
     }
-    let h = serde_json::from_value(h).map_err(|e| RlError::BadFile {
+    let h: H = serde_json::from_value(h).map_err(|e| RlError::BadFile {
         path: path.to_path_buf(),
         reason: format!("checkpoint header: {e}"),
     })?;
+    check_space("observation space", &h.common().observation_space, spaces.0)?;
+    check_space("action space", &h.common().action_space, spaces.1)?;
     Ok((
         h,
         ArrayReader {

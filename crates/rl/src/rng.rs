@@ -1,54 +1,39 @@
-//! A small seedable RNG whose whole state fits in a checkpoint (xoshiro256++ seeded through
-//! SplitMix64). All randomness of training (exploration noise, minibatch order, initial
-//! weights) comes from here, so the same seed on one thread gives the same run.
+//! The learners' seedable RNG: rand_xoshiro's xoshiro256++ (seeded through SplitMix64, the
+//! generator's reference seeding), whose whole state fits in a checkpoint. All randomness of
+//! training (exploration noise, minibatch order, initial weights) comes from here, so the same
+//! seed on one thread gives the same run. The envs draw from rand's `StdRng`; both are rand's.
 
+use rand::RngExt;
+use rand_xoshiro::Xoshiro256PlusPlus;
+use rand_xoshiro::rand_core::{Rng as _, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-/// xoshiro256++ with a cached second Box-Muller normal.
+/// xoshiro256++ with a cached second Box-Muller normal. Serialised as `{ s, spare }`, the
+/// generator's state words beside the cache.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Rng {
-    s: [u64; 4],
+    #[serde(flatten)]
+    core: Xoshiro256PlusPlus,
     spare: Option<f64>,
-}
-
-fn splitmix64(x: &mut u64) -> u64 {
-    *x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *x;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 impl Rng {
     /// A generator seeded from `seed`.
     pub fn new(seed: u64) -> Self {
-        let mut x = seed;
-        let s = [
-            splitmix64(&mut x),
-            splitmix64(&mut x),
-            splitmix64(&mut x),
-            splitmix64(&mut x),
-        ];
-        Self { s, spare: None }
+        Self {
+            core: Xoshiro256PlusPlus::seed_from_u64(seed),
+            spare: None,
+        }
     }
 
     /// Next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
-        let s = &mut self.s;
-        let out = s[0].wrapping_add(s[3]).rotate_left(23).wrapping_add(s[0]);
-        let t = s[1] << 17;
-        s[2] ^= s[0];
-        s[3] ^= s[1];
-        s[1] ^= s[2];
-        s[0] ^= s[3];
-        s[2] ^= t;
-        s[3] = s[3].rotate_left(45);
-        out
+        self.core.next_u64()
     }
 
-    /// Uniform in [0, 1).
+    /// Uniform in [0, 1), 53 bits.
     pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+        self.core.random::<f64>()
     }
 
     /// Uniform integer in [0, n) (n > 0).
@@ -104,5 +89,30 @@ mod tests {
         assert!((var - 1.0).abs() < 0.02, "{var}");
         assert!((0..1000).all(|_| r.below(7) < 7));
         assert_eq!(Rng::new(5).next_u64(), Rng::new(5).next_u64());
+    }
+
+    #[test]
+    fn seed_zero_gives_the_reference_xoshiro256_plus_plus_stream() {
+        // xoshiro256++ seeded with SplitMix64(0), as in the generator's reference C code: the
+        // stream every committed run and shipped policy was trained with.
+        let mut r = Rng::new(0);
+        let got: Vec<u64> = (0..3).map(|_| r.next_u64()).collect();
+        assert_eq!(
+            got,
+            [0x5317_5d61_490b_23df, 0x61da_6f3d_c380_d507, 0x5c0f_df91_ec9a_7bfc]
+        );
+    }
+
+    #[test]
+    fn the_state_round_trips_through_a_checkpoint_header_as_s_and_spare() {
+        let mut r = Rng::new(9);
+        r.normal();
+        let json = serde_json::to_value(&r).unwrap();
+        assert_eq!(json["s"].as_array().map(Vec::len), Some(4), "{json}");
+        assert!(json["spare"].is_f64(), "{json}");
+        let mut back: Rng = serde_json::from_value(json).unwrap();
+        assert_eq!(back, r);
+        assert_eq!(back.normal().to_bits(), r.normal().to_bits());
+        assert_eq!(back.next_u64(), r.next_u64());
     }
 }

@@ -19,16 +19,16 @@ pub use config::PpoConfig;
 pub use update::GradientProbe;
 
 use crate::adam::Adam;
-use crate::checkpoint::{self, AdamMeta, ArrayWriter};
+use crate::checkpoint::{self, AdamMeta, ArrayWriter, Common};
 use crate::cnn::encode;
 use crate::error::Result;
-use crate::gaussian::HALF_LN_2PI_F32;
+use crate::gaussian::{self, HALF_LN_2PI_F32};
 use crate::nets::{HostParams, Init, MlpSpec, init_layer, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
-use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, check_space};
+use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData};
 use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
-use agvrl_envs::{BoxSpace, Env, VecEnv};
+use agvrl_envs::{Env, VecEnv};
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -125,16 +125,15 @@ pub struct Ppo<E: Env> {
 struct Header {
     algorithm: Algorithm,
     config: PpoConfig,
-    observation_space: BoxSpace,
-    action_space: BoxSpace,
-    seed: u64,
-    num_timesteps: u64,
-    n_updates: u64,
-    episodes: u64,
-    recent_returns: Vec<f64>,
-    rng: Rng,
+    #[serde(flatten)]
+    common: Common,
     opt: AdamMeta,
-    normalizer: Option<ObsNormalizer>,
+}
+
+impl checkpoint::Header for Header {
+    fn common(&self) -> &Common {
+        &self.common
+    }
 }
 
 /// One rollout, flat with index `step * n_envs + env`.
@@ -308,7 +307,7 @@ impl<E: Env> Ppo<E> {
         let log_std = self.params.data[Layout::of(&self.cfg).log_std].clone();
         let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
         // log N(x; m, s) summed over elements = sum(-z^2/2) - sum(log s) - a ln(2 pi)/2
-        let lp_const = -log_std.iter().sum::<f32>() - a as f32 * HALF_LN_2PI_F32;
+        let lp_const = gaussian::log_prob_const(&log_std);
         let latent_dim = *self.cfg.net_arch.last().unwrap_or(&o);
         let sigma_sq: Vec<f64> = log_std.iter().map(|l| (2.0 * *l as f64).exp()).collect();
         let mut expl = vec![0.0f32; n_envs * latent_dim * a];
@@ -366,7 +365,7 @@ impl<E: Env> Ppo<E> {
                         let m = &expl[e * latent_dim * a..(e + 1) * latent_dim * a];
                         let noise: f32 = h.iter().enumerate().map(|(k, hk)| hk * m[k * a + j]).sum();
                         let act = mean[e * a + j] + noise;
-                        lp -= (0.5 * (noise as f64).powi(2) / var[j] + 0.5 * var[j].ln()) as f32;
+                        lp -= gaussian::neg_log_density(noise as f64, var[j]) as f32;
                         actions.push(act);
                         clipped.push(act.clamp(space.low[j], space.high[j]));
                     }
@@ -493,38 +492,33 @@ impl<E: Env> Ppo<E> {
         let header = Header {
             algorithm: Algorithm::Ppo,
             config: self.cfg.clone(),
-            observation_space: self.env.observation_space().clone(),
-            action_space: self.env.action_space().clone(),
-            seed: self.seed,
-            num_timesteps: self.num_timesteps,
-            n_updates: self.n_updates,
-            episodes: self.episodes.count,
-            recent_returns: self.episodes.recent.iter().copied().collect(),
-            rng: self.rng.clone(),
+            common: Common::new(
+                (self.env.observation_space(), self.env.action_space()),
+                self.seed,
+                (self.num_timesteps, self.n_updates),
+                &self.episodes,
+                &self.rng,
+                &self.normalizer,
+            ),
             opt,
-            normalizer: self.normalizer.clone(),
         };
         checkpoint::write(path, &header, &w)
     }
 
     /// Resume from a checkpoint with `env` (whose spaces must match); episodes restart.
     pub fn load_checkpoint(path: &Path, env: VecEnv<E>, device: &Device) -> Result<Self> {
-        let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Ppo)?;
-        check_space("observation space", &h.observation_space, env.observation_space())?;
-        check_space("action space", &h.action_space, env.action_space())?;
-        let mut s = Self::new(h.config.clone(), env, device, h.seed)?;
+        let spaces = (env.observation_space(), env.action_space());
+        let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Ppo, spaces)?;
+        let mut s = Self::new(h.config.clone(), env, device, h.common.seed)?;
         let shapes = s.params.shapes.clone();
         s.params = r.params(&shapes)?;
         s.opt = r.adam(&h.opt, &shapes)?;
         r.finish()?;
-        s.rng = h.rng;
-        s.num_timesteps = h.num_timesteps;
-        s.n_updates = h.n_updates;
-        s.episodes = Episodes {
-            count: h.episodes,
-            recent: h.recent_returns.into_iter().collect(),
-        };
-        s.normalizer = h.normalizer;
+        s.episodes = h.common.episodes();
+        s.rng = h.common.rng;
+        s.num_timesteps = h.common.num_timesteps;
+        s.n_updates = h.common.n_updates;
+        s.normalizer = h.common.normalizer;
         Ok(s)
     }
 

@@ -12,7 +12,7 @@
 use super::{Layout, Ppo, Rollout, forward};
 use crate::adam::Adam;
 use crate::error::{Result, RlError};
-use crate::gaussian::HALF_LN_2PI;
+use crate::gaussian::{self, HALF_LN_2PI};
 use crate::nets::{grads_of, to_vec};
 use agvrl_envs::Env;
 use burn::tensor::{Tensor, TensorData};
@@ -113,8 +113,8 @@ pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f6
         let mut lp = -(a as f64) * HALF_LN_2PI;
         for j in 0..a {
             diff[j] = (x.actions[i * a + j] - x.mean[i * a + j]) as f64;
-            lp -= 0.5 * diff[j] * diff[j] / var[j] + 0.5 * var[j].ln();
-            h.entropy += (0.5 + HALF_LN_2PI + 0.5 * var[j].ln()) * inv_n;
+            lp -= gaussian::neg_log_density(diff[j], var[j]);
+            h.entropy += gaussian::entropy(var[j]) * inv_n;
         }
         let log_ratio = lp - x.old_log_prob[i] as f64;
         let ratio = log_ratio.exp();
@@ -389,7 +389,7 @@ mod tests {
             }
         };
         let diff = t(x.actions, [1, n, a]) - mean.clone();
-        let lp = (diff.powi_scalar(2) / var.clone() * -0.5 - var.clone().log() * 0.5 - HALF_LN_2PI).sum_dim(2);
+        let lp = gaussian::log_prob(diff, var.clone());
         let ratio = (lp - t(x.old_log_prob, [1, n, 1])).exp();
         let adv = t(x.advantages, [1, n, 1]);
         let pg = (ratio.clone() * adv.clone())
@@ -397,7 +397,7 @@ mod tests {
             .mean()
             .neg();
         let vf = (t(x.returns, [1, n, 1]) - value.clone()).powi_scalar(2).mean();
-        let ent = (var.log() * 0.5 + (0.5 + HALF_LN_2PI)).sum_dim(2).mean();
+        let ent = gaussian::entropy_of(var).mean();
         let loss = pg + vf * vf_coef - ent * ent_coef;
         let g = loss.backward();
         let v = |x: &Tensor<3>| to_vec(x.grad(&g).unwrap()).unwrap();

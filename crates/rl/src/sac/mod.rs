@@ -19,12 +19,12 @@ pub use config::{EntCoef, SacConfig};
 
 use crate::adam::Adam;
 use crate::buffer::ReplayBuffer;
-use crate::checkpoint::{self, AdamMeta, ArrayWriter};
+use crate::checkpoint::{self, AdamMeta, ArrayWriter, Common};
 use crate::cnn::encode;
 use crate::error::{Result, RlError};
 use crate::nets::{Activation, HostParams, Init, MlpSpec, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
-use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, check_space, unsquash};
+use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, unsquash};
 use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
 use agvrl_envs::{BoxSpace, Env, VecEnv};
@@ -73,20 +73,19 @@ pub struct Sac<E: Env> {
 struct Header {
     algorithm: Algorithm,
     config: SacConfig,
-    observation_space: BoxSpace,
-    action_space: BoxSpace,
-    seed: u64,
-    num_timesteps: u64,
-    n_updates: u64,
-    episodes: u64,
-    recent_returns: Vec<f64>,
-    rng: Rng,
+    #[serde(flatten)]
+    common: Common,
     actor_opt: AdamMeta,
     critic_opt: AdamMeta,
     ent_opt: Option<AdamMeta>,
-    normalizer: Option<ObsNormalizer>,
     buffer_len: usize,
     buffer_pos: usize,
+}
+
+impl checkpoint::Header for Header {
+    fn common(&self) -> &Common {
+        &self.common
+    }
 }
 
 fn finite_box(space: &BoxSpace) -> Result<()> {
@@ -379,18 +378,17 @@ impl<E: Env> Sac<E> {
         let header = Header {
             algorithm: Algorithm::Sac,
             config: self.cfg.clone(),
-            observation_space: self.env.observation_space().clone(),
-            action_space: self.env.action_space().clone(),
-            seed: self.seed,
-            num_timesteps: self.num_timesteps,
-            n_updates: self.n_updates,
-            episodes: self.episodes.count,
-            recent_returns: self.episodes.recent.iter().copied().collect(),
-            rng: self.rng.clone(),
+            common: Common::new(
+                (self.env.observation_space(), self.env.action_space()),
+                self.seed,
+                (self.num_timesteps, self.n_updates),
+                &self.episodes,
+                &self.rng,
+                &self.normalizer,
+            ),
             actor_opt,
             critic_opt,
             ent_opt,
-            normalizer: self.normalizer.clone(),
             buffer_len: b.len(),
             buffer_pos: b.pos,
         };
@@ -400,10 +398,9 @@ impl<E: Env> Sac<E> {
     /// Resume from a checkpoint with `env` (whose spaces must match); training continues with
     /// the saved weights, optimisers, buffer, RNG and counters; episodes restart.
     pub fn load_checkpoint(path: &Path, env: VecEnv<E>, device: &Device) -> Result<Self> {
-        let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Sac)?;
-        check_space("observation space", &h.observation_space, env.observation_space())?;
-        check_space("action space", &h.action_space, env.action_space())?;
-        let mut s = Self::new(h.config.clone(), env, device, h.seed)?;
+        let spaces = (env.observation_space(), env.action_space());
+        let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Sac, spaces)?;
+        let mut s = Self::new(h.config.clone(), env, device, h.common.seed)?;
         s.actor = r.params(&s.actor.shapes)?;
         s.critic = r.params(&s.critic.shapes)?;
         s.critic_target = r.params(&s.critic.shapes)?;
@@ -434,14 +431,11 @@ impl<E: Env> Sac<E> {
         s.buffer.dones = r.array(Some(n))?;
         s.buffer.pos = h.buffer_pos;
         r.finish()?;
-        s.rng = h.rng;
-        s.num_timesteps = h.num_timesteps;
-        s.n_updates = h.n_updates;
-        s.episodes = Episodes {
-            count: h.episodes,
-            recent: h.recent_returns.into_iter().collect(),
-        };
-        s.normalizer = h.normalizer;
+        s.episodes = h.common.episodes();
+        s.rng = h.common.rng;
+        s.num_timesteps = h.common.num_timesteps;
+        s.n_updates = h.common.n_updates;
+        s.normalizer = h.common.normalizer;
         s.upload_all();
         Ok(s)
     }

@@ -14,7 +14,6 @@
 use super::Sac;
 use crate::cnn::{ImageSpec, encode};
 use crate::error::{Result, RlError};
-use crate::gaussian::HALF_LN_2PI_F32 as HALF_LN_2PI;
 use crate::nets::{Activation, grads_of, mlp_forward, to_vec};
 use crate::policy::{LOG_STD_MAX, LOG_STD_MIN};
 use agvrl_envs::Env;
@@ -28,7 +27,7 @@ pub(crate) fn squashed_sample(out: Tensor<3>, eps: Tensor<3>, a: usize) -> (Tens
     let u = mean + log_std.clone().exp() * eps.clone();
     let y = u.tanh();
     // log N(u; mean, std) = -eps^2/2 - log std - ln(2 pi)/2, minus the tanh Jacobian.
-    let gauss = (eps.powi_scalar(2) * -0.5 - log_std - HALF_LN_2PI).sum_dim(2);
+    let gauss = crate::gaussian::log_prob_of_noise(eps, log_std);
     let jac = (y.clone().powi_scalar(2).neg() + (1.0 + 1e-6)).log().sum_dim(2);
     (y, gauss - jac)
 }
