@@ -81,8 +81,10 @@ pub fn probe(a: ProbeArgs) -> Result<()> {
     };
     let mut sim = Sim::new(SimConfig {
         scene: SceneSource::Builtin(scene.into()),
-        camera,
-        ..SimConfig::default()
+        settings: agvrl_sim::SimSettings {
+            camera,
+            ..Default::default()
+        },
     })?;
     sim.reset(PlanarPose {
         x_m: x,

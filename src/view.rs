@@ -58,8 +58,8 @@ pub fn view(a: ViewArgs) -> Result<()> {
     if let Some(n) = a.steps {
         env_cfg.max_steps = n;
     }
-    if a.camera && env_cfg.camera.is_none() {
-        env_cfg.camera = Some(Default::default());
+    if a.camera && env_cfg.sim.camera.is_none() {
+        env_cfg.sim.camera = Some(Default::default());
     }
     let mut env = make_sim_env(&env_id, &env_cfg)?.with_context(|| format!("{env_id} has no vehicle to view"))?;
     let mut policy = match &policy_path {

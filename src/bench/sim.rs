@@ -35,8 +35,10 @@ pub(super) fn run(quick: bool) -> Vec<String> {
         for id in SCENE_IDS {
             let cfg = SimConfig {
                 scene: SceneSource::Builtin(id.to_string()),
-                mode,
-                ..SimConfig::default()
+                settings: agvrl_sim::SimSettings {
+                    dynamics: mode,
+                    ..Default::default()
+                },
             };
             let load_s = median_s(reps.min(3), || {
                 black_box(Sim::new(cfg.clone()).ok());
@@ -61,7 +63,8 @@ pub(super) fn run(quick: bool) -> Vec<String> {
             };
             drive(&mut sim, steps / 5, true);
             let step_s = median_s(reps, || drive(&mut sim, steps, true)) / steps as f64;
-            let phys_s = median_s(reps, || drive(&mut sim, steps, false)) / steps as f64 / sim.config().substeps as f64;
+            let phys_s =
+                median_s(reps, || drive(&mut sim, steps, false)) / steps as f64 / sim.config().settings.substeps as f64;
             let scan_s = median_s(reps, || {
                 for _ in 0..steps {
                     black_box(sim.lidar_scan());
@@ -99,8 +102,10 @@ pub(super) fn camera(quick: bool) -> Vec<String> {
             });
             let cfg = SimConfig {
                 scene: SceneSource::Builtin(id.to_string()),
-                camera,
-                ..SimConfig::default()
+                settings: agvrl_sim::SimSettings {
+                    camera,
+                    ..Default::default()
+                },
             };
             let Ok(sim) = Sim::new(cfg) else { continue };
             black_box(sim.camera_frame());

@@ -511,3 +511,39 @@ fn the_shipped_search_policy_drives_every_search_scene_in_agvrl_drive() {
         );
     }
 }
+
+/// agvrl-drive reads the settings beside a policy with the run config type `agvrl train`
+/// writes: a key `agvrl train` would refuse (a typo) stops the drive with the key named,
+/// instead of driving on defaults.
+#[test]
+fn agvrl_drive_refuses_a_settings_file_that_agvrl_train_would_refuse() {
+    let dir = std::env::temp_dir().join(format!("agvrl-sidecar-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let policy = dir.join("racing.agvrl");
+    std::fs::copy(shipped_policy("racing-oval-ppo"), &policy).unwrap();
+    let drive = || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
+            .arg("--policy")
+            .arg(&policy)
+            .args(["--steps", "5", "--quiet"])
+            .output()
+            .unwrap()
+    };
+    std::fs::write(
+        dir.join("racing.toml"),
+        "env = \"racing-oval\"\n[env_config]\nsubstepz = 8\n",
+    )
+    .unwrap();
+    let o = drive();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("substepz"), "{err}");
+    // The same file with the key spelt right drives.
+    std::fs::write(
+        dir.join("racing.toml"),
+        "env = \"racing-oval\"\n[env_config]\nsubsteps = 8\n",
+    )
+    .unwrap();
+    let o = drive();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

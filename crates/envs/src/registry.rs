@@ -10,8 +10,7 @@ use crate::task::{
 };
 use crate::task_env::TaskEnv;
 use crate::wrappers::{NoiseConfig, Noisy, TimeLimit};
-use agvrl_sim::sensors::LidarConfig;
-use agvrl_sim::{DynamicsMode, SceneKind, SceneSource, SimConfig};
+use agvrl_sim::{SceneKind, SceneSource, SimConfig, SimSettings};
 use serde::{Deserialize, Serialize};
 
 /// The task an env id poses.
@@ -99,24 +98,10 @@ pub fn spec(id: &str) -> Option<&'static EnvSpec> {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct EnvConfig {
-    /// Built-in vehicle name or the path of a vehicle TOML.
-    pub vehicle: String,
-    /// Dynamics mode.
-    pub dynamics: DynamicsMode,
-    /// Physics substeps per 1/30 s control period.
-    pub substeps: u32,
-    /// Braking deceleration when the throttle asks for less speed, m/s^2, like the car's
-    /// speed-controlled ESC; 0 (the default) coasts, as AutoVRL.
-    pub brake_mps2: f64,
-    /// LiDAR.
-    pub lidar: LidarConfig,
-    /// Search subjects placed in the scene (seeded by `subject_seed`); finding them needs the
-    /// camera.
-    pub subjects: usize,
-    /// Seed of the subjects' placement.
-    pub subject_seed: u64,
-    /// The vehicle camera (frames appear in `SensorFrame::image`; off by default).
-    pub camera: Option<agvrl_sim::sensors::CameraConfig>,
+    /// The simulator's settings (vehicle, dynamics, substeps, brake, LiDAR, GPS, camera,
+    /// subjects), at the top level of the env TOML; the env id picks the scene.
+    #[serde(flatten)]
+    pub sim: SimSettings,
     /// Observation composition.
     pub observation: ObsConfig,
     /// Action mapping.
@@ -156,14 +141,7 @@ pub struct EnvConfig {
 impl Default for EnvConfig {
     fn default() -> Self {
         Self {
-            vehicle: "xtenth_car".into(),
-            dynamics: DynamicsMode::Raycast,
-            substeps: 4,
-            brake_mps2: 0.0,
-            lidar: LidarConfig::default(),
-            subjects: 0,
-            subject_seed: 0,
-            camera: None,
+            sim: SimSettings::default(),
             observation: ObsConfig::default(),
             action_mapping: ActionMapping::Scaled,
             search_reward: SearchReward::AutovrlCode,
@@ -252,22 +230,14 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<SimCar, EnvError> {
     }
     let sim = SimConfig {
         scene: source,
-        vehicle: cfg.vehicle.clone(),
-        mode: cfg.dynamics,
-        substeps: cfg.substeps,
-        lidar: cfg.lidar.clone(),
-        camera: cfg.camera.clone(),
-        subjects: cfg.subjects,
-        subject_seed: cfg.subject_seed,
-        brake_mps2: cfg.brake_mps2,
-        ..SimConfig::default()
+        settings: cfg.sim.clone(),
     };
     let v =
         SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?.with_new_layout_each_episode(cfg.new_layout_each_episode);
     Ok(if cfg.noise.is_off() {
-        SimCar::Exact(v)
+        SimCar::Exact(Box::new(v))
     } else {
-        SimCar::Noisy(Noisy::new(v, cfg.noise))
+        SimCar::Noisy(Box::new(Noisy::new(v, cfg.noise)))
     })
 }
 
@@ -284,7 +254,7 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
     }
     let mut safety_filter = cfg.safety_filter;
     if safety_filter.decel_mps2 == 0.0 {
-        safety_filter.decel_mps2 = cfg.brake_mps2 as f32;
+        safety_filter.decel_mps2 = cfg.sim.brake_mps2 as f32;
     }
     safety_filter.validate().map_err(EnvError::Config)?;
     let ends_below_m = match spec.task {
@@ -300,8 +270,8 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
     let common = CommonConfig {
         observation: cfg.observation,
         action_mapping: cfg.action_mapping,
-        n_rays: cfg.lidar.n_rays,
-        range_max_m: cfg.lidar.range_max_m,
+        n_rays: cfg.sim.lidar.n_rays,
+        range_max_m: cfg.sim.lidar.range_max_m,
         safety_filter,
     };
     Ok(if spec.task == TaskKind::Racing {

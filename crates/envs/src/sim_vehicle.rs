@@ -265,7 +265,7 @@ impl Vehicle for SimVehicle {
     }
 
     fn control_period_s(&self) -> f64 {
-        self.sim.config().control_period_s
+        self.sim.config().settings.control_period_s
     }
 
     fn steering_limit_rad(&self) -> f64 {
@@ -282,9 +282,9 @@ impl Vehicle for SimVehicle {
 /// [`SimCar::sim`]; a task only ever sees the [`Vehicle`] seam.
 pub enum SimCar {
     /// Exact sensors, immediate commands.
-    Exact(SimVehicle),
+    Exact(Box<SimVehicle>),
     /// Noisy sensors and delayed commands.
-    Noisy(crate::wrappers::Noisy<SimVehicle>),
+    Noisy(Box<crate::wrappers::Noisy<SimVehicle>>),
 }
 
 impl SimCar {
@@ -303,15 +303,15 @@ impl SimCar {
 
     fn vehicle_mut(&mut self) -> &mut dyn Vehicle {
         match self {
-            Self::Exact(v) => v,
-            Self::Noisy(n) => n,
+            Self::Exact(v) => v.as_mut(),
+            Self::Noisy(n) => n.as_mut(),
         }
     }
 
     fn vehicle(&self) -> &dyn Vehicle {
         match self {
-            Self::Exact(v) => v,
-            Self::Noisy(n) => n,
+            Self::Exact(v) => v.as_ref(),
+            Self::Noisy(n) => n.as_ref(),
         }
     }
 }

@@ -125,6 +125,30 @@ mod env_contract {
     }
 }
 
+mod env_config_file {
+    use super::*;
+
+    /// The simulator's settings are embedded in `EnvConfig` and read at the top level of its
+    /// TOML; every one of them reaches the simulator, and a misspelt key is an error.
+    #[test]
+    fn simulator_keys_sit_at_the_top_level_reach_the_simulator_and_typos_are_refused() {
+        let text = "substeps = 6\nbrake_mps2 = 2.5\ncontrol_period_s = 0.025\nmax_steps = 7\n\
+                    [lidar]\nn_rays = 50\n";
+        let cfg: EnvConfig = toml::from_str(text).unwrap();
+        assert_eq!((cfg.sim.substeps, cfg.sim.lidar.n_rays, cfg.max_steps), (6, 50, 7));
+        let car = make_vehicle("racing-oval", &cfg).unwrap();
+        assert_eq!(car.sim().config().settings, cfg.sim);
+        assert_eq!(car.control_period_s(), 0.025);
+        let back: EnvConfig = toml::from_str(&toml::to_string(&cfg).unwrap()).unwrap();
+        assert_eq!(back, cfg);
+        for bad in ["substepz = 6", "[lidar]\nn_rayz = 3", "dynamics = \"warp\""] {
+            let e = toml::from_str::<EnvConfig>(bad).unwrap_err().to_string();
+            let key = bad.trim_start_matches("[lidar]\n").split([' ', '=']).next().unwrap();
+            assert!(e.contains(key) || e.contains("warp"), "{bad}: {e}");
+        }
+    }
+}
+
 mod episodes {
     use super::*;
 
@@ -664,7 +688,10 @@ mod camera_frames {
             ..Default::default()
         });
         let cfg = EnvConfig {
-            camera,
+            sim: agvrl_sim::SimSettings {
+                camera,
+                ..Default::default()
+            },
             spawn: SpawnMode::Fixed,
             ..EnvConfig::default()
         };
@@ -690,14 +717,16 @@ mod subjects {
     fn subjects_stand_by_trees_and_are_found_when_the_camera_sees_them() {
         let sim = agvrl_sim::SimConfig {
             scene: agvrl_sim::SceneSource::Builtin("outdoor-20".into()),
-            subjects: 3,
-            subject_seed: 7,
-            camera: Some(agvrl_sim::sensors::CameraConfig {
-                width: 80,
-                height: 60,
+            settings: agvrl_sim::SimSettings {
+                subjects: 3,
+                subject_seed: 7,
+                camera: Some(agvrl_sim::sensors::CameraConfig {
+                    width: 80,
+                    height: 60,
+                    ..Default::default()
+                }),
                 ..Default::default()
-            }),
-            ..Default::default()
+            },
         };
         let vehicle = SimVehicle::new(sim.clone(), SpawnMode::Fixed, Randomisation::default()).unwrap();
         let subjects = vehicle.map().unwrap().subjects.clone();
@@ -750,11 +779,14 @@ mod image_observations {
 
     fn cfg(channels: ImageChannels, camera: bool) -> EnvConfig {
         EnvConfig {
-            camera: camera.then(|| agvrl_sim::sensors::CameraConfig {
-                width: 64,
-                height: 48,
+            sim: agvrl_sim::SimSettings {
+                camera: camera.then(|| agvrl_sim::sensors::CameraConfig {
+                    width: 64,
+                    height: 48,
+                    ..Default::default()
+                }),
                 ..Default::default()
-            }),
+            },
             observation: ObsConfig {
                 image: ImageObs {
                     channels,
@@ -815,7 +847,10 @@ mod safety_filter {
 
     fn filtered(enabled: bool) -> EnvConfig {
         EnvConfig {
-            brake_mps2: 3.0,
+            sim: agvrl_sim::SimSettings {
+                brake_mps2: 3.0,
+                ..Default::default()
+            },
             safety_filter: SafetyFilterConfig {
                 enabled,
                 ..SafetyFilterConfig::default()
@@ -892,10 +927,8 @@ mod safety_filter {
 
     #[test]
     fn a_filter_on_a_coasting_drive_is_refused() {
-        let cfg = EnvConfig {
-            brake_mps2: 0.0,
-            ..filtered(true)
-        };
+        let mut cfg = filtered(true);
+        cfg.sim.brake_mps2 = 0.0;
         let err = make("search-outdoor-20", &cfg)
             .err()
             .expect("a coasting car cannot be filtered");

@@ -130,7 +130,7 @@ impl Env {
                     len: 0,
                 }),
                 id: env_id.to_string(),
-                has_camera: cfg.camera.is_some(),
+                has_camera: cfg.sim.camera.is_some(),
             })
         })
     }

@@ -47,6 +47,7 @@ mod buffer;
 #[cfg(feature = "train")]
 mod checkpoint;
 pub mod cnn;
+pub mod config;
 pub mod device;
 mod error;
 pub mod eval;
@@ -71,6 +72,7 @@ pub use buffer::ReplayBuffer;
 #[cfg(feature = "train")]
 pub use checkpoint::CHECKPOINT_FORMAT_VERSION;
 pub use cnn::ImageSpec;
+pub use config::{EntCoef, PpoConfig, RunConfig, SacConfig};
 pub use device::{CpuBackend, default_device, device_by_name};
 pub use error::{Result, RlError};
 pub use eval::evaluate;
@@ -78,11 +80,11 @@ pub use file::write_atomic;
 pub use normalize::ObsNormalizer;
 pub use policy::{Algorithm, EncoderData, POLICY_FORMAT_VERSION, Policy, PolicyData};
 #[cfg(feature = "train")]
-pub use ppo::{Ppo, PpoConfig};
+pub use ppo::Ppo;
 #[cfg(feature = "train")]
 pub use progress::{Control, Losses, Progress};
 #[cfg(feature = "train")]
-pub use sac::{Sac, SacConfig};
+pub use sac::Sac;
 
 /// Re-exported so callers can name the device without depending on Burn.
 pub use burn::tensor::Device;

@@ -32,53 +32,68 @@ pub enum SceneSource {
     },
 }
 
-/// Everything that defines a simulation.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// Everything that defines a simulation: the scene and the settings.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SimConfig {
     /// The scene.
     pub scene: SceneSource,
+    /// Vehicle, dynamics, timing, sensors and drive.
+    pub settings: SimSettings,
+}
+
+/// The simulator's settings besides the scene. agvrl-envs' `EnvConfig` embeds them (its env id
+/// picks the scene), so an env TOML and the simulator read the same keys.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SimSettings {
     /// A built-in vehicle name (`xtenth_car`, `racecar`) or the path of a vehicle TOML.
     pub vehicle: String,
     /// Dynamics mode.
-    pub mode: DynamicsMode,
+    pub dynamics: DynamicsMode,
     /// Control period, seconds (AutoVRL: 1/30).
     pub control_period_s: f64,
     /// Physics steps per control period (the substep must be <= 1/60 s).
     pub substeps: u32,
+    /// Braking deceleration of the drive when the throttle asks for less speed, m/s^2, like
+    /// the car's speed-controlled ESC; 0 (the default) coasts, as AutoVRL (see `DriveModel`).
+    pub brake_mps2: f64,
+    /// Split steering between the front wheels by Ackermann geometry (`None`: the vehicle's
+    /// own setting; `Some(false)`: AutoVRL's equal angles).
+    pub ackermann: Option<bool>,
     /// LiDAR settings.
     pub lidar: LidarConfig,
     /// GPS settings.
     pub gps: GpsConfig,
-    /// Human-sized subjects added to the scene (search targets), placed by `subject_seed`.
+    /// Human-sized subjects added to the scene (search targets), placed by `subject_seed`;
+    /// finding them needs the camera.
     pub subjects: usize,
     /// Seed of the subjects' placement.
     pub subject_seed: u64,
     /// The vehicle's camera (on its camera link), when set.
     pub camera: Option<crate::sensors::CameraConfig>,
-    /// Split steering between the front wheels by Ackermann geometry (`None`: the vehicle's
-    /// own setting; `Some(false)`: AutoVRL's equal angles).
-    pub ackermann: Option<bool>,
-    /// Braking deceleration of the drive when the throttle asks for less speed, m/s^2 (0:
-    /// AutoVRL's coasting; see `DriveModel`).
-    pub brake_mps2: f64,
 }
 
-impl Default for SimConfig {
+impl Default for SceneSource {
+    fn default() -> Self {
+        Self::Builtin("oval".into())
+    }
+}
+
+impl Default for SimSettings {
     fn default() -> Self {
         Self {
-            scene: SceneSource::Builtin("oval".into()),
             vehicle: "xtenth_car".into(),
-            mode: DynamicsMode::Raycast,
+            dynamics: DynamicsMode::Raycast,
             control_period_s: 1.0 / 30.0,
             substeps: 4,
+            brake_mps2: 0.0,
+            ackermann: None,
             lidar: LidarConfig::default(),
             gps: GpsConfig::default(),
             subjects: 0,
             subject_seed: 0,
             camera: None,
-            ackermann: None,
-            brake_mps2: 0.0,
         }
     }
 }
@@ -135,23 +150,24 @@ impl Sim {
             context: "sim config".into(),
             msg,
         };
-        if !(cfg.control_period_s > 0.0 && cfg.control_period_s.is_finite()) || cfg.substeps == 0 {
+        let set = &cfg.settings;
+        if !(set.control_period_s > 0.0 && set.control_period_s.is_finite()) || set.substeps == 0 {
             return Err(invalid("control_period_s must be positive and substeps >= 1".into()));
         }
-        if cfg.control_period_s / cfg.substeps as f64 > 1.0 / 60.0 + 1e-9 {
+        if set.control_period_s / set.substeps as f64 > 1.0 / 60.0 + 1e-9 {
             return Err(invalid(format!(
                 "physics substep {:.4} s is longer than 1/60 s: raise substeps",
-                cfg.control_period_s / cfg.substeps as f64
+                set.control_period_s / set.substeps as f64
             )));
         }
-        if !(cfg.brake_mps2 >= 0.0 && cfg.brake_mps2.is_finite()) {
+        if !(set.brake_mps2 >= 0.0 && set.brake_mps2.is_finite()) {
             return Err(invalid(format!(
                 "brake_mps2 must be finite and >= 0, got {}",
-                cfg.brake_mps2
+                set.brake_mps2
             )));
         }
-        cfg.lidar.validate().map_err(invalid)?;
-        if let Some(c) = &cfg.camera {
+        set.lidar.validate().map_err(invalid)?;
+        if let Some(c) = &set.camera {
             c.validate().map_err(invalid)?;
         }
         let assets = AssetSource::builtin();
@@ -163,24 +179,24 @@ impl Sim {
             }
             SceneSource::Procedural { kind, seed, half_m } => Scene::procedural(*kind, *seed, *half_m, 2.0)?,
         };
-        if cfg.subjects > 0 {
-            let file = scene.file.clone().with_subjects(cfg.subjects, cfg.subject_seed, 3.0);
+        if set.subjects > 0 {
+            let file = scene.file.clone().with_subjects(set.subjects, set.subject_seed, 3.0);
             scene = Scene::build(file, &assets, "scene with subjects")?;
         }
-        let model = if cfg.vehicle.ends_with(".toml") {
-            let (src, name) = AssetSource::for_file(std::path::Path::new(&cfg.vehicle));
+        let model = if set.vehicle.ends_with(".toml") {
+            let (src, name) = AssetSource::for_file(std::path::Path::new(&set.vehicle));
             VehicleModel::load(&src, &name)?
         } else {
-            VehicleModel::builtin(&assets, &cfg.vehicle)?
+            VehicleModel::builtin(&assets, &set.vehicle)?
         };
-        let mut world = World::new(&scene, (cfg.control_period_s / cfg.substeps as f64) as f32);
+        let mut world = World::new(&scene, (set.control_period_s / set.substeps as f64) as f32);
         let d = model.spec.drive;
         let nominal = VehicleParams {
             drive: DriveModel {
                 c_t: d.c_t,
                 c_d: d.c_d,
                 c_r: d.c_r,
-                brake: cfg.brake_mps2 / model.drive_radius_m() as f64,
+                brake: set.brake_mps2 / model.drive_radius_m() as f64,
             },
             tyre_friction: model.spec.tyre_friction,
             mass_scale: 1.0,
@@ -195,12 +211,12 @@ impl Sim {
         let body = Body::new(
             &mut world,
             &model,
-            cfg.mode,
+            set.dynamics,
             spawn_pose(&model, pose2),
             body_params(&nominal),
         )?;
-        let lidar = Lidar::new(cfg.lidar.clone());
-        let camera = crate::sensors::Camera::new(cfg.camera.clone().unwrap_or_default(), &scene, &world.statics);
+        let lidar = Lidar::new(set.lidar.clone());
+        let camera = crate::sensors::Camera::new(set.camera.clone().unwrap_or_default(), &scene, &world.statics);
         // One physics step first, so the snapshot holds a built broad phase: the wheel rays of
         // the first substep after every reset then see the ground.
         world.pw.step();
@@ -302,9 +318,13 @@ impl Sim {
         };
         let max = self.model.spec.steering.max_rad;
         let delta = (c.steering_rad + self.params.steering_offset_rad).clamp(-max, max);
-        let t = self.cfg.control_period_s;
+        let t = self.cfg.settings.control_period_s;
         self.wheel_speed = self.params.drive.advance(self.wheel_speed, c.throttle, t);
-        let ack = self.cfg.ackermann.unwrap_or(self.model.spec.steering.ackermann);
+        let ack = self
+            .cfg
+            .settings
+            .ackermann
+            .unwrap_or(self.model.spec.steering.ackermann);
         self.wheel_angles = ackermann_split(
             delta,
             self.model.wheelbase_m as f64,
@@ -318,7 +338,7 @@ impl Sim {
         let bp = body_params(&self.params);
         let steer = (self.wheel_angles.0 as f32, self.wheel_angles.1 as f32);
         let mut before = self.base_pose();
-        for _ in 0..self.cfg.substeps {
+        for _ in 0..self.cfg.settings.substeps {
             before = self.base_pose();
             self.body
                 .substep(&mut self.world, &self.model, self.wheel_speed as f32, steer, bp);
@@ -465,7 +485,7 @@ impl Sim {
     /// The camera frame from the vehicle's camera link, when a camera is configured and the
     /// vehicle has a camera link.
     pub fn camera_frame(&self) -> Option<crate::sensors::camera::RenderedFrame> {
-        self.cfg.camera.as_ref()?;
+        self.cfg.settings.camera.as_ref()?;
         let pose = self.camera_pose()?;
         Some(self.camera.render(&self.world.statics, &pose))
     }
@@ -478,7 +498,7 @@ impl Sim {
 
     /// The GPS reading.
     pub fn gps(&self) -> GpsReading {
-        gps::read(&self.cfg.gps, &self.base_pose())
+        gps::read(&self.cfg.settings.gps, &self.base_pose())
     }
 
     /// The IMU reading (accelerations over the last control period).

@@ -35,8 +35,10 @@ fn room(half: f32, name: &str) -> SceneSource {
 fn sim(scene: SceneSource, mode: DynamicsMode) -> Sim {
     Sim::new(SimConfig {
         scene,
-        mode,
-        ..SimConfig::default()
+        settings: SimSettings {
+            dynamics: mode,
+            ..Default::default()
+        },
     })
     .unwrap()
 }
@@ -96,9 +98,11 @@ mod dynamics {
         for mode in MODES {
             let mut s = Sim::new(SimConfig {
                 scene: room(40.0, "brake"),
-                mode,
-                brake_mps2: a,
-                ..SimConfig::default()
+                settings: SimSettings {
+                    dynamics: mode,
+                    brake_mps2: a,
+                    ..Default::default()
+                },
             })
             .unwrap();
             s.reset(PlanarPose {
@@ -130,7 +134,10 @@ mod dynamics {
     #[test]
     fn brake_rejects_a_negative_rate() {
         let e = Sim::new(SimConfig {
-            brake_mps2: -1.0,
+            settings: SimSettings {
+                brake_mps2: -1.0,
+                ..Default::default()
+            },
             ..SimConfig::default()
         });
         assert!(e.err().is_some_and(|e| e.to_string().contains("brake_mps2")));
@@ -263,7 +270,10 @@ mod dynamics {
     #[test]
     fn ackermann_can_be_switched_to_autovrl_equal_angles() {
         let mut s = Sim::new(SimConfig {
-            ackermann: Some(false),
+            settings: SimSettings {
+                ackermann: Some(false),
+                ..Default::default()
+            },
             ..SimConfig::default()
         })
         .unwrap();
@@ -292,7 +302,10 @@ mod dynamics {
     #[test]
     fn substeps_longer_than_a_sixtieth_are_rejected() {
         let e = Sim::new(SimConfig {
-            substeps: 1,
+            settings: SimSettings {
+                substeps: 1,
+                ..Default::default()
+            },
             ..SimConfig::default()
         })
         .err()
@@ -361,14 +374,16 @@ mod sensor_readings {
         for mode in MODES {
             let cfg = SimConfig {
                 scene: room(20.0, "self"),
-                mode,
-                lidar: sensors::LidarConfig {
-                    n_rays: 720,
-                    fov_deg: 360.0,
-                    range_min_m: 0.0,
-                    range_max_m: 3.0,
+                settings: SimSettings {
+                    dynamics: mode,
+                    lidar: sensors::LidarConfig {
+                        n_rays: 720,
+                        fov_deg: 360.0,
+                        range_min_m: 0.0,
+                        range_max_m: 3.0,
+                    },
+                    ..Default::default()
                 },
-                ..SimConfig::default()
             };
             let mut s = Sim::new(cfg).unwrap();
             for _ in 0..90 {
@@ -441,7 +456,7 @@ mod sensor_readings {
                 30,
             );
             let g0 = s.gps().position_m;
-            let dt = s.config().control_period_s;
+            let dt = s.config().settings.control_period_s;
             let mut v_prev = s.imu().lin_vel_w;
             let mut integ = [0.0f64; 3];
             for _ in 0..60 {
@@ -468,14 +483,16 @@ mod sensor_readings {
     fn gps_geodetic_fix_moves_north_with_y() {
         let cfg = SimConfig {
             scene: room(20.0, "geo"),
-            gps: sensors::GpsConfig {
-                origin: Some(msg::Geodetic {
-                    latitude_deg: 35.0,
-                    longitude_deg: -85.0,
-                    altitude_m: 200.0,
-                }),
+            settings: SimSettings {
+                gps: sensors::GpsConfig {
+                    origin: Some(msg::Geodetic {
+                        latitude_deg: 35.0,
+                        longitude_deg: -85.0,
+                        altitude_m: 200.0,
+                    }),
+                },
+                ..Default::default()
             },
-            ..SimConfig::default()
         };
         let mut s = Sim::new(cfg).unwrap();
         s.reset(PlanarPose {
@@ -614,7 +631,10 @@ mod errors {
         write(&d, "car.toml", &toml.replace("xtenth_car.urdf", "car.urdf"));
         write(&d, "car.urdf", "<robot name=\"x\"><link name=\"a\"></robot>");
         let e = Sim::new(SimConfig {
-            vehicle: d.join("car.toml").display().to_string(),
+            settings: SimSettings {
+                vehicle: d.join("car.toml").display().to_string(),
+                ..Default::default()
+            },
             ..SimConfig::default()
         })
         .err()
@@ -636,7 +656,10 @@ mod errors {
         );
         write(&d, "xtenth_car.urdf", &src.read("vehicles/xtenth_car.urdf").unwrap());
         let e = Sim::new(SimConfig {
-            vehicle: d.join("car.toml").display().to_string(),
+            settings: SimSettings {
+                vehicle: d.join("car.toml").display().to_string(),
+                ..Default::default()
+            },
             ..SimConfig::default()
         })
         .err()
@@ -731,8 +754,10 @@ mod camera_images {
         });
         Sim::new(SimConfig {
             scene,
-            camera,
-            ..SimConfig::default()
+            settings: SimSettings {
+                camera,
+                ..Default::default()
+            },
         })
         .unwrap()
     }

@@ -10,7 +10,7 @@ use agvrl_deploy::{DriveConfig, DriveLoop};
 use agvrl_envs::api::Vehicle;
 use agvrl_envs::task::{Intervention, Task};
 use agvrl_envs::{EnvConfig, make_task, make_vehicle};
-use agvrl_rl::Policy;
+use agvrl_rl::{Policy, RunConfig};
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use serde::Deserialize;
@@ -82,13 +82,6 @@ struct TraceRow {
     action: Vec<f32>,
 }
 
-#[derive(Deserialize)]
-struct RunFile {
-    env: String,
-    #[serde(default)]
-    env_config: EnvConfig,
-}
-
 fn main() {
     if let Err(e) = run() {
         eprintln!("error: {e:#}");
@@ -96,9 +89,9 @@ fn main() {
     }
 }
 
-fn read_run_file(path: &Path) -> Result<RunFile> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message().trim()))
+/// The run config `agvrl train` wrote (the same type, so the same keys and checks).
+fn read_run_file(path: &Path) -> Result<RunConfig> {
+    Ok(RunConfig::load(path)?)
 }
 
 /// Policy path, env id and env settings from --run / --policy (+ its .toml) / --env.
@@ -179,7 +172,7 @@ fn run() -> Result<()> {
 #[cfg(feature = "ros2")]
 fn drive_ros2(a: &Args, env: &str, env_cfg: &EnvConfig, policy: Policy, drive: DriveConfig) -> Result<()> {
     let mut cfg = ros2_config(a)?;
-    cfg.check_lidar(&env_cfg.lidar)?;
+    cfg.check_lidar(&env_cfg.sim.lidar)?;
     // Full throttle is the trained car's top speed unless the car's TOML says otherwise.
     let top = make_vehicle(env, env_cfg)?.sim().vehicle().top_speed_mps();
     if let Some(w) = cfg.drive.for_trained_top_speed(top) {

@@ -11,10 +11,9 @@
 //! (a truncated episode adds `gamma * V(final_obs)` to its last reward, as SB3) -> GAE ->
 //! `update.rs`: `n_epochs` passes of shuffled minibatches.
 
-mod config;
 mod update;
 
-pub use config::PpoConfig;
+pub use crate::config::PpoConfig;
 #[doc(hidden)]
 pub use update::GradientProbe;
 

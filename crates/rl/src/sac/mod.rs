@@ -12,10 +12,9 @@
 //! replay buffer (`next_obs` is `final_obs` where an episode ended; only termination stops
 //! bootstrapping) -> `update.rs` every `train_freq` steps.
 
-mod config;
 mod update;
 
-pub use config::{EntCoef, SacConfig};
+pub use crate::config::{EntCoef, SacConfig};
 
 use crate::adam::Adam;
 use crate::buffer::ReplayBuffer;

@@ -1,0 +1,197 @@
+//! Configuration: the run TOML (`RunConfig`: which env, which algorithm, which settings) and
+//! the learners' settings inside it. The CLI trains from it, writes it beside every policy, and
+//! agvrl-drive reads the same type back, so one file format serves both.
+
+mod ppo;
+mod sac;
+
+pub use ppo::PpoConfig;
+pub use sac::{EntCoef, SacConfig};
+
+use crate::error::{Result, RlError};
+use crate::policy::Algorithm;
+use agvrl_envs::EnvConfig;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A training run.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunConfig {
+    /// Env id (evaluation; training too unless `train_envs` is set).
+    pub env: String,
+    /// Env ids the training envs cycle through (env `i` drives `train_envs[i % len]`); all
+    /// must share `env`'s spaces. Empty: every training env is `env`.
+    pub train_envs: Vec<String>,
+    /// `ppo` or `sac`.
+    pub algo: Algorithm,
+    /// Environment steps to train.
+    pub steps: u64,
+    /// Seed of everything.
+    pub seed: u64,
+    /// Parallel envs.
+    pub n_envs: usize,
+    /// Threads stepping the envs.
+    pub threads: usize,
+    /// How many of the `n_envs` training envs drive on seeded procedural layouts of the env's
+    /// kind and size instead of its built-in map (layout randomisation; evaluation always uses
+    /// the map of `env_config`).
+    pub procedural_layouts: usize,
+    /// Deterministic episodes evaluated after training.
+    pub eval_episodes: usize,
+    /// Time limit of evaluation episodes, control steps (default: the training limit).
+    pub eval_max_steps: Option<u64>,
+    /// Env settings.
+    pub env_config: EnvConfig,
+    /// PPO settings (used when algo = "ppo").
+    pub ppo: PpoConfig,
+    /// SAC settings (used when algo = "sac").
+    pub sac: SacConfig,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            env: "racing-oval".into(),
+            train_envs: Vec::new(),
+            algo: Algorithm::Ppo,
+            steps: 100_000,
+            seed: 0,
+            n_envs: 8,
+            threads: 2,
+            procedural_layouts: 0,
+            eval_episodes: 3,
+            eval_max_steps: None,
+            env_config: EnvConfig::default(),
+            ppo: PpoConfig::default(),
+            sac: SacConfig::default(),
+        }
+    }
+}
+
+impl RunConfig {
+    /// Parse a run TOML; `origin` names it in errors.
+    pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
+        let cfg: RunConfig =
+            toml::from_str(text).map_err(|e| RlError::RunConfig(format!("{origin}: {}", e.message().trim())))?;
+        cfg.validate().map_err(|e| match e {
+            RlError::RunConfig(m) => RlError::RunConfig(format!("{origin}: {m}")),
+            other => other,
+        })?;
+        Ok(cfg)
+    }
+
+    /// Parse a run TOML with `sets` (`KEY=VALUE`, dotted keys, TOML values; a value that is
+    /// not TOML is taken as a string) applied on top.
+    pub fn from_toml_with(text: &str, origin: &str, sets: &[String]) -> Result<Self> {
+        if sets.is_empty() {
+            return Self::from_toml(text, origin);
+        }
+        let mut table: toml::Table =
+            toml::from_str(text).map_err(|e| RlError::RunConfig(format!("{origin}: {}", e.message().trim())))?;
+        for s in sets {
+            let (key, value) = s
+                .split_once('=')
+                .ok_or_else(|| RlError::RunConfig(format!("--set {s}: expected KEY=VALUE")))?;
+            let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+                .ok()
+                .and_then(|mut t| t.remove("v"))
+                .unwrap_or_else(|| toml::Value::String(value.to_string()));
+            let path: Vec<&str> = key.trim().split('.').collect();
+            let mut t = &mut table;
+            for part in &path[..path.len() - 1] {
+                let next = t
+                    .entry(part.to_string())
+                    .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+                t = next
+                    .as_table_mut()
+                    .ok_or_else(|| RlError::RunConfig(format!("--set {s}: '{part}' is not a table")))?;
+            }
+            t.insert(path[path.len() - 1].to_string(), value);
+        }
+        let text = toml::to_string(&table).map_err(|e| RlError::RunConfig(format!("{origin} with --set: {e}")))?;
+        Self::from_toml(&text, &format!("{origin} with --set"))
+    }
+
+    /// Load a run TOML file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| RlError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml(&text, &path.display().to_string())
+    }
+
+    /// Check values a typo would break.
+    pub fn validate(&self) -> Result<()> {
+        if !agvrl_envs::ENV_IDS.contains(&self.env.as_str()) {
+            return Err(RlError::RunConfig(format!(
+                "unknown env id '{}'; valid ids: {}",
+                self.env,
+                agvrl_envs::ENV_IDS.join(", ")
+            )));
+        }
+        for id in &self.train_envs {
+            if !agvrl_envs::ENV_IDS.contains(&id.as_str()) {
+                return Err(RlError::RunConfig(format!(
+                    "unknown env id '{id}' in train_envs; valid ids: {}",
+                    agvrl_envs::ENV_IDS.join(", ")
+                )));
+            }
+        }
+        if self.env_config.held_out {
+            return Err(RlError::RunConfig(
+                "env_config.held_out is for evaluation only: training never draws held-out episodes".into(),
+            ));
+        }
+        if self.n_envs == 0 || self.threads == 0 || self.steps == 0 {
+            return Err(RlError::RunConfig(
+                "steps, n_envs and threads must be at least 1".into(),
+            ));
+        }
+        if self.procedural_layouts > self.n_envs {
+            return Err(RlError::RunConfig(format!(
+                "procedural_layouts ({}) cannot exceed n_envs ({})",
+                self.procedural_layouts, self.n_envs
+            )));
+        }
+        Ok(())
+    }
+
+    /// The fully resolved TOML (every default written out).
+    pub fn to_toml(&self) -> Result<String> {
+        toml::to_string_pretty(self).map_err(|e| RlError::RunConfig(format!("writing the run config: {e}")))
+    }
+
+    /// Env settings of training env `i`: the last `procedural_layouts` envs get a layout seed
+    /// drawn from the run's seed and their index (redrawn every episode with
+    /// `env_config.new_layout_each_episode`); the others drive the built-in map.
+    pub fn train_env_config(&self, i: usize) -> EnvConfig {
+        let mut cfg = self.env_config.clone();
+        if i + self.procedural_layouts >= self.n_envs {
+            cfg.layout_seed = Some(self.seed.wrapping_mul(1_000_003).wrapping_add(i as u64));
+        } else {
+            cfg.new_layout_each_episode = false;
+        }
+        cfg
+    }
+
+    /// Env id of training env `i`.
+    pub fn train_env_id(&self, i: usize) -> &str {
+        match self.train_envs.len() {
+            0 => &self.env,
+            n => &self.train_envs[i % n],
+        }
+    }
+
+    /// Env settings for evaluation episodes: the built-in map, held-out seeds.
+    pub fn eval_env_config(&self) -> EnvConfig {
+        EnvConfig {
+            max_steps: self.eval_max_steps.unwrap_or(self.env_config.max_steps),
+            layout_seed: None,
+            new_layout_each_episode: false,
+            held_out: true,
+            ..self.env_config.clone()
+        }
+    }
+}
