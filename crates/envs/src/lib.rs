@@ -8,7 +8,8 @@
 //!   -> TimeLimit (truncation) -> VecEnv (auto-reset, final_obs) -> learner
 //! ```
 //!
-//! Invariants: `api` sees agvrl-sim only through its plain `msg` types; rewards live only in
+//! Invariants: `api` sees agvrl-sim only through its plain `msg` types (and the track geometry
+//! `scene::OvalTrack`); rewards live only in
 //! `task::reward`; every random draw comes from a RNG seeded through `reset`; a NaN or
 //! wrong-length action is an error and never reaches the vehicle.
 #![warn(missing_docs)]

@@ -103,8 +103,8 @@ pub struct TrackSpec {
 
 impl TrackSpec {
     /// The track's plain geometry (progress along the centre line).
-    pub fn oval(&self) -> crate::msg::OvalTrack {
-        crate::msg::OvalTrack {
+    pub fn oval(&self) -> super::OvalTrack {
+        super::OvalTrack {
             straight_m: self.straight_m,
             inner_radius_m: self.inner_radius_m,
             outer_radius_m: self.outer_radius_m,
