@@ -35,10 +35,28 @@ enum Cmd {
         /// Only this part (learning: the learning checks alone).
         #[arg(long, value_enum)]
         only: Option<BenchPart>,
-        /// CPU backend of the learner figures (flex or ndarray).
-        #[arg(long, default_value = "flex")]
-        backend: String,
+        /// CPU backend of the learner figures.
+        #[arg(long, value_enum, default_value_t = BackendArg::Flex)]
+        backend: BackendArg,
     },
+}
+
+/// `bench --backend`: the CPU backend of the learner figures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendArg {
+    /// burn-flex.
+    Flex,
+    /// burn-ndarray.
+    Ndarray,
+}
+
+impl From<BackendArg> for agvrl_rl::CpuBackend {
+    fn from(b: BackendArg) -> Self {
+        match b {
+            BackendArg::Flex => Self::Flex,
+            BackendArg::Ndarray => Self::NdArray,
+        }
+    }
 }
 
 /// Run the CLI on `args` (the program name first); returns the exit status. `--help`,
@@ -77,7 +95,7 @@ fn run(cli: Cli) -> Result<()> {
             learning,
             only,
             backend,
-        }) => bench::run(quick, learning, only, agvrl_rl::CpuBackend::parse(&backend)?),
+        }) => bench::run(quick, learning, only, backend.into()),
     }
 }
 

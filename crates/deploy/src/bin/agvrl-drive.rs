@@ -17,6 +17,15 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+/// `--vehicle`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum VehicleKind {
+    /// The simulated car of the env.
+    Sim,
+    /// A car behind ROS 2 topics.
+    Ros2,
+}
+
 #[derive(Parser)]
 #[command(
     name = "agvrl-drive",
@@ -33,9 +42,10 @@ struct Args {
     /// Environment id whose task to run (default: the run's, else racing-oval).
     #[arg(long)]
     env: Option<String>,
-    /// Which vehicle: sim, or ros2 (needs --config, or uses the default topics).
-    #[arg(long, default_value = "sim")]
-    vehicle: String,
+    /// Which vehicle: the simulated car, or a ROS 2 car (needs --config, or uses the default
+    /// topics).
+    #[arg(long, value_enum, default_value_t = VehicleKind::Sim)]
+    vehicle: VehicleKind,
     /// The car's TOML: topics, QoS, scan mapping, command scaling (see car.example.toml).
     #[arg(long)]
     config: Option<PathBuf>,
@@ -158,14 +168,13 @@ fn run() -> Result<()> {
         realtime: a.realtime,
         ..DriveConfig::default()
     };
-    match a.vehicle.as_str() {
-        "sim" => {
+    match a.vehicle {
+        VehicleKind::Sim => {
             let vehicle = make_vehicle(&env, &env_cfg)?;
             let task = make_task(&env, &env_cfg, vehicle.steering_limit_rad())?;
             drive_loop(&a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?)
         }
-        "ros2" => drive_ros2(&a, &env, &env_cfg, policy, drive),
-        other => bail!("--vehicle '{other}': choose sim or ros2"),
+        VehicleKind::Ros2 => drive_ros2(&a, &env, &env_cfg, policy, drive),
     }
 }
 
@@ -358,4 +367,22 @@ fn serve_sim(a: &Args, env: &str, env_cfg: &EnvConfig) -> Result<()> {
 #[cfg(not(feature = "ros2"))]
 fn serve_sim(_: &Args, _: &str, _: &EnvConfig) -> Result<()> {
     bail!("--serve-sim: this agvrl-drive was built without the `ros2` feature")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_cli_is_consistent_and_a_bad_vehicle_lists_the_valid_ones() {
+        Args::command().debug_assert();
+        let e = Args::try_parse_from(["agvrl-drive", "--vehicle", "car"])
+            .err()
+            .map(|e| e.to_string());
+        let e = e.unwrap_or_default();
+        assert!(e.contains("sim") && e.contains("ros2"), "{e}");
+        let a = Args::try_parse_from(["agvrl-drive"]).unwrap();
+        assert_eq!(a.vehicle, VehicleKind::Sim);
+    }
 }
