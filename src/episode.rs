@@ -3,9 +3,11 @@
 
 use agvrl_envs::task::Task;
 use agvrl_envs::wrappers::TimeLimit;
-use agvrl_envs::{Env, EnvConfig, SensorFrame, SimCar, Step, TaskEnv, Vehicle, make, make_task, make_vehicle};
+use agvrl_envs::{EnvConfig, SensorFrame, SimCar, Step, TaskEnv, Vehicle, make, make_task, make_vehicle};
 use agvrl_sim::Sim;
 use anyhow::Result;
+use rand_xoshiro::SplitMix64;
+use rand_xoshiro::rand_core::{Rng as _, SeedableRng};
 
 /// A vehicle env as `agvrl_envs::make` builds it, with its simulated car's type kept so the
 /// simulator behind it can be inspected.
@@ -78,15 +80,16 @@ pub fn speed_mps(frame: &SensorFrame) -> f64 {
     frame.imu.as_ref().map_or(0.0, |i| i.lin_vel_b[0])
 }
 
-/// Uniform random actions in a box (the `view` command without a policy), seeded.
+/// Uniform random actions in a box (`eval --random`, the `view` command without a policy),
+/// seeded: rand_xoshiro's SplitMix64, 24 bits per element.
 pub struct RandomActions {
-    state: u64,
+    rng: SplitMix64,
 }
 
 impl RandomActions {
     pub fn new(seed: u64) -> Self {
         Self {
-            state: seed ^ 0x2545_f491_4f6c_dd1d,
+            rng: SplitMix64::seed_from_u64(seed ^ 0x2545_f491_4f6c_dd1d),
         }
     }
 
@@ -94,12 +97,7 @@ impl RandomActions {
         low.iter()
             .zip(high)
             .map(|(&l, &h)| {
-                // SplitMix64: enough for exploration noise in a viewer.
-                self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-                let mut z = self.state;
-                z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-                z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-                let u = ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32;
+                let u = (self.rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
                 l + u * (h - l)
             })
             .collect()
@@ -115,19 +113,8 @@ pub fn drive(
     act: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
     obs: &mut Observer<'_>,
 ) -> Result<(f64, Step)> {
-    let (mut o, _) = env.reset(Some(seed))?;
-    observe(env, obs, episode, 0, 0.0, false, false)?;
-    let mut ret = 0.0;
-    let mut k = 0;
-    loop {
-        let a = act(&o)?;
-        let st = env.step(&a)?;
-        k += 1;
-        ret += st.reward;
-        observe(env, obs, episode, k, st.reward, st.done(), st.terminated)?;
-        if st.done() {
-            return Ok((ret, st));
-        }
-        o = st.obs;
-    }
+    agvrl_rl::eval::run_episode(env, seed, act, |env, k, st| match st {
+        None => observe(env, obs, episode, 0, 0.0, false, false),
+        Some(st) => observe(env, obs, episode, k, st.reward, st.done(), st.terminated),
+    })
 }

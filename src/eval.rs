@@ -203,16 +203,10 @@ pub fn evaluate(
             check(&env.observation_space(), &env.action_space(), &policy)?;
             let space = env.action_space();
             for k in 0..episodes {
-                let (mut o, _) = env.reset(Some(seed + k as u64))?;
-                loop {
-                    let st = env.step(&act_of(&mut policy, &space, &o)?)?;
-                    s.mean_return += st.reward;
-                    if st.done() {
-                        account(&mut s, &st, &mut cov_sum);
-                        break;
-                    }
-                    o = st.obs;
-                }
+                let act = |o: &[f32]| act_of(&mut policy, &space, o);
+                let (ret, last) = agvrl_rl::eval::run_episode(&mut *env, seed + k as u64, act, |_, _, _| Ok(()))?;
+                s.mean_return += ret;
+                account(&mut s, &last, &mut cov_sum);
             }
         }
     }

@@ -221,7 +221,13 @@ pub fn train(a: TrainArgs) -> Result<()> {
             Some(more) => learner.num_timesteps() + more,
             None => cfg.steps,
         };
-        let previous = std::fs::read_to_string(dir.join("metrics.csv")).unwrap_or_default();
+        // A run stopped before its first chunk has no metrics yet; any other failure keeps the
+        // history from being overwritten.
+        let previous = match std::fs::read_to_string(dir.join("metrics.csv")) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+            Err(e) => return Err(anyhow::Error::new(e).context(format!("reading {}/metrics.csv", dir.display()))),
+        };
         eprintln!(
             "resuming {} at step {} up to {target}",
             dir.display(),

@@ -41,7 +41,7 @@ class AgvrlEnv(gymnasium.Env):
         self.env_config = dict(env_config)
         self.observation_space = _box(self._core.observation_bounds())
         self.action_space = _box(self._core.action_bounds())
-        vehicle = env_id != "pendulum"
+        vehicle = self._core.renders
         self.metadata = {
             "render_modes": ["rgb_array"] if vehicle else [],
             "render_fps": round(1.0 / self._core.dt),

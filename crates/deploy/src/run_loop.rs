@@ -10,14 +10,26 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum DeployError {
     /// The policy was trained for other observation or action spaces.
-    #[error("the policy does not match this task: {0}")]
-    Mismatch(String),
-    /// The vehicle failed (not a stale reading: a broken connection, a simulator error).
+    #[error("the policy does not match this task")]
+    Mismatch(#[source] agvrl_rl::RlError),
+    /// The vehicle failed (not a stale reading: a broken connection, a DDS error).
     #[error("vehicle: {0}")]
     Vehicle(String),
+    /// The simulated vehicle or the task failed.
+    #[error("vehicle")]
+    Env(#[from] EnvError),
     /// A bad setting (the car's TOML, a topic name).
     #[error("config: {0}")]
     Config(String),
+    /// A file (the car's TOML) could not be read.
+    #[error("{path}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
 }
 
 /// Loop settings.
@@ -79,11 +91,11 @@ pub enum Event {
     Inference(String),
 }
 
-/// A vehicle's error, without a second "vehicle:" prefix.
+/// A vehicle's error: a hardware vehicle's message as it is, anything else with its source.
 fn vehicle_err(e: EnvError) -> DeployError {
     match e {
         EnvError::Vehicle(m) => DeployError::Vehicle(m),
-        other => DeployError::Vehicle(other.to_string()),
+        other => DeployError::Env(other),
     }
 }
 
@@ -131,7 +143,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
         let action_space = agvrl_envs::BoxSpace::uniform(2, -1.0, 1.0);
         policy
             .check_spaces(&task.observation_space(), &action_space)
-            .map_err(|e| DeployError::Mismatch(e.to_string()))?;
+            .map_err(DeployError::Mismatch)?;
         let frame = vehicle.reset(seed).map_err(vehicle_err)?;
         task.reset(&frame, vehicle.map());
         let clock_s = frame.stamp_s;

@@ -125,7 +125,7 @@ fn a_policy_for_another_task_refuses_to_start() {
     let v = make_vehicle("racing-oval", &cfg).unwrap();
     let task = make_task("racing-oval", &cfg, v.steering_limit_rad()).unwrap();
     match DriveLoop::new(v, task, policy_for("pendulum"), DriveConfig::default(), 0) {
-        Err(DeployError::Mismatch(m)) => assert!(m.contains("observation"), "{m}"),
+        Err(DeployError::Mismatch(m)) => assert!(m.to_string().contains("observation"), "{m}"),
         Err(e) => panic!("wrong error {e}"),
         Ok(_) => panic!("a pendulum policy must not drive a car"),
     }

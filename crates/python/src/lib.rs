@@ -107,6 +107,7 @@ struct Env {
     act_space: agvrl_envs::BoxSpace,
     dt_s: f64,
     has_camera: bool,
+    renders: bool,
 }
 
 #[pymethods]
@@ -119,6 +120,7 @@ impl Env {
         guard(|| {
             let cfg = config::env_config(config)?;
             let mut inner = build(env_id, &cfg).map_err(env_err)?;
+            let renders = matches!(inner, Inner::Sim(_));
             let e = inner.env();
             Ok(Self {
                 obs_space: e.observation_space(),
@@ -131,6 +133,7 @@ impl Env {
                 }),
                 id: env_id.to_string(),
                 has_camera: cfg.sim.camera.is_some(),
+                renders,
             })
         })
     }
@@ -145,6 +148,12 @@ impl Env {
     #[getter]
     fn dt(&self) -> f64 {
         self.dt_s
+    }
+
+    /// Whether `render` draws frames: the env drives a simulated vehicle.
+    #[getter]
+    fn renders(&self) -> bool {
+        self.renders
     }
 
     /// Observation bounds `(low, high)`, float32 arrays.

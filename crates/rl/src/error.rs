@@ -55,6 +55,9 @@ pub enum RlError {
     /// Training produced a non-finite value (loss or weight).
     #[error("non-finite {0} during training")]
     NonFinite(&'static str),
+    /// A bug inside agvrl-rl (a worker thread panicked); the run cannot go on.
+    #[error("internal error: {0}")]
+    Internal(String),
     /// Reading tensor data back from the device failed.
     #[error("tensor data: {0}")]
     Tensor(String),

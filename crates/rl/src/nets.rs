@@ -136,11 +136,6 @@ impl MlpSpec {
         }
         p
     }
-
-    /// Multiply-adds per input row, over all members (for FLOP counts).
-    pub fn macs_per_row(&self) -> usize {
-        self.n_members * self.sizes.windows(2).map(|w| w[0] * w[1]).sum::<usize>()
-    }
 }
 
 /// One layer's weights `[n, fan_in, fan_out]` and biases `[n, 1, fan_out]`.

@@ -1,5 +1,5 @@
 //! agvrl-sim: the simulator. rapier3d physics, URDF vehicles and objects, the paper's Ackermann
-//! actuation, GPS / IMU / LiDAR, and the five AutoVRL scenes.
+//! actuation, GPS / IMU / LiDAR / camera (RGB, depth, segmentation), and the five AutoVRL scenes.
 //!
 //! ```text
 //! Control{throttle, steering} -> DriveModel (w) + ackermann_split (left, right)

@@ -256,7 +256,11 @@ impl UrdfModel {
     }
 }
 
-/// Vertices (`v x y z` lines) of a Wavefront OBJ file.
+/// Vertices (`v x y z` lines) of a Wavefront OBJ file, in file order. Only the point cloud
+/// is needed (every mesh becomes its convex hull), and the meshes are embedded assets:
+/// rapier3d-urdf's mesh loading reads from disk paths, and mesh-loader's OBJ reader returns
+/// face-expanded vertices in another order (a hull built from them is not bit-identical, which
+/// would move every committed search figure), so the parser is these twenty lines.
 pub fn parse_obj_vertices(text: &str) -> Result<Vec<Vector>, String> {
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {

@@ -220,8 +220,10 @@ impl DriveMapping {
 impl Ros2Config {
     /// Read and check a TOML file.
     pub fn load(path: &Path) -> Result<Self, DeployError> {
-        let text =
-            std::fs::read_to_string(path).map_err(|e| DeployError::Config(format!("{}: {e}", path.display())))?;
+        let text = std::fs::read_to_string(path).map_err(|source| DeployError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
         Self::from_toml(&text).map_err(|e| DeployError::Config(format!("{}: {e}", path.display())))
     }
 

@@ -95,7 +95,11 @@ impl RobotHandle {
 
     /// A copy of the stats.
     pub fn stats(&self) -> RobotStats {
-        self.stats.lock().map(|s| s.clone()).unwrap_or_default()
+        // A thread that panicked holding the lock left whole counters: read them anyway.
+        self.stats
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
     }
 }
 
@@ -132,13 +136,12 @@ impl SimRobot {
         faults: Faults,
     ) -> Result<Self, DeployError> {
         cfg.validate().map_err(DeployError::Config)?;
-        let err = |e: agvrl_envs::EnvError| DeployError::Vehicle(e.to_string());
-        let mut vehicle = make_vehicle(env, env_cfg).map_err(err)?;
+        let mut vehicle = make_vehicle(env, env_cfg)?;
         let mut cfg = cfg;
         // The robot serves its own car: an explicit max_speed_mps is honoured as set.
         let _ = cfg.drive.for_trained_top_speed(vehicle.sim().vehicle().top_speed_mps());
-        let mut task = make_task(env, env_cfg, vehicle.steering_limit_rad()).map_err(err)?;
-        let frame = vehicle.reset(seed).map_err(err)?;
+        let mut task = make_task(env, env_cfg, vehicle.steering_limit_rad())?;
+        let frame = vehicle.reset(seed)?;
         task.reset(&frame, vehicle.map());
         let mut node = node(&cfg, &format!("{}_sim", cfg.node_name))?;
         let t = &cfg.topics;
@@ -249,9 +252,8 @@ impl SimRobot {
 
     /// One control period with `c`, then publish the new sensor set.
     fn step(&mut self, c: Control, received: bool) -> Result<(), DeployError> {
-        let err = |e: agvrl_envs::EnvError| DeployError::Vehicle(e.to_string());
-        self.vehicle.actuate(c).map_err(err)?;
-        self.frame = self.vehicle.sense().map_err(err)?;
+        self.vehicle.actuate(c)?;
+        self.frame = self.vehicle.sense()?;
         let out = self.task.evaluate(&self.frame, self.vehicle.map());
         if let Ok(mut s) = self.handle.stats.lock() {
             s.ticks += 1;

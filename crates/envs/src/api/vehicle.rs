@@ -84,7 +84,9 @@ pub trait Vehicle: Send {
     fn control_period_s(&self) -> f64;
     /// Steering limit of the virtual centre wheel, rad.
     fn steering_limit_rad(&self) -> f64;
-    /// The map, when the vehicle is simulated.
+    /// The map of the current episode, when the vehicle is simulated (a real car has none).
+    /// Asked for at reset rather than given when the task is built, because the simulator
+    /// redraws procedural layouts at reset.
     fn map(&self) -> Option<&MapInfo> {
         None
     }

@@ -162,7 +162,7 @@ fn run_blocks<T: Send>(blocks: &[Block], f: impl Fn(&Block) -> Result<T> + Sync)
         for h in handles {
             out.push(
                 h.join()
-                    .map_err(|_| RlError::Tensor("SAC worker thread panicked".into()))??,
+                    .map_err(|_| RlError::Internal("SAC worker thread panicked".into()))??,
             );
         }
         Ok(out)
