@@ -34,6 +34,12 @@
 //! picked at run time with [`CpuBackend`]. Without them the crate is inference only
 //! ([`Policy`], [`evaluate`], on flex), which is what agvrl-drive links.
 //!
+//! Why the weights are not Burn `Module`s: every network is a stack of members evaluated with
+//! one batched matmul per layer (the twin critics, PPO's actor and critic trunks), Adam runs as
+//! one fused host loop over a flat tensor list, and checkpoints and policy files write that list
+//! in order. Each learner names the parts of its list in one place (PPO's `Layout`, SAC's
+//! `NetParts`), so adding a part is a field there, not a renumbering of uses.
+//!
 //! Limitations: gSDE for PPO only (not SAC), no discrete actions, no learning-rate
 //! schedules; envs restart their episodes on resume (the `Env` trait has no state snapshot);
 //! policy files use agvrl's own container (see `file.rs`), not burn-store, because the

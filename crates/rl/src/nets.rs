@@ -14,6 +14,33 @@ use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
+/// Where a network's parts sit in its flat tensor list: the MLP's weights and biases, layer by
+/// layer, then the image encoder's tensors (none without `image`). Adam, checkpoints and policy
+/// files walk the list as a whole; forward passes take their part through this.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NetParts {
+    mlp_tensors: usize,
+}
+
+impl NetParts {
+    /// The layout of an MLP with `hidden` hidden layers (plus its output layer).
+    pub fn mlp(hidden: usize) -> Self {
+        Self {
+            mlp_tensors: 2 * (hidden + 1),
+        }
+    }
+
+    /// The MLP's tensors.
+    pub fn mlp_of<'a, T>(&self, params: &'a [T]) -> &'a [T] {
+        &params[..self.mlp_tensors]
+    }
+
+    /// The encoder's tensors.
+    pub fn encoder_of<'a, T>(&self, params: &'a [T]) -> &'a [T] {
+        &params[self.mlp_tensors..]
+    }
+}
+
 /// Hidden-layer activation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -55,6 +55,16 @@ pub(crate) struct Layout {
 }
 
 impl Layout {
+    /// The actor and critic MLPs' tensors.
+    pub(crate) fn trunk_of<'a, T>(&self, params: &'a [T]) -> &'a [T] {
+        &params[self.trunk.clone()]
+    }
+
+    /// The encoder's tensors.
+    pub(crate) fn encoder_of<'a, T>(&self, params: &'a [T]) -> &'a [T] {
+        &params[self.encoder.clone()]
+    }
+
     pub(crate) fn of(cfg: &PpoConfig) -> Self {
         let h = 2 * cfg.net_arch.len();
         Self {
@@ -74,10 +84,10 @@ impl Layout {
 pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (Tensor<3>, Tensor<3>, Tensor<3>) {
     let l = Layout::of(cfg);
     let x = match &cfg.image {
-        Some(spec) => encode(&params[l.encoder], spec, x),
+        Some(spec) => encode(l.encoder_of(params), spec, x),
         None => x,
     };
-    let h = mlp_forward(&params[l.trunk], x, cfg.activation_fn, true);
+    let h = mlp_forward(l.trunk_of(params), x, cfg.activation_fn, true);
     let latent = h.clone().narrow(0, 0, 1);
     let mean = latent.clone().matmul(params[l.pi_w].clone()) + params[l.pi_b].clone();
     let value = h.narrow(0, 1, 1).matmul(params[l.vf_w].clone()) + params[l.vf_b].clone();
@@ -427,9 +437,10 @@ impl<E: Env> Ppo<E> {
             data: vec![],
         };
         // Member 0 of each trunk tensor is the actor's.
-        for (s, d) in self.params.shapes[l.trunk.clone()]
+        for (s, d) in l
+            .trunk_of(&self.params.shapes)
             .iter()
-            .zip(&self.params.data[l.trunk.clone()])
+            .zip(l.trunk_of(&self.params.data))
         {
             let per = s[1] * s[2];
             params.push([1, s[1], s[2]], d[..per].to_vec());
@@ -440,8 +451,8 @@ impl<E: Env> Ppo<E> {
         let encoder = self.cfg.image.map(|spec| EncoderData {
             spec,
             params: HostParams {
-                shapes: self.params.shapes[l.encoder.clone()].to_vec(),
-                data: self.params.data[l.encoder.clone()].to_vec(),
+                shapes: l.encoder_of(&self.params.shapes).to_vec(),
+                data: l.encoder_of(&self.params.data).to_vec(),
             },
         });
         let mut sizes = vec![self.params.shapes[0][1]];

@@ -21,7 +21,7 @@ use crate::buffer::ReplayBuffer;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter, Common};
 use crate::cnn::encode;
 use crate::error::{Result, RlError};
-use crate::nets::{Activation, HostParams, Init, MlpSpec, mlp_forward, to_vec};
+use crate::nets::{Activation, HostParams, Init, MlpSpec, NetParts, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
 use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, unsquash};
 use crate::progress::{Control, Episodes, Losses, Progress};
@@ -183,9 +183,9 @@ impl<E: Env> Sac<E> {
         Ok(s)
     }
 
-    /// Tensors of the actor's (or a critic stack's) MLP; the image encoder's follow.
-    fn n_mlp(&self) -> usize {
-        2 * (self.cfg.net_arch.len() + 1)
+    /// The parts of the actor's (and each critic stack's) tensor list.
+    fn parts(&self) -> NetParts {
+        NetParts::mlp(self.cfg.net_arch.len())
     }
 
     fn upload_all(&mut self) {
@@ -306,11 +306,11 @@ impl<E: Env> Sac<E> {
             norm.normalize_rows(&mut x, self.obs_dim);
         }
         let mut x = Tensor::<3>::from_data(TensorData::new(x, [1, n, self.obs_dim]), &self.device);
-        let k = self.n_mlp();
+        let parts = self.parts();
         if let Some(spec) = &self.cfg.image {
-            x = encode(&self.actor_dev[k..], spec, x);
+            x = encode(parts.encoder_of(&self.actor_dev), spec, x);
         }
-        let out = to_vec(mlp_forward(&self.actor_dev[..k], x, Activation::Relu, false))?;
+        let out = to_vec(mlp_forward(parts.mlp_of(&self.actor_dev), x, Activation::Relu, false))?;
         let a = self.act_dim;
         let mut acts = Vec::with_capacity(n * a);
         for row in out.chunks_exact(2 * a) {
@@ -328,24 +328,27 @@ impl<E: Env> Sac<E> {
     pub fn policy_data(&self) -> PolicyData {
         let mut net = self.actor_spec.clone();
         net.n_members = 1;
-        let k = self.n_mlp();
-        let part = |r: std::ops::Range<usize>| HostParams {
-            shapes: self.actor.shapes[r.clone()].to_vec(),
-            data: self.actor.data[r].to_vec(),
+        let parts = self.parts();
+        let mlp = || HostParams {
+            shapes: parts.mlp_of(&self.actor.shapes).to_vec(),
+            data: parts.mlp_of(&self.actor.data).to_vec(),
         };
-        let n = self.actor.shapes.len();
+        let encoder = || HostParams {
+            shapes: parts.encoder_of(&self.actor.shapes).to_vec(),
+            data: parts.encoder_of(&self.actor.data).to_vec(),
+        };
         PolicyData {
             algorithm: Algorithm::Sac,
             observation_space: self.env.observation_space().clone(),
             action_space: self.env.action_space().clone(),
             net,
-            params: part(0..k),
+            params: mlp(),
             head: ActionHead::SquashedGaussian,
             normalizer: self.normalizer.clone(),
             config_toml: self.cfg_toml.clone(),
             encoder: self.cfg.image.map(|spec| EncoderData {
                 spec,
-                params: part(k..n),
+                params: encoder(),
             }),
         }
     }

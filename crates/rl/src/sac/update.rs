@@ -14,7 +14,7 @@
 use super::Sac;
 use crate::cnn::{ImageSpec, encode};
 use crate::error::{Result, RlError};
-use crate::nets::{Activation, grads_of, mlp_forward, to_vec};
+use crate::nets::{Activation, NetParts, grads_of, mlp_forward, to_vec};
 use crate::policy::{LOG_STD_MAX, LOG_STD_MIN};
 use agvrl_envs::Env;
 use burn::tensor::{Device, Tensor, TensorData};
@@ -67,8 +67,8 @@ struct Shared<'a> {
     batch: usize,
     gamma: f64,
     ent_coef: f64,
-    /// MLP tensors per net; with `image` the encoder's follow.
-    n_mlp: usize,
+    /// Where the MLP and the encoder sit in each net's tensors.
+    parts: NetParts,
     image: Option<ImageSpec>,
 }
 
@@ -81,20 +81,25 @@ impl Shared<'_> {
     /// features.
     fn features(&self, net: &[Tensor<3>], obs: Tensor<3>) -> Tensor<3> {
         match &self.image {
-            Some(spec) => encode(&net[self.n_mlp..], spec, obs),
+            Some(spec) => encode(self.parts.encoder_of(net), spec, obs),
             None => obs,
         }
     }
 
     /// Actor outputs `[1, b, 2a]`.
     fn actor_out(&self, actor: &[Tensor<3>], obs: Tensor<3>) -> Tensor<3> {
-        mlp_forward(&actor[..self.n_mlp], self.features(actor, obs), Activation::Relu, false)
+        mlp_forward(
+            self.parts.mlp_of(actor),
+            self.features(actor, obs),
+            Activation::Relu,
+            false,
+        )
     }
 
     /// Twin Q values `[2, b, 1]` from critic features and actions.
     fn q(&self, critic: &[Tensor<3>], features: Tensor<3>, action: Tensor<3>) -> Tensor<3> {
         mlp_forward(
-            &critic[..self.n_mlp],
+            self.parts.mlp_of(critic),
             Tensor::cat(vec![features, action], 2),
             Activation::Relu,
             false,
@@ -217,7 +222,7 @@ impl<E: Env> Sac<E> {
             batch: b,
             gamma: self.cfg.gamma,
             ent_coef,
-            n_mlp: self.n_mlp(),
+            parts: self.parts(),
             image: self.cfg.image,
         };
         let critic_out = run_blocks(&blocks, |blk| shared.critic_block(blk))?;
