@@ -25,7 +25,8 @@
 //! - All randomness comes from one seeded [`rng::Rng`] per learner: the same seed on one thread
 //!   gives the same run, bit for bit (also for a fixed `Sac::set_threads` count).
 //! - The Burn `Device` is chosen by the caller ([`device`]); weights are held on the host and
-//!   mirrored to the device, so a policy file loads on any backend without autodiff.
+//!   mirrored to the device, so a policy file loads on any backend without autodiff. PPO
+//!   without an image encoder runs its networks on the host (`ppo/host.rs`), whatever the device.
 //! - Files (policy, checkpoint) are written atomically and carry a CRC-32; a truncated,
 //!   corrupted or mismatching file is an error, never a silently wrong policy.
 //!

@@ -11,6 +11,7 @@
 //! (a truncated episode adds `gamma * V(final_obs)` to its last reward, as SB3) -> GAE ->
 //! `update.rs`: `n_epochs` passes of shuffled minibatches.
 
+mod host;
 mod update;
 
 pub use crate::config::PpoConfig;
@@ -312,7 +313,12 @@ impl<E: Env> Ppo<E> {
         let (n_envs, o, a, n_steps) = (self.env.n_envs(), self.obs_dim, self.act_dim, self.cfg.n_steps);
         let total = n_steps * n_envs;
         let dev = self.device.clone();
-        let params = self.params.to_device(&dev);
+        // The host path (configs without an image) needs no device copy.
+        let params = if self.cfg.image.is_some() {
+            self.params.to_device(&dev)
+        } else {
+            Vec::new()
+        };
         let log_std = self.params.data[Layout::of(&self.cfg).log_std].clone();
         let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
         // log N(x; m, s) summed over elements = sum(-z^2/2) - sum(log s) - a ln(2 pi)/2
@@ -345,8 +351,14 @@ impl<E: Env> Ppo<E> {
         let mut episode_starts = Vec::with_capacity(total);
         let space = self.env.action_space().clone();
         let sde = self.cfg.use_sde;
+        let (host_params, layout) = (&self.params, Layout::of(&self.cfg));
         let value_of =
             |params: &[Tensor<3>], x: Vec<f32>, n: usize, cfg: &PpoConfig| -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
+                if cfg.image.is_none() {
+                    let f = host::forward(host_params, &layout, cfg.activation_fn, &x, n);
+                    let latent = if sde { f.latent(&x).to_vec() } else { vec![] };
+                    return Ok((f.mean, f.value, latent));
+                }
                 let t = Tensor::<3>::from_data(TensorData::new(x, [1, n, o]), &dev);
                 let (mean, value, latent) = forward(params, t, cfg);
                 let latent = if sde { to_vec(latent)? } else { vec![] };

@@ -9,7 +9,7 @@
 //! (each a Burn dispatch plus its backward) by 5; `tests::fused_head_matches_autodiff` checks
 //! the result against the plain autodiff formulation.
 
-use super::{Layout, Ppo, Rollout, forward};
+use super::{Layout, Ppo, Rollout, forward, host};
 use crate::adam::Adam;
 use crate::error::{Result, RlError};
 use crate::gaussian::{self, HALF_LN_2PI};
@@ -194,8 +194,11 @@ impl<E: Env> Ppo<E> {
         ret: &[f32],
     ) -> Result<(Head, Vec<Vec<f32>>)> {
         let (o, a, n) = (self.obs_dim, self.act_dim, old_lp.len());
-        let ad = self.device.clone().autodiff();
         let log_std_idx = Layout::of(&self.cfg).log_std;
+        if self.cfg.image.is_none() {
+            return Ok(self.minibatch_on_host(&obs, &act, old_lp, adv, ret));
+        }
+        let ad = self.device.clone().autodiff();
         let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
         // log_std's gradient comes from the host head; only the networks are tracked.
         let mut params: Vec<Tensor<3>> = self.params.to_tracked(&ad);
@@ -227,6 +230,45 @@ impl<E: Env> Ppo<E> {
         let mut grads = grads_of(&params, &surrogate.backward())?;
         grads[log_std_idx] = head.d_log_std.clone();
         Ok((head, grads))
+    }
+
+    /// [`Self::minibatch`] with the networks on the host ([`super::host`]).
+    fn minibatch_on_host(
+        &self,
+        obs: &[f32],
+        act: &[f32],
+        old_lp: &[f32],
+        adv: &[f32],
+        ret: &[f32],
+    ) -> (Head, Vec<Vec<f32>>) {
+        let l = Layout::of(&self.cfg);
+        let f = host::forward(&self.params, &l, self.cfg.activation_fn, obs, old_lp.len());
+        let head = loss_head(
+            &HeadInput {
+                mean: &f.mean,
+                value: &f.value,
+                log_std: &self.params.data[l.log_std],
+                latent: self.cfg.use_sde.then(|| f.latent(obs)),
+                actions: act,
+                old_log_prob: old_lp,
+                advantages: adv,
+                returns: ret,
+            },
+            self.cfg.clip_range,
+            self.cfg.vf_coef,
+            self.cfg.ent_coef,
+        );
+        let mut grads = host::backward(
+            &self.params,
+            &l,
+            self.cfg.activation_fn,
+            obs,
+            &f,
+            &head.d_mean,
+            &head.d_value,
+        );
+        grads[l.log_std] = head.d_log_std.clone();
+        (head, grads)
     }
 
     /// Collect one rollout, update on it, then return the rollout's first `batch_size` samples
@@ -439,6 +481,62 @@ mod tests {
         assert!(close(&h.d_mean, &d_mean), "{:?}\n{:?}", &h.d_mean[..6], &d_mean[..6]);
         assert!(close(&h.d_value, &d_value));
         assert!(close(&h.d_log_std, &d_log_std), "{:?} {:?}", h.d_log_std, d_log_std);
+    }
+
+    /// The host networks' outputs and gradients against the same networks through Burn's
+    /// autodiff (tanh there is `2 sigmoid(2x) - 1` on libm's `expf`), for both activations,
+    /// with and without gSDE's latent.
+    #[test]
+    fn host_gradients_match_autodiff() {
+        use crate::nets::Activation;
+        for (arch, act, sde) in [
+            (vec![64, 64], Activation::Tanh, false),
+            (vec![32, 16], Activation::Relu, true),
+            (vec![8], Activation::Tanh, true),
+        ] {
+            let cfg = super::super::PpoConfig {
+                net_arch: arch.clone(),
+                activation_fn: act,
+                use_sde: sde,
+                ..Default::default()
+            };
+            let env = crate::learning::pendulum_envs(2).unwrap();
+            let device = crate::device::default_device();
+            let ppo = Ppo::new(cfg.clone(), env, &device, 3).unwrap();
+            let (o, a, n) = (ppo.obs_dim, ppo.act_dim, 40);
+            let mut rng = Rng::new(5);
+            let x: Vec<f32> = rng.normals(n * o).iter().map(|v| 2.0 * v).collect();
+            let (d_mean, d_value) = (rng.normals(n * a), rng.normals(n));
+            let l = Layout::of(&cfg);
+            let f = host::forward(&ppo.params, &l, act, &x, n);
+            let host_grads = host::backward(&ppo.params, &l, act, &x, &f, &d_mean, &d_value);
+
+            let ad = device.clone().autodiff();
+            let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
+            let params = ppo.params.to_tracked(&ad);
+            let (mean, value, latent) = forward(&params, t3(x.clone(), [1, n, o]), &cfg);
+            let close = |p: &[f32], q: &[f32], what: &str| {
+                assert_eq!(p.len(), q.len(), "{what}");
+                for (k, (p, q)) in p.iter().zip(q).enumerate() {
+                    assert!(
+                        (p - q).abs() < 2e-5 + 2e-4 * q.abs(),
+                        "{arch:?} {act:?} {what}[{k}]: {p} vs {q}"
+                    );
+                }
+            };
+            close(&f.mean, &to_vec(mean.clone().inner()).unwrap(), "mean");
+            close(&f.value, &to_vec(value.clone().inner()).unwrap(), "value");
+            if sde {
+                close(f.latent(&x), &to_vec(latent.inner()).unwrap(), "latent");
+            }
+            let surrogate =
+                (mean * t3(d_mean.clone(), [1, n, a])).sum() + (value * t3(d_value.clone(), [1, n, 1])).sum();
+            let auto = grads_of(&params, &surrogate.backward()).unwrap();
+            for k in 0..=l.vf_b {
+                close(&host_grads[k], &auto[k], &format!("grad {k}"));
+            }
+            assert!(host_grads[l.log_std].iter().all(|g| *g == 0.0));
+        }
     }
 
     #[test]

@@ -1,0 +1,222 @@
+//! PPO's MLP networks on the host: forward and backward of the stacked actor/critic trunk and
+//! the two heads, in plain loops over row-major slices.
+//!
+//! A minibatch of SB3-sized networks (64 samples, 64x64 layers) is a few hundred thousand
+//! multiply-adds: through the tensor backend its time goes to dispatch, graph building, buffer
+//! churn and a scalar libm `expf` per activation. Here the products are ndarray's
+//! `general_mat_mul` (matrixmultiply's kernels, picked for the CPU at run time) on views of the
+//! host weights, and tanh is a rational approximation of a few ulp in a loop the compiler
+//! vectorises, so one minibatch costs a fraction of the tensor path. Used for every config without an image
+//! encoder; `tests::host_gradients_match_autodiff` checks it against Burn's autodiff.
+
+use super::Layout;
+use crate::nets::{Activation, HostParams};
+use ndarray::linalg::general_mat_mul;
+use ndarray::{ArrayView2, ArrayViewMut2};
+
+/// tanh within 5e-7 of the exact value (Eigen's and MLAS's rational form, clamped where f32
+/// tanh is +-1), in plain arithmetic so a loop over it vectorises.
+#[inline]
+pub(crate) fn fast_tanh(x: f32) -> f32 {
+    let x = x.clamp(-7.905_311, 7.905_311);
+    let x2 = x * x;
+    let mut p = -2.760_768_5e-16f32;
+    p = p * x2 + 2.000_188e-13;
+    p = p * x2 - 8.604_672e-11;
+    p = p * x2 + 5.122_297e-8;
+    p = p * x2 + 1.485_722_4e-5;
+    p = p * x2 + 6.372_619_3e-4;
+    p = p * x2 + 4.893_524_6e-3;
+    let mut q = 1.198_258_4e-6f32;
+    q = q * x2 + 1.185_347_1e-4;
+    q = q * x2 + 2.268_434_6e-3;
+    q = q * x2 + 4.893_525e-3;
+    x * p / q
+}
+
+fn activate(v: &mut [f32], act: Activation) {
+    match act {
+        Activation::Tanh => v.iter_mut().for_each(|x| *x = fast_tanh(*x)),
+        Activation::Relu => v.iter_mut().for_each(|x| *x = x.max(0.0)),
+    }
+}
+
+/// `dz = dh * act'(y)` in place on `dh`, from the activation's output `y`.
+fn activation_grad(dh: &mut [f32], y: &[f32], act: Activation) {
+    match act {
+        Activation::Tanh => dh.iter_mut().zip(y).for_each(|(d, y)| *d *= 1.0 - y * y),
+        Activation::Relu => dh.iter_mut().zip(y).for_each(|(d, y)| {
+            if *y <= 0.0 {
+                *d = 0.0
+            }
+        }),
+    }
+}
+
+fn view(v: &[f32], rows: usize, cols: usize) -> ArrayView2<'_, f32> {
+    ArrayView2::from_shape((rows, cols), v).expect("a slice of rows x cols")
+}
+
+fn view_mut(v: &mut [f32], rows: usize, cols: usize) -> ArrayViewMut2<'_, f32> {
+    ArrayViewMut2::from_shape((rows, cols), v).expect("a slice of rows x cols")
+}
+
+/// `out[n x o] = x[n x i] w[i x o] + b[o]`.
+fn affine(x: &[f32], w: &[f32], b: &[f32], (n, i, o): (usize, usize, usize), out: &mut Vec<f32>) {
+    out.clear();
+    for _ in 0..n {
+        out.extend_from_slice(b);
+    }
+    general_mat_mul(1.0, &view(x, n, i), &view(w, i, o), 1.0, &mut view_mut(out, n, o));
+}
+
+/// `dw[i x o] += x[n x i]^T dz[n x o]`, `db[o] += sum over rows of dz`.
+fn weight_grads(x: &[f32], dz: &[f32], (n, i, o): (usize, usize, usize), dw: &mut [f32], db: &mut [f32]) {
+    for r in 0..n {
+        db.iter_mut().zip(&dz[r * o..(r + 1) * o]).for_each(|(b, d)| *b += d);
+    }
+    general_mat_mul(1.0, &view(x, n, i).t(), &view(dz, n, o), 1.0, &mut view_mut(dw, i, o));
+}
+
+/// `dx[n x i] = dz[n x o] w[i x o]^T`.
+fn input_grads(dz: &[f32], w: &[f32], (n, i, o): (usize, usize, usize), dx: &mut Vec<f32>) {
+    dx.clear();
+    dx.resize(n * i, 0.0);
+    general_mat_mul(1.0, &view(dz, n, o), &view(w, i, o).t(), 0.0, &mut view_mut(dx, n, i));
+}
+
+/// One forward pass of `n` rows: every layer's output per member (for the backward pass), the
+/// action mean and the value.
+pub(crate) struct Forward {
+    n: usize,
+    /// `outs[l][m]`: layer `l`'s activated output for member `m` (0 actor, 1 critic), `[n x out]`.
+    outs: Vec<[Vec<f32>; 2]>,
+    /// Action mean, `[n x a]`.
+    pub(crate) mean: Vec<f32>,
+    /// Value, `[n]`.
+    pub(crate) value: Vec<f32>,
+}
+
+impl Forward {
+    /// The actor's last hidden layer (gSDE's latent), `[n x latent]`; the input without hidden layers.
+    pub(crate) fn latent<'a>(&'a self, x: &'a [f32]) -> &'a [f32] {
+        self.outs.last().map_or(x, |o| &o[0])
+    }
+}
+
+/// The networks of `params` (laid out as [`Layout`] for `n_layers` hidden layers) on the
+/// observations `x [n x in]`.
+pub(crate) fn forward(params: &HostParams, l: &Layout, act: Activation, x: &[f32], n: usize) -> Forward {
+    let mut outs: Vec<[Vec<f32>; 2]> = Vec::with_capacity(l.trunk.len() / 2);
+    for k in (l.trunk.start..l.trunk.end).step_by(2) {
+        let [_, i, o] = params.shapes[k];
+        let member = |m: usize, input: &[f32]| {
+            let mut out = Vec::new();
+            let (w, b) = (
+                &params.data[k][m * i * o..(m + 1) * i * o],
+                &params.data[k + 1][m * o..(m + 1) * o],
+            );
+            affine(input, w, b, (n, i, o), &mut out);
+            activate(&mut out, act);
+            out
+        };
+        let layer = match outs.last() {
+            None => [member(0, x), member(1, x)],
+            Some([h0, h1]) => [member(0, h0), member(1, h1)],
+        };
+        outs.push(layer);
+    }
+    let last = |m: usize| outs.last().map_or(x, |o| &o[m]);
+    let [_, lat, a] = params.shapes[l.pi_w];
+    let mut mean = Vec::new();
+    affine(
+        last(0),
+        &params.data[l.pi_w],
+        &params.data[l.pi_b],
+        (n, lat, a),
+        &mut mean,
+    );
+    let [_, lat_v, _] = params.shapes[l.vf_w];
+    let mut value = Vec::new();
+    affine(
+        last(1),
+        &params.data[l.vf_w],
+        &params.data[l.vf_b],
+        (n, lat_v, 1),
+        &mut value,
+    );
+    Forward { n, outs, mean, value }
+}
+
+/// Gradients of `sum(mean * d_mean) + sum(value * d_value)` with respect to every tensor of
+/// `params`, in its order (zeros for `log_std` and any tensor outside the networks).
+pub(crate) fn backward(
+    params: &HostParams,
+    l: &Layout,
+    act: Activation,
+    x: &[f32],
+    f: &Forward,
+    d_mean: &[f32],
+    d_value: &[f32],
+) -> Vec<Vec<f32>> {
+    let n = f.n;
+    let mut grads: Vec<Vec<f32>> = params.data.iter().map(|p| vec![0.0; p.len()]).collect();
+    let last = |m: usize| f.outs.last().map_or(x, |o| &o[m]);
+    // Heads, then each member's trunk from the top.
+    let mut dh: [Vec<f32>; 2] = [Vec::new(), Vec::new()];
+    for (m, (w, b, d)) in [(l.pi_w, l.pi_b, d_mean), (l.vf_w, l.vf_b, d_value)]
+        .into_iter()
+        .enumerate()
+    {
+        let [_, i, o] = params.shapes[w];
+        let (gw, rest) = split_two(&mut grads, w, b);
+        weight_grads(last(m), d, (n, i, o), gw, rest);
+        input_grads(d, &params.data[w], (n, i, o), &mut dh[m]);
+    }
+    let layers: Vec<usize> = (l.trunk.start..l.trunk.end).step_by(2).collect();
+    for (depth, &k) in layers.iter().enumerate().rev() {
+        let [_, i, o] = params.shapes[k];
+        for (m, dhm) in dh.iter_mut().enumerate() {
+            activation_grad(dhm, &f.outs[depth][m], act);
+            let input = if depth == 0 { x } else { &f.outs[depth - 1][m] };
+            let (gw, gb) = split_two(&mut grads, k, k + 1);
+            weight_grads(
+                input,
+                dhm,
+                (n, i, o),
+                &mut gw[m * i * o..(m + 1) * i * o],
+                &mut gb[m * o..(m + 1) * o],
+            );
+            if depth > 0 {
+                let dz = std::mem::take(dhm);
+                input_grads(&dz, &params.data[k][m * i * o..(m + 1) * i * o], (n, i, o), dhm);
+            }
+        }
+    }
+    grads
+}
+
+/// Mutable borrows of two different entries `a < b` of `v`.
+fn split_two(v: &mut [Vec<f32>], a: usize, b: usize) -> (&mut [f32], &mut [f32]) {
+    let (lo, hi) = v.split_at_mut(b);
+    (&mut lo[a], &mut hi[0])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fast_tanh_is_within_5e_7_of_tanh_everywhere() {
+        let mut worst = 0.0f64;
+        for k in -200_000..=200_000 {
+            let x = k as f32 * 1e-4;
+            worst = worst.max((fast_tanh(x) as f64 - (x as f64).tanh()).abs());
+        }
+        for x in [-1e30f32, -20.0, 20.0, 1e30] {
+            worst = worst.max((fast_tanh(x) as f64 - (x as f64).tanh()).abs());
+        }
+        assert!(worst < 5e-7, "{worst}");
+        assert_eq!(fast_tanh(0.0), 0.0);
+    }
+}
