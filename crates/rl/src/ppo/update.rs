@@ -184,7 +184,8 @@ fn explained_variance(returns: &[f32], advantages: &[f32]) -> f64 {
 }
 
 impl<E: Env> Ppo<E> {
-    /// Loss and gradients (before clipping) of one minibatch; `adv` already normalised.
+    /// Loss and gradients (before clipping) of one minibatch; `adv` already normalised. The
+    /// networks run on the host ([`super::host`]) unless the config has an image encoder.
     fn minibatch(
         &self,
         obs: Vec<f32>,
@@ -194,81 +195,47 @@ impl<E: Env> Ppo<E> {
         ret: &[f32],
     ) -> Result<(Head, Vec<Vec<f32>>)> {
         let (o, a, n) = (self.obs_dim, self.act_dim, old_lp.len());
-        let log_std_idx = Layout::of(&self.cfg).log_std;
-        if self.cfg.image.is_none() {
-            return Ok(self.minibatch_on_host(&obs, &act, old_lp, adv, ret));
-        }
-        let ad = self.device.clone().autodiff();
-        let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
-        // log_std's gradient comes from the host head; only the networks are tracked.
-        let mut params: Vec<Tensor<3>> = self.params.to_tracked(&ad);
-        params[log_std_idx] = params[log_std_idx].clone().detach();
-        let (mean, value, latent) = forward(&params, t3(obs, [1, n, o]), &self.cfg);
-        let (mean_h, value_h) = (to_vec(mean.clone().inner())?, to_vec(value.clone().inner())?);
-        let latent_h = if self.cfg.use_sde {
-            Some(to_vec(latent.inner())?)
-        } else {
-            None
-        };
-        let head = loss_head(
-            &HeadInput {
-                mean: &mean_h,
-                value: &value_h,
-                log_std: &self.params.data[log_std_idx],
-                latent: latent_h.as_deref(),
+        let l = Layout::of(&self.cfg);
+        let head_of = |mean: &[f32], value: &[f32], latent: Option<&[f32]>| {
+            let x = HeadInput {
+                mean,
+                value,
+                log_std: &self.params.data[l.log_std],
+                latent,
                 actions: &act,
                 old_log_prob: old_lp,
                 advantages: adv,
                 returns: ret,
-            },
-            self.cfg.clip_range,
-            self.cfg.vf_coef,
-            self.cfg.ent_coef,
-        );
-        let surrogate =
-            (mean * t3(head.d_mean.clone(), [1, n, a])).sum() + (value * t3(head.d_value.clone(), [1, n, 1])).sum();
-        let mut grads = grads_of(&params, &surrogate.backward())?;
-        grads[log_std_idx] = head.d_log_std.clone();
-        Ok((head, grads))
-    }
-
-    /// [`Self::minibatch`] with the networks on the host ([`super::host`]).
-    fn minibatch_on_host(
-        &self,
-        obs: &[f32],
-        act: &[f32],
-        old_lp: &[f32],
-        adv: &[f32],
-        ret: &[f32],
-    ) -> (Head, Vec<Vec<f32>>) {
-        let l = Layout::of(&self.cfg);
-        let f = host::forward(&self.params, &l, self.cfg.activation_fn, obs, old_lp.len());
-        let head = loss_head(
-            &HeadInput {
-                mean: &f.mean,
-                value: &f.value,
-                log_std: &self.params.data[l.log_std],
-                latent: self.cfg.use_sde.then(|| f.latent(obs)),
-                actions: act,
-                old_log_prob: old_lp,
-                advantages: adv,
-                returns: ret,
-            },
-            self.cfg.clip_range,
-            self.cfg.vf_coef,
-            self.cfg.ent_coef,
-        );
-        let mut grads = host::backward(
-            &self.params,
-            &l,
-            self.cfg.activation_fn,
-            obs,
-            &f,
-            &head.d_mean,
-            &head.d_value,
-        );
+            };
+            loss_head(&x, self.cfg.clip_range, self.cfg.vf_coef, self.cfg.ent_coef)
+        };
+        let (head, mut grads) = if self.cfg.image.is_none() {
+            let act_fn = self.cfg.activation_fn;
+            let f = host::forward(&self.params, &l, act_fn, &obs, n);
+            let head = head_of(&f.mean, &f.value, self.cfg.use_sde.then(|| f.latent(&obs)));
+            let grads = host::backward(&self.params, &l, act_fn, &obs, &f, &head.d_mean, &head.d_value);
+            (head, grads)
+        } else {
+            let ad = self.device.clone().autodiff();
+            let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
+            // log_std's gradient comes from the host head; only the networks are tracked.
+            let mut params: Vec<Tensor<3>> = self.params.to_tracked(&ad);
+            params[l.log_std] = params[l.log_std].clone().detach();
+            let (mean, value, latent) = forward(&params, t3(obs, [1, n, o]), &self.cfg);
+            let (mean_h, value_h) = (to_vec(mean.clone().inner())?, to_vec(value.clone().inner())?);
+            let latent_h = if self.cfg.use_sde {
+                Some(to_vec(latent.inner())?)
+            } else {
+                None
+            };
+            let head = head_of(&mean_h, &value_h, latent_h.as_deref());
+            let surrogate =
+                (mean * t3(head.d_mean.clone(), [1, n, a])).sum() + (value * t3(head.d_value.clone(), [1, n, 1])).sum();
+            let grads = grads_of(&params, &surrogate.backward())?;
+            (head, grads)
+        };
         grads[l.log_std] = head.d_log_std.clone();
-        (head, grads)
+        Ok((head, grads))
     }
 
     /// Collect one rollout, update on it, then return the rollout's first `batch_size` samples
