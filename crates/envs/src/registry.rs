@@ -252,6 +252,12 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
             cfg.clearance_fov_deg
         )));
     }
+    cfg.observation.explored.validate().map_err(EnvError::Config)?;
+    if spec.task == TaskKind::Racing && !cfg.observation.explored.is_empty() {
+        return Err(EnvError::Config(format!(
+            "observation.explored is a search observation; {id} is a racing env"
+        )));
+    }
     let mut safety_filter = cfg.safety_filter;
     if safety_filter.decel_mps2 == 0.0 {
         safety_filter.decel_mps2 = cfg.sim.brake_mps2 as f32;

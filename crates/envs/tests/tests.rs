@@ -903,6 +903,37 @@ mod safety_filter {
     }
 
     #[test]
+    fn the_safe_reward_charges_its_filter_term_on_exactly_the_steps_the_filter_acted() {
+        let cfg = EnvConfig {
+            search_reward: agvrl_envs::task::SearchReward::Safe,
+            safe_reward: agvrl_envs::task::SafeShaping {
+                filter: -0.5,
+                ..Default::default()
+            },
+            max_steps: 400,
+            ..filtered(true)
+        };
+        let mut env = make("search-urban-20", &cfg).unwrap();
+        let mut rng = StdRng::seed_from_u64(3);
+        env.reset(Some(0)).unwrap();
+        let (mut last, mut charged) = (0, 0);
+        loop {
+            let st = env
+                .step(&[rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)])
+                .unwrap();
+            let n = st.info.search.as_ref().unwrap().filter_interventions;
+            let expect = if n > last { -0.5 } else { 0.0 };
+            assert_eq!(st.info.reward_terms.filter, expect, "interventions {last} -> {n}");
+            charged += (n > last) as u64;
+            last = n;
+            if st.done() {
+                break;
+            }
+        }
+        assert!(charged > 0, "the filter never acted");
+    }
+
+    #[test]
     fn a_car_sent_straight_at_a_wall_stops_short_of_it() {
         // The oval's outer wall ahead, full throttle, no steering: the filter brakes or steers
         // away, and the LiDAR never comes within the racing task's 0.8 m.
@@ -938,5 +969,60 @@ mod safety_filter {
             .err()
             .expect("clearance under the termination range");
         assert!(err.to_string().contains("clearance_m"), "{err}");
+    }
+}
+
+mod explored_observation {
+    use super::*;
+    use agvrl_envs::task::{ExploredObs, ObsConfig};
+
+    fn cfg() -> EnvConfig {
+        EnvConfig {
+            observation: ObsConfig {
+                explored: ExploredObs {
+                    sectors: 8,
+                    ..ExploredObs::default()
+                },
+                ..ObsConfig::default()
+            },
+            max_steps: 200,
+            ..EnvConfig::default()
+        }
+    }
+
+    #[test]
+    fn driving_ahead_leaves_new_ground_ahead_and_explored_ground_behind() {
+        let mut env = make("search-outdoor-20", &cfg()).unwrap();
+        assert_eq!(env.observation_space().dim(), 104 + 16);
+        check_env(env.as_mut(), 60).unwrap();
+        let (obs, _) = env.reset(Some(3)).unwrap();
+        let ex = &obs[104..];
+        assert!(ex.iter().all(|v| (0.0..=1.0).contains(v)), "{ex:?}");
+        assert!(
+            ex[8..].iter().all(|v| *v == 1.0),
+            "nothing beyond 4 m explored yet: {ex:?}"
+        );
+        let mut last = obs;
+        let mut moved = 0.0;
+        for _ in 0..60 {
+            let s = env.step(&[1.0, 0.0]).unwrap();
+            assert!(!s.terminated, "the spawn has room to drive straight");
+            moved = s.info.search.as_ref().unwrap().distance_m;
+            last = s.obs;
+        }
+        assert!(moved > 1.0, "moved {moved} m");
+        let ex = &last[104..];
+        // Sector 0 is straight ahead, sector 4 behind (ring 2-4 m).
+        assert!(ex[4] + 0.3 < ex[0], "behind {} ahead {}: {ex:?}", ex[4], ex[0]);
+    }
+
+    #[test]
+    fn racing_refuses_it_and_bad_rings_are_an_error() {
+        let err = make("racing-oval", &cfg()).err().expect("a search observation");
+        assert!(err.to_string().contains("observation.explored"), "{err}");
+        let mut bad = cfg();
+        bad.observation.explored.radii_m = [2.0, 2.0, 8.0];
+        let err = make("search-urban-20", &bad).err().expect("empty ring");
+        assert!(err.to_string().contains("radii_m"), "{err}");
     }
 }

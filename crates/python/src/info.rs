@@ -25,7 +25,7 @@ fn code(c: Option<TerminationCause>) -> i8 {
     })
 }
 
-fn terms(t: &RewardTerms) -> [(&'static str, f64); 8] {
+fn terms(t: &RewardTerms) -> [(&'static str, f64); 9] {
     [
         ("throttle", t.throttle),
         ("steering", t.steering),
@@ -35,6 +35,7 @@ fn terms(t: &RewardTerms) -> [(&'static str, f64); 8] {
         ("slow", t.slow),
         ("proximity", t.proximity),
         ("coverage", t.coverage),
+        ("filter", t.filter),
     ]
 }
 

@@ -83,6 +83,8 @@ pub struct RewardTerms {
     pub proximity: f64,
     /// Reward for newly covered ground (the `safe` search reward).
     pub coverage: f64,
+    /// Penalty for a step whose control the safety filter changed (the `safe` search reward).
+    pub filter: f64,
 }
 
 /// Racing progress, reported every step of a racing task.

@@ -4,6 +4,7 @@
 //! `action.rs` maps actions to controls, `reward.rs` holds every reward.
 
 mod action;
+pub mod explored;
 mod observation;
 pub mod racing;
 pub mod reward;
@@ -13,6 +14,7 @@ mod termination;
 
 use crate::api::{BoxSpace, Control, MapInfo, RewardTerms, SensorFrame, SensorNeeds, TerminationCause};
 pub use action::ActionMapping;
+pub use explored::{ExploredMemory, ExploredObs};
 pub use observation::{ImageChannels, ImageObs, ObsConfig, RangeScale};
 use serde::{Deserialize, Serialize};
 pub use termination::{common_termination, min_range_ahead_m, min_range_m, terminate};

@@ -1,6 +1,8 @@
 //! How a frame becomes the observation vector: LiDAR ranges (scaled), speed, yaw rate, the
-//! applied steering and throttle, and camera channels, as `ObsConfig` composes them.
+//! applied steering and throttle, the explored-ground memory, and camera channels, as
+//! `ObsConfig` composes them.
 
+use super::explored::{ExploredMemory, ExploredObs};
 use crate::api::{BoxSpace, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -16,7 +18,8 @@ pub enum RangeScale {
 }
 
 /// Composition of the observation vector: the LiDAR ranges, then the enabled extras in this
-/// order (speed / 2 m/s, yaw rate / 2 rad/s, steering / limit, throttle).
+/// order (speed / 2 m/s, yaw rate / 2 rad/s, steering / limit, throttle, the explored-ground
+/// fractions, camera channels).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ObsConfig {
@@ -30,6 +33,9 @@ pub struct ObsConfig {
     pub steering: bool,
     /// The throttle in force.
     pub throttle: bool,
+    /// The unexplored fraction of the ground around the car, by sector and ring (search only;
+    /// needs the GPS / pose fix).
+    pub explored: ExploredObs,
     /// Camera channels appended after everything else (needs the vehicle camera).
     pub image: ImageObs,
 }
@@ -136,6 +142,7 @@ impl Default for ObsConfig {
             yaw_rate: true,
             steering: true,
             throttle: true,
+            explored: ExploredObs::default(),
             image: ImageObs::default(),
         }
     }
@@ -150,6 +157,7 @@ impl ObsConfig {
             yaw_rate: false,
             steering: false,
             throttle: false,
+            explored: ExploredObs::default(),
             image: ImageObs::default(),
         }
     }
@@ -166,7 +174,7 @@ impl ObsConfig {
         SensorNeeds {
             scan: true,
             imu: self.speed || self.yaw_rate,
-            gps: false,
+            gps: !self.explored.is_empty(),
             image: !self.image.is_empty(),
         }
     }
@@ -189,13 +197,15 @@ impl ObsConfig {
                 s.high.push(hi);
             }
         }
-        s.low.extend(std::iter::repeat_n(0.0, self.image.len()));
-        s.high.extend(std::iter::repeat_n(1.0, self.image.len()));
+        let n01 = self.explored.len() + self.image.len();
+        s.low.extend(std::iter::repeat_n(0.0, n01));
+        s.high.extend(std::iter::repeat_n(1.0, n01));
         s
     }
 
-    /// Build the observation (the frame's needs were checked by the env).
-    pub fn observe(&self, frame: &SensorFrame, steering_limit_rad: f64) -> Vec<f32> {
+    /// Build the observation (the frame's needs were checked by the env); `explored` is the
+    /// task's memory when `self.explored` is on.
+    pub fn observe(&self, frame: &SensorFrame, steering_limit_rad: f64, explored: Option<&ExploredMemory>) -> Vec<f32> {
         let mut out = Vec::new();
         if let Some(scan) = &frame.scan {
             out.reserve(scan.ranges.len() + self.n_extra());
@@ -216,6 +226,12 @@ impl ObsConfig {
         }
         if self.throttle {
             out.push(frame.applied.throttle.clamp(0.0, 1.0) as f32);
+        }
+        if !self.explored.is_empty() {
+            match explored {
+                Some(m) => m.append(frame, &mut out),
+                None => out.extend(std::iter::repeat_n(0.0, self.explored.len())),
+            }
         }
         if !self.image.is_empty() {
             self.image.append(frame.image.as_ref(), &mut out);

@@ -82,7 +82,7 @@ impl Task for Racing {
     }
 
     fn observe(&self, frame: &SensorFrame) -> Vec<f32> {
-        self.cfg.common.observation.observe(frame, self.steering_limit)
+        self.cfg.common.observation.observe(frame, self.steering_limit, None)
     }
 
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {

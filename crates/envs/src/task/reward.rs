@@ -49,6 +49,10 @@ pub struct SafeShaping {
     /// car standing still near an obstacle pays nothing, so stopping where it cannot turn
     /// (there is no reverse) beats crashing. 0 (the default): not scaled.
     pub near_speed_mps: f64,
+    /// Charged every step the safety filter changed the policy's control (<= 0): the policy
+    /// learns to propose safe controls and to keep out of places where the filter must brake
+    /// (a car braked in a dead end has no reverse and stays there). 0 (the default): free.
+    pub filter: f64,
 }
 
 impl Default for SafeShaping {
@@ -58,6 +62,7 @@ impl Default for SafeShaping {
             near_weight: 1.0,
             collision: -20.0,
             near_speed_mps: 0.0,
+            filter: 0.0,
         }
     }
 }
@@ -85,6 +90,9 @@ impl SafeShaping {
         }
         if !(self.collision.is_finite() && self.collision <= 0.0) {
             return Err(format!("safe_reward.collision must be <= 0, got {}", self.collision));
+        }
+        if !(self.filter.is_finite() && self.filter <= 0.0) {
+            return Err(format!("safe_reward.filter must be <= 0, got {}", self.filter));
         }
         Ok(())
     }
@@ -182,6 +190,7 @@ impl RewardTerms {
             + self.slow
             + self.proximity
             + self.coverage
+            + self.filter
     }
 }
 
@@ -297,6 +306,7 @@ mod tests {
             near_weight: 2.0,
             collision: -100.0,
             near_speed_mps: 0.0,
+            filter: 0.0,
         };
         // Halfway between 1.6 m and 0.6 m: half of the weight.
         let r = search(SearchReward::Safe, &wide, 1.1, 0.0, 0.0, false, 0);
@@ -328,6 +338,12 @@ mod tests {
                 .validate()
                 .unwrap_err()
                 .contains("collision")
+        );
+        assert!(
+            SafeShaping { filter: 0.5, ..wide }
+                .validate()
+                .unwrap_err()
+                .contains("filter")
         );
     }
 

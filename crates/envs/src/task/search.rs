@@ -1,6 +1,7 @@
 //! Search / exploration (the paper's R_search): drive fast, keep a clearance band, avoid
 //! obstacles. Reports coverage of the free map and the distance travelled.
 
+use super::explored::ExploredMemory;
 use super::reward::{self, SafeShaping, SearchReward};
 use super::{CommonConfig, Intervention, Outcome, SafetyFilter, Task, min_range_ahead_m, terminate};
 use crate::api::{BoxSpace, Control, MapInfo, SearchInfo, SensorFrame, SensorNeeds};
@@ -63,6 +64,7 @@ pub struct Search {
     n_subjects: usize,
     filter: SafetyFilter,
     interventions: u64,
+    explored: Option<ExploredMemory>,
 }
 
 #[derive(Default)]
@@ -91,6 +93,8 @@ impl Search {
             n_subjects: 0,
             filter: SafetyFilter::new(cfg.common.safety_filter),
             interventions: 0,
+            explored: (!cfg.common.observation.explored.is_empty())
+                .then(|| ExploredMemory::new(cfg.common.observation.explored)),
         }
     }
 
@@ -188,6 +192,10 @@ impl Task for Search {
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         self.filter.reset();
         self.interventions = 0;
+        if let Some(m) = &mut self.explored {
+            m.clear();
+            m.visit(frame);
+        }
         self.grid = Grid::default();
         self.start_s = frame.stamp_s;
         self.found.clear();
@@ -227,7 +235,10 @@ impl Task for Search {
     }
 
     fn observe(&self, frame: &SensorFrame) -> Vec<f32> {
-        self.cfg.common.observation.observe(frame, self.steering_limit)
+        self.cfg
+            .common
+            .observation
+            .observe(frame, self.steering_limit, self.explored.as_ref())
     }
 
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
@@ -242,6 +253,9 @@ impl Task for Search {
             self.last_xy = Some(xy);
             self.cover(xy[0] as f32, xy[1] as f32);
         }
+        if let Some(m) = &mut self.explored {
+            m.visit(frame);
+        }
         let new_cells = self.n_covered - covered_before;
         let mut terms = reward::search(
             self.cfg.reward,
@@ -254,6 +268,9 @@ impl Task for Search {
         );
         let forward = frame.imu.as_ref().map_or(f64::INFINITY, |i| i.lin_vel_b[0]);
         reward::weight_proximity_by_speed(&mut terms, &self.cfg.safe, forward);
+        if self.cfg.reward == SearchReward::Safe && self.filter.last_intervention() != Intervention::None {
+            terms.filter = self.cfg.safe.filter;
+        }
         let termination = terminate(
             &mut terms,
             frame,

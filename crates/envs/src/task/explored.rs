@@ -1,0 +1,374 @@
+//! A memory of the ground the car has explored, read from the GPS / pose fix only (no map), so
+//! the same code runs on the car: a memoryless policy cannot tell new ground from old and
+//! sweeps the same loop again and again. The observation gets, for each sector around the car
+//! and each ring of distances, the fraction of its cells the car has not yet come near, and
+//! optionally the fraction it has seen free (a LiDAR ray crossed it) but not yet come near: the
+//! frontier, which, unlike unexplored ground, never lies behind a wall.
+
+use crate::api::SensorFrame;
+use serde::{Deserialize, Serialize};
+
+/// Cells per side of the memory grid (a power of two): positions wrap around every
+/// `GRID * cell_m` metres, far beyond what one query reads, so the memory needs no map bounds.
+const GRID: i32 = 256;
+
+/// The explored-ground part of the observation (`[env_config.observation.explored]`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ExploredObs {
+    /// Sectors around the car (0: off). Sector k is centred `k * 360 / sectors` degrees left of
+    /// straight ahead.
+    pub sectors: usize,
+    /// Ring boundaries, metres: ring k spans `radii_m[k]` to `radii_m[k + 1]` from the car.
+    pub radii_m: [f32; 3],
+    /// A cell is explored once the car came this close to its centre, metres (the coverage
+    /// radius).
+    pub visited_m: f32,
+    /// Cell size, metres.
+    pub cell_m: f32,
+    /// Also append the frontier fractions (seen free, not yet visited) after the unexplored
+    /// ones; needs the LiDAR scan.
+    pub frontier: bool,
+}
+
+impl Default for ExploredObs {
+    fn default() -> Self {
+        Self {
+            sectors: 0,
+            radii_m: [2.0, 4.0, 8.0],
+            visited_m: 2.0,
+            cell_m: 0.5,
+            frontier: false,
+        }
+    }
+}
+
+impl ExploredObs {
+    /// Values appended: one per sector and ring (twice with the frontier), each in [0, 1].
+    pub fn len(&self) -> usize {
+        self.sectors * (self.radii_m.len() - 1) * (1 + self.frontier as usize)
+    }
+
+    /// Whether it is off.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// An error for settings that cannot work.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.is_empty() {
+            return Ok(());
+        }
+        let r = self.radii_m;
+        let ok = self.sectors <= 64
+            && self.cell_m.is_finite()
+            && self.cell_m >= 0.05
+            && self.visited_m.is_finite()
+            && self.visited_m >= 0.0
+            && r.iter().all(|x| x.is_finite())
+            && r[0] >= 0.0
+            && r[0] < r[1]
+            && r[1] < r[2]
+            && r[2].max(self.visited_m) < 0.25 * GRID as f32 * self.cell_m;
+        if ok {
+            Ok(())
+        } else {
+            Err(format!(
+                "observation.explored needs sectors <= 64, cell_m >= 0.05, 0 <= radii_m[0] < radii_m[1] < \
+                 radii_m[2] and radii_m[2], visited_m < {} cells; got {self:?}",
+                GRID / 4
+            ))
+        }
+    }
+}
+
+/// A cell the car came near.
+const VISITED: u8 = 1;
+/// A cell a LiDAR ray crossed before its hit.
+const SEEN: u8 = 2;
+/// Rays mark free cells out to this range at most, metres.
+const SEE_WITHIN_M: f32 = 10.0;
+
+/// The memory behind `ExploredObs` for one episode.
+#[derive(Clone, Debug)]
+pub struct ExploredMemory {
+    cfg: ExploredObs,
+    /// `VISITED | SEEN` bits per cell.
+    visited: Vec<u8>,
+    /// Cells within the rings, relative to the car's cell: offset, bearing (rad), ring.
+    stencil: Vec<(i32, i32, f32, usize)>,
+}
+
+impl ExploredMemory {
+    /// An empty memory (the settings were validated).
+    pub fn new(cfg: ExploredObs) -> Self {
+        let c = cfg.cell_m;
+        let reach = (cfg.radii_m[2] / c).ceil() as i32 + 1;
+        let mut stencil = Vec::new();
+        for di in -reach..=reach {
+            for dj in -reach..=reach {
+                let (x, y) = (di as f32 * c, dj as f32 * c);
+                let d = x.hypot(y);
+                if let Some(ring) = (0..2).find(|&k| d >= cfg.radii_m[k] && d < cfg.radii_m[k + 1]) {
+                    stencil.push((di, dj, y.atan2(x), ring));
+                }
+            }
+        }
+        Self {
+            cfg,
+            visited: vec![0; (GRID * GRID) as usize],
+            stencil,
+        }
+    }
+
+    fn index(i: i32, j: i32) -> usize {
+        ((i & (GRID - 1)) * GRID + (j & (GRID - 1))) as usize
+    }
+
+    fn cell_of(&self, v: f64) -> i32 {
+        (v / self.cfg.cell_m as f64).round() as i32
+    }
+
+    /// Forget everything (a new episode).
+    pub fn clear(&mut self) {
+        self.visited.fill(0);
+    }
+
+    /// Mark the cells within `visited_m` of the frame's position.
+    pub fn visit(&mut self, frame: &SensorFrame) {
+        let Some(g) = &frame.gps else { return };
+        let c = self.cfg.cell_m as f64;
+        let (x, y) = (g.position_m[0], g.position_m[1]);
+        let r = self.cfg.visited_m as f64;
+        let (i0, i1) = (self.cell_of(x - r), self.cell_of(x + r));
+        let (j0, j1) = (self.cell_of(y - r), self.cell_of(y + r));
+        for i in i0..=i1 {
+            for j in j0..=j1 {
+                if (i as f64 * c - x).powi(2) + (j as f64 * c - y).powi(2) <= r * r {
+                    self.visited[Self::index(i, j)] |= VISITED;
+                }
+            }
+        }
+        if self.cfg.frontier {
+            self.see(frame);
+        }
+    }
+
+    /// Mark the cells the scan's rays crossed before their hits (from the pose fix: the LiDAR
+    /// sits near the base link; a cell is half a metre).
+    fn see(&mut self, frame: &SensorFrame) {
+        let (Some(g), Some(scan)) = (&frame.gps, &frame.scan) else {
+            return;
+        };
+        let c = self.cfg.cell_m as f64;
+        let (x, y, yaw) = (g.position_m[0], g.position_m[1], g.rpy_rad[2]);
+        let step = 0.5 * self.cfg.cell_m;
+        for (k, &r) in scan.ranges.iter().enumerate() {
+            if !r.is_finite() {
+                continue;
+            }
+            let hit = scan.hit.get(k).copied().unwrap_or(r < scan.range_max);
+            // Stop short of the cell holding the hit.
+            let end = if hit { r - self.cfg.cell_m } else { r }.min(SEE_WITHIN_M);
+            let b = yaw + (scan.angle_min + scan.angle_increment * k as f32) as f64;
+            let (sb, cb) = b.sin_cos();
+            let mut d = step;
+            while d <= end {
+                let (px, py) = (x + cb * d as f64, y + sb * d as f64);
+                self.visited[Self::index((px / c).round() as i32, (py / c).round() as i32)] |= SEEN;
+                d += step;
+            }
+        }
+    }
+
+    /// Append the unexplored fraction of every (ring, sector), ring-major. The frame's own
+    /// position counts as visited whether or not `visit` saw it yet, so the reading does not
+    /// depend on whether the task evaluated the frame before observing it (the env does, the
+    /// drive loop does not).
+    pub fn append(&self, frame: &SensorFrame, out: &mut Vec<f32>) {
+        let n = self.cfg.sectors;
+        let Some(g) = frame.gps.as_ref().filter(|_| n > 0) else {
+            out.extend(std::iter::repeat_n(0.0, self.cfg.len()));
+            return;
+        };
+        let (x, y) = (g.position_m[0], g.position_m[1]);
+        let (ci, cj) = (self.cell_of(x), self.cell_of(y));
+        // The car's offset from its cell's centre, for the cells it stands near now.
+        let c = self.cfg.cell_m as f64;
+        let (ox, oy) = ((x - ci as f64 * c) as f32, (y - cj as f64 * c) as f32);
+        let r2 = self.cfg.visited_m * self.cfg.visited_m;
+        let yaw = g.rpy_rad[2] as f32;
+        let width = std::f32::consts::TAU / n as f32;
+        let n_open = self.cfg.sectors * (self.cfg.radii_m.len() - 1);
+        let mut total = [0u32; 128];
+        let mut open = [0u32; 256];
+        for &(di, dj, bearing, ring) in &self.stencil {
+            let rel = (bearing - yaw + 0.5 * width).rem_euclid(std::f32::consts::TAU);
+            let k = ring * n + ((rel / width) as usize).min(n - 1);
+            total[k] += 1;
+            let (dx, dy) = (di as f32 * self.cfg.cell_m - ox, dj as f32 * self.cfg.cell_m - oy);
+            let here = dx * dx + dy * dy <= r2;
+            let state = self.visited[Self::index(ci + di, cj + dj)];
+            let unvisited = !here && state & VISITED == 0;
+            open[k] += u32::from(unvisited);
+            open[n_open + k] += u32::from(unvisited && state & SEEN != 0);
+        }
+        out.extend((0..self.cfg.len()).map(|k| open[k] as f32 / total[k % n_open].max(1) as f32));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use agvrl_sim::msg::GpsReading;
+
+    fn at(x: f64, y: f64, yaw: f64) -> SensorFrame {
+        SensorFrame {
+            gps: Some(GpsReading {
+                position_m: [x, y, 0.0],
+                rpy_rad: [0.0, 0.0, yaw],
+                ..GpsReading::default()
+            }),
+            ..SensorFrame::default()
+        }
+    }
+
+    fn read(m: &ExploredMemory, f: &SensorFrame) -> Vec<f32> {
+        let mut v = vec![];
+        m.append(f, &mut v);
+        v
+    }
+
+    fn cfg() -> ExploredObs {
+        ExploredObs {
+            sectors: 4,
+            ..ExploredObs::default()
+        }
+    }
+
+    #[test]
+    fn a_fresh_memory_reads_all_unexplored_and_the_rings_start_beyond_the_visited_disk() {
+        let mut m = ExploredMemory::new(cfg());
+        let f = at(3.0, -7.0, 0.4);
+        m.visit(&f);
+        // The car marked a 2 m disk; the inner ring starts at 2 m, so nearly nothing of it is
+        // explored yet (cells on the 2 m circle may be).
+        let v = read(&m, &f);
+        assert_eq!(v.len(), 8);
+        for x in &v[..4] {
+            assert!(*x > 0.85 && *x <= 1.0, "{v:?}");
+        }
+        for x in &v[4..] {
+            assert_eq!(*x, 1.0, "{v:?}");
+        }
+    }
+
+    #[test]
+    fn driving_ahead_explores_the_sector_behind_and_leaves_the_one_ahead_open() {
+        let mut m = ExploredMemory::new(cfg());
+        // Drive 6 m along +x, heading +x, then look from the end of the track.
+        for k in 0..=60 {
+            m.visit(&at(k as f64 * 0.1, 0.0, 0.0));
+        }
+        let v = read(&m, &at(6.0, 0.0, 0.0));
+        // Sectors: 0 ahead, 1 left, 2 behind, 3 right.
+        // Cells on the 2 m circle count as visited from where the car stands.
+        assert!(v[0] > 0.95, "ahead is new ground: {v:?}");
+        assert!(v[2] < 0.1, "the ring behind (2-4 m) was driven through: {v:?}");
+        // Left and right mirror each other up to the cells on the sector edges (diagonals).
+        assert!(v[1] > 0.3 && (v[1] - v[3]).abs() < 0.1, "{v:?}");
+        assert!(
+            v[6] < 0.7 && v[4] == 1.0,
+            "outer ring: behind partly explored, ahead not: {v:?}"
+        );
+        // Turned around (heading -x), the explored sector is now sector 0.
+        let w = read(&m, &at(6.0, 0.0, std::f64::consts::PI));
+        assert!(w[0] < 0.1 && w[2] > 0.95 && w[6] == 1.0 && w[4] < 0.7, "{w:?}");
+    }
+
+    #[test]
+    fn the_reading_is_the_same_before_and_after_the_frame_is_visited() {
+        let mut m = ExploredMemory::new(cfg());
+        for k in 0..30 {
+            m.visit(&at(k as f64 * 0.13, k as f64 * 0.07, 0.5));
+        }
+        let f = at(4.33, 2.21, 0.5);
+        let before = read(&m, &f);
+        m.visit(&f);
+        assert_eq!(before, read(&m, &f));
+    }
+
+    #[test]
+    fn the_frontier_is_ground_the_lidar_saw_free_and_never_ground_behind_a_hit() {
+        use agvrl_sim::msg::LaserScan;
+        let m_cfg = ExploredObs {
+            frontier: true,
+            ..cfg()
+        };
+        // A 90 degree fan ahead (+x): free to 12 m except a wall 5 m ahead within 10 degrees.
+        let ranges: Vec<f32> = (-45..=45)
+            .map(|a: i32| if a.abs() <= 10 { 5.0 } else { 12.0 })
+            .collect();
+        let mut f = at(0.0, 0.0, 0.0);
+        f.scan = Some(LaserScan {
+            angle_min: -45f32.to_radians(),
+            angle_increment: 1f32.to_radians(),
+            range_max: 12.0,
+            hit: ranges.iter().map(|r| *r < 12.0).collect(),
+            ranges,
+            ..LaserScan::default()
+        });
+        let mut m = ExploredMemory::new(m_cfg);
+        m.visit(&f);
+        let v = read(&m, &f);
+        assert_eq!(v.len(), 16);
+        let (unexplored, frontier) = v.split_at(8);
+        // Everything beyond 2 m is unexplored; the frontier lies ahead only.
+        assert!(unexplored[4..].iter().all(|x| *x == 1.0), "{v:?}");
+        assert!(frontier[0] > 0.5 && frontier[4] > 0.3, "ahead, both rings: {v:?}");
+        for k in [1, 3, 5, 7] {
+            assert!(
+                frontier[k] < 0.1,
+                "sector {}: the fan's 45 degree edge at most: {v:?}",
+                k % 4
+            );
+        }
+        assert_eq!((frontier[2], frontier[6]), (0.0, 0.0), "behind: unseen {v:?}");
+        // Seen: ground before the wall and the open fan; unseen: the wall's cell, its shadow,
+        // the ground beside the car and beyond the 10 m the rays mark.
+        let seen = |x: f64, y: f64| m.visited[ExploredMemory::index(m.cell_of(x), m.cell_of(y))] & SEEN != 0;
+        assert!(seen(3.0, 0.0) && seen(4.0, 0.3) && seen(8.0, 4.0));
+        assert!(!seen(5.0, 0.0) && !seen(7.0, 0.0) && !seen(9.0, 0.5));
+        assert!(!seen(0.0, 5.0) && !seen(-3.0, 0.0) && !seen(11.0, 0.0));
+        // Visiting the frontier turns it into explored ground.
+        for k in 0..=40 {
+            m.visit(&at(k as f64 * 0.1, 0.0, 0.0));
+        }
+        let after = read(&m, &at(4.0, 0.0, std::f64::consts::PI));
+        assert!(after[8] < frontier[0], "{after:?}");
+    }
+
+    #[test]
+    fn clear_forgets_and_far_positions_do_not_alias_within_a_query() {
+        let mut m = ExploredMemory::new(cfg());
+        let f = at(0.0, 0.0, 0.0);
+        for k in 0..50 {
+            m.visit(&at(k as f64 * 0.1, 0.0, 0.0));
+        }
+        assert!(read(&m, &f).iter().any(|x| *x < 1.0));
+        m.clear();
+        m.visit(&f);
+        // 100 m away the grid has not wrapped onto the visited cells (period 128 m).
+        let far = at(100.0, 0.0, 0.0);
+        assert_eq!(read(&m, &far), read(&ExploredMemory::new(cfg()), &far));
+        assert!(
+            ExploredObs {
+                radii_m: [3.0, 2.0, 8.0],
+                ..cfg()
+            }
+            .validate()
+            .is_err()
+        );
+        assert!(cfg().validate().is_ok());
+    }
+}
