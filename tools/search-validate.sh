@@ -3,7 +3,9 @@
 # filter's settings): terminations over 50 held-out episodes per search scene, on the built-in
 # maps and on new procedural layouts, without and with sim2real noise, with evaluation seeds from
 # 1,000,000 (the README's table uses seed base 0, so the choice never sees the table's
-# episodes). Fewer is better; on a tie, the higher mean coverage.
+# episodes). The rule: among the trainings within 2 terminations of the fewest, the one with the
+# highest mean coverage ships (terminations first, since every target bounds them; coverage
+# next, since the coverage targets are the ones a fresh training misses).
 #   tools/search-validate.sh POLICY [POLICY ...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
