@@ -203,7 +203,7 @@ impl ExploredMemory {
         let mut total = [0u32; 128];
         let mut open = [0u32; 256];
         for &(di, dj, bearing, ring) in &self.stencil {
-            let rel = (bearing - yaw + 0.5 * width).rem_euclid(std::f32::consts::TAU);
+            let rel = wrap_tau(bearing - yaw + 0.5 * width);
             let k = ring * n + ((rel / width) as usize).min(n - 1);
             total[k] += 1;
             let (dx, dy) = (di as f32 * self.cfg.cell_m - ox, dj as f32 * self.cfg.cell_m - oy);
@@ -214,6 +214,21 @@ impl ExploredMemory {
             open[n_open + k] += u32::from(unvisited && state & SEEN != 0);
         }
         out.extend((0..self.cfg.len()).map(|k| open[k] as f32 / total[k % n_open].max(1) as f32));
+    }
+}
+
+/// `x.rem_euclid(TAU)`, without the libm call for `x` within one turn of [0, TAU) (a yaw in
+/// [-pi, pi] keeps it there): one exact subtraction gives the same bits.
+fn wrap_tau(x: f32) -> f32 {
+    use std::f32::consts::TAU;
+    if (0.0..TAU).contains(&x) {
+        x
+    } else if x > -TAU && x < 0.0 {
+        x + TAU
+    } else if (TAU..2.0 * TAU).contains(&x) {
+        x - TAU
+    } else {
+        x.rem_euclid(TAU)
     }
 }
 
@@ -346,6 +361,17 @@ mod tests {
         }
         let after = read(&m, &at(4.0, 0.0, std::f64::consts::PI));
         assert!(after[8] < frontier[0], "{after:?}");
+    }
+
+    #[test]
+    fn wrap_tau_is_rem_euclid_over_the_range_it_is_used_on() {
+        let tau = std::f32::consts::TAU;
+        for k in -4000..=4000 {
+            let x = k as f32 * 0.0019 - 0.3 * tau + (k as f32).sin() * 1e-3;
+            for x in [x, x - tau, x + tau, x + 9.0 * tau, 0.0, tau, -tau, 2.0 * tau, -0.0] {
+                assert_eq!(wrap_tau(x).to_bits(), x.rem_euclid(tau).to_bits(), "{x}");
+            }
+        }
     }
 
     #[test]
