@@ -138,7 +138,14 @@ def test_ctrl_c_stops_training_with_a_complete_run_directory(workdir):
         "import agvrl\n"
         "agvrl.train({'env': 'pendulum', 'algo': 'ppo', 'steps': 50_000_000, 'eval_episodes': 1}, out='run')\n"
     )
-    p = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True)
+    # A shell that starts the suite in the background leaves SIGINT ignored, and children
+    # inherit that; the child gets the default back, as an interactive Python has it.
+    p = subprocess.Popen(
+        [sys.executable, "-c", script],
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     # The run directory is claimed as run.partial before training starts.
     deadline = time.time() + 60
     while not (workdir / "run.partial" / "config.toml").exists():
