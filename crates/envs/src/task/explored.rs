@@ -181,10 +181,11 @@ impl ExploredMemory {
         }
     }
 
-    /// Append the unexplored fraction of every (ring, sector), ring-major. The frame's own
-    /// position counts as visited whether or not `visit` saw it yet, so the reading does not
-    /// depend on whether the task evaluated the frame before observing it (the env does, the
-    /// drive loop does not).
+    /// Append the unexplored fraction of every (ring, sector), ring-major, then the frontier
+    /// fractions if on. The frame's own position counts as visited whether or not `visit` saw
+    /// it yet, so the unexplored part does not depend on whether the task evaluated the frame
+    /// before observing it (the env does, the drive loop does not); the frontier reads the
+    /// scans `visit` took in, so on the car it lags one frame behind the env's.
     pub fn append(&self, frame: &SensorFrame, out: &mut Vec<f32>) {
         let n = self.cfg.sectors;
         let Some(g) = frame.gps.as_ref().filter(|_| n > 0) else {
