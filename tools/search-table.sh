@@ -7,6 +7,9 @@
 # evaluation seeds (`agvrl eval --seed`); FILTER (on or off) overrides the policy's safety
 # filter setting for both the policy and the random policy (`agvrl eval --safety-filter`).
 # RANDOM_POLICY=off skips the random policy (its columns print "-"), for comparing trainings.
+# A policy with a reverse gear (action_mapping = "scaled_reverse") is also compared with the
+# random policy of the forward-only car (the same settings with "scaled"): a random policy that
+# reverses half the time covers less, and the ratio is taken against the better of the two.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 policy="${1:-assets/policies/search.agvrl}"
@@ -16,7 +19,18 @@ filter="${4:-}"
 bin="${AGVRL:-${CARGO_TARGET_DIR:-target}/release/agvrl}"
 [ -x "$bin" ] || cargo build --release -q
 key() { sed -n "s/^$1=//p" <<<"$2"; }
-echo "| scene | maps | preset | policy: terminations / $episodes | coverage | filter interventions / episode | random: terminations | coverage | coverage ratio |"
+forward=""
+settings="${policy%.agvrl}.toml"
+if [ -f "$settings" ] && grep -q '^action_mapping = "scaled_reverse"' "$settings"; then
+  dir=$(mktemp -d)
+  trap 'rm -rf "$dir"' EXIT
+  forward="$dir/$(basename "$policy")"
+  cp "$policy" "$forward"
+  sed 's/^action_mapping = "scaled_reverse"/action_mapping = "scaled"/' "$settings" >"${forward%.agvrl}.toml"
+fi
+random="random"
+[ -z "$forward" ] || random="random (same car / forward only)"
+echo "| scene | maps | preset | policy: terminations / $episodes | coverage | filter interventions / episode | $random: terminations | coverage | coverage ratio |"
 echo "|---|---|---|---|---|---|---|---|---|"
 for preset in none sim2real; do
   for layouts in builtin procedural; do
@@ -29,8 +43,14 @@ for preset in none sim2real; do
       rt=- rc=- ratio=-
       if [ "${RANDOM_POLICY:-on}" != off ]; then
         r=$("$bin" "${args[@]}" --random)
-        rt=$(key collisions "$r"); rc=$(key coverage "$r")
-        ratio=$(python3 -c "print(f'{$pc / max($rc, 1e-9):.1f}x')")
+        rt=$(key collisions "$r"); rc=$(key coverage "$r"); best=$rc
+        if [ -n "$forward" ]; then
+          f=$("$bin" "${args[@]/#$policy/$forward}" --random)
+          fc=$(key coverage "$f")
+          rt="$rt / $(key collisions "$f")"; rc="$rc / $fc"
+          best=$(python3 -c "print(max($best, $fc))")
+        fi
+        ratio=$(python3 -c "print(f'{$pc / max($best, 1e-9):.1f}x')")
       fi
       fi=$(key filter_interventions_per_episode "$p"); fi="${fi:-off}"
       echo "| $env | $layouts | $preset | $(key collisions "$p") | $pc | $fi | $rt | $rc | $ratio |"

@@ -903,6 +903,40 @@ mod safety_filter {
     }
 
     #[test]
+    fn a_car_with_reverse_and_back_out_behind_the_filter_reverses_and_never_crashes() {
+        for id in ["search-outdoor-20", "search-urban-20"] {
+            let cfg = EnvConfig {
+                max_steps: 600,
+                action_mapping: agvrl_envs::task::ActionMapping::ScaledReverse,
+                safety_filter: SafetyFilterConfig {
+                    backout_m: 0.6,
+                    ..filtered(true).safety_filter
+                },
+                ..filtered(true)
+            };
+            let mut env = make(id, &cfg).unwrap();
+            let mut rng = StdRng::seed_from_u64(11);
+            let mut slowest = 0.0f32;
+            for k in 0..4 {
+                env.reset(Some(k)).unwrap();
+                for t in 0.. {
+                    // Two seconds forward, one second in reverse, random steering.
+                    let a0 = if t % 90 < 60 { 0.8 } else { -1.0 };
+                    let a = [a0, rng.random_range(-1.0..1.0)];
+                    let st = env.step(&a).unwrap();
+                    // Speed (halved) is the fourth value from the end of the default observation.
+                    slowest = slowest.min(2.0 * st.obs[st.obs.len() - 4]);
+                    assert!(!st.terminated, "{id}: {:?}", st.info.termination);
+                    if st.done() {
+                        break;
+                    }
+                }
+            }
+            assert!(slowest < -0.1, "{id}: never reversed (slowest {slowest} m/s)");
+        }
+    }
+
+    #[test]
     fn the_safe_reward_charges_its_filter_term_on_exactly_the_steps_the_filter_acted() {
         let cfg = EnvConfig {
             search_reward: agvrl_envs::task::SearchReward::Safe,

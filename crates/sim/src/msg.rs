@@ -91,7 +91,8 @@ impl LaserScan {
 /// A drive command (like `ackermann_msgs/AckermannDrive`, in AutoVRL's throttle form).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Control {
-    /// Throttle in [0, 1] (no reverse, no brake: AutoVRL's car).
+    /// Throttle in [-1, 1]; negative reverses. The policies' action mappings give [0, 1]
+    /// (AutoVRL's car); only a safety filter backing out of a dead end reverses.
     pub throttle: f64,
     /// Steering angle of the virtual centre front wheel, rad, positive = left.
     pub steering_rad: f64,

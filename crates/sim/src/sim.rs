@@ -306,7 +306,7 @@ impl Sim {
     pub fn step(&mut self, control: Control) -> Result<(), SimError> {
         let c = Control {
             throttle: if control.throttle.is_finite() {
-                control.throttle.clamp(0.0, 1.0)
+                control.throttle.clamp(-1.0, 1.0)
             } else {
                 0.0
             },

@@ -93,6 +93,58 @@ mod dynamics {
     }
 
     #[test]
+    fn reverse_backs_the_car_at_the_models_steady_speed_on_the_mirrored_arc() {
+        for mode in MODES {
+            let mut s = sim(room(40.0, "rev"), mode);
+            s.reset(PlanarPose {
+                x_m: 30.0,
+                y_m: 0.0,
+                yaw_rad: 0.0,
+            })
+            .unwrap();
+            let back = Control {
+                throttle: -0.5,
+                steering_rad: 0.0,
+            };
+            run(&mut s, back, 300);
+            let w_ss = s.nominal_params().drive.steady_state(0.5);
+            let w = s.wheel_speed_radps();
+            assert!((w + w_ss).abs() / w_ss < 0.01, "{mode:?}: w {w} vs -{w_ss}");
+            let v = s.forward_speed_mps() as f64;
+            let wr = w * s.vehicle().drive_radius_m() as f64;
+            assert!(
+                (v - wr).abs() / wr.abs() < 0.05,
+                "{mode:?}: ground speed {v} vs w r {wr}"
+            );
+            assert!(
+                s.pose2().x_m < 30.0 - 5.0,
+                "{mode:?}: backed only to x = {}",
+                s.pose2().x_m
+            );
+            assert!(s.pose2().y_m.abs() < 0.5, "{mode:?}: drifted to y = {}", s.pose2().y_m);
+        }
+        // Reversing on left lock turns the car clockwise, on the forward arc's radius.
+        let mut s = sim(room(40.0, "rev-arc"), DynamicsMode::Raycast);
+        s.reset(PlanarPose {
+            x_m: 0.0,
+            y_m: 0.0,
+            yaw_rad: 0.0,
+        })
+        .unwrap();
+        let lock = s.vehicle().spec.steering.max_rad;
+        run(
+            &mut s,
+            Control {
+                throttle: -0.2,
+                steering_rad: lock,
+            },
+            60,
+        );
+        let p = s.pose2();
+        assert!(p.yaw_rad < -0.3 && p.x_m < -0.3, "{p:?}");
+    }
+
+    #[test]
     fn braking_stops_the_car_within_the_closed_form_distance() {
         let a = 3.0;
         for mode in MODES {

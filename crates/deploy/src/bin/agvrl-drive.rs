@@ -227,6 +227,7 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<
                 Intervention::None => "",
                 Intervention::Steered => " filter=steered",
                 Intervention::Braked => " filter=braked",
+                Intervention::Reversed => " filter=reversed",
             };
             let laps = t
                 .racing

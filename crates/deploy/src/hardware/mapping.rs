@@ -189,12 +189,13 @@ pub fn drive_command(c: Control, m: &DriveMapping, stamp_s: f64, frame_id: &str)
 pub fn clip(c: Control, m: &DriveMapping) -> Control {
     let f = |v: f64| if v.is_finite() { v } else { 0.0 };
     Control {
-        throttle: f(c.throttle).clamp(0.0, 1.0),
+        throttle: f(c.throttle).clamp(-1.0, 1.0),
         steering_rad: f(c.steering_rad).clamp(-m.steering_limit_rad, m.steering_limit_rad),
     }
 }
 
-/// The control a drive command asks for (the inverse of [`drive_command`]; reverse reads 0).
+/// The control a drive command asks for (the inverse of [`drive_command`]; a negative speed
+/// reverses).
 pub fn control_of(d: &msg::AckermannDrive, m: &DriveMapping) -> Control {
     clip(
         Control {
@@ -378,6 +379,14 @@ mod tests {
         };
         let back = control_of(&drive_command(c, &m, 1.5, "base_link").drive, &m);
         assert!((back.throttle - 0.75).abs() < 1e-6 && (back.steering_rad + 0.25).abs() < 1e-6);
+        // The safety filter's back-out reverses: a negative speed, and back.
+        let rev = Control {
+            throttle: -0.25,
+            steering_rad: 0.36,
+        };
+        let cmd = drive_command(rev, &m, 1.5, "base_link").drive;
+        assert!((cmd.speed + 0.25 * m.full_throttle_mps()).abs() < 1e-6);
+        assert!((control_of(&cmd, &m).throttle + 0.25).abs() < 1e-6);
         let wild = Control {
             throttle: f64::NAN,
             steering_rad: 3.0,

@@ -17,7 +17,14 @@ pub enum ActionMapping {
     /// T = clamp(a0, 0, 1), delta = a1 * delta_max: the lower half of a0 asks for a standstill,
     /// so with a braking drive a car can stop and stay stopped under exploration noise.
     ScaledStop,
+    /// T = a0 for a0 >= 0, else a0 * REVERSE_THROTTLE_MAX (reverse, slower than forward, like
+    /// XTENTH-CAR's ESC), delta = a1 * delta_max: a car that can back out of a dead end. The
+    /// safety filter checks a reverse path against the points the car saw on its way in.
+    ScaledReverse,
 }
+
+/// The largest reverse throttle of [`ActionMapping::ScaledReverse`].
+pub const REVERSE_THROTTLE_MAX: f64 = 0.5;
 
 impl ActionMapping {
     /// Map a (finite) action to a control. Non-finite inputs give a safe zero control.
@@ -38,6 +45,13 @@ impl ActionMapping {
                 throttle: a0.clamp(0.0, 1.0),
                 steering_rad: a1.clamp(-1.0, 1.0) * delta_max_rad,
             },
+            ActionMapping::ScaledReverse => {
+                let a0 = a0.clamp(-1.0, 1.0);
+                Control {
+                    throttle: if a0 < 0.0 { a0 * REVERSE_THROTTLE_MAX } else { a0 },
+                    steering_rad: a1.clamp(-1.0, 1.0) * delta_max_rad,
+                }
+            }
         }
     }
 }
@@ -64,6 +78,22 @@ mod tests {
                 steering_rad: -0.1
             }
         );
+    }
+
+    #[test]
+    fn reverse_mapping_reverses_slower_than_it_drives() {
+        let m = ActionMapping::ScaledReverse;
+        assert_eq!(
+            m.control(-1.0, 1.0, 0.36),
+            Control {
+                throttle: -REVERSE_THROTTLE_MAX,
+                steering_rad: 0.36
+            }
+        );
+        assert_eq!(m.control(0.8, 0.0, 0.36).throttle, 0.8);
+        assert_eq!(m.control(-0.4, 0.0, 0.36).throttle, -0.4 * REVERSE_THROTTLE_MAX);
+        assert_eq!(m.control(5.0, 0.0, 0.36).throttle, 1.0);
+        assert_eq!(m.control(f64::NAN, 0.0, 0.36), Control::default());
     }
 
     #[test]

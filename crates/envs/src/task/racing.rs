@@ -47,7 +47,10 @@ impl Racing {
             progress_m: 0.0,
             info: RacingInfo::default(),
             lap_start_s: 0.0,
-            filter: SafetyFilter::new(cfg.common.safety_filter),
+            filter: SafetyFilter::new(
+                cfg.common.safety_filter,
+                cfg.common.action_mapping == crate::task::ActionMapping::ScaledReverse,
+            ),
         }
     }
 }

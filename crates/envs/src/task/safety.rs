@@ -4,6 +4,12 @@
 //! replaced by the nearest steering whose path is clear, or by braking on the clearest arc.
 //! Only the scan, the IMU's speed and yaw rate, and the car's geometry enter, so the same filter
 //! runs in simulation and on the car.
+//!
+//! A car without reverse that stops facing a wall stays there (its turning circle is wider than
+//! the gap). With `backout_m > 0` the filter then reverses out of the dead end: on the steering
+//! lock that turns the nose towards the side with more free path ahead, checked against the
+//! points of the last `reverse_memory_s` seconds (the LiDAR does not see behind the car, but the
+//! car drove in through what lies behind it, and saw the sides on the way).
 
 use crate::api::{Control, SensorFrame};
 use serde::{Deserialize, Serialize};
@@ -42,6 +48,16 @@ pub struct SafetyFilterConfig {
     pub rear_m: f32,
     /// Half the body's width, wheels included, metres.
     pub half_width_m: f32,
+    /// How far to reverse out of a dead end, metres (0: never reverse; the car waits braked).
+    pub backout_m: f32,
+    /// Throttle while reversing, in (0, 1].
+    pub backout_throttle: f32,
+    /// How long obstacle points are kept for checking a reverse path (the policy's or a
+    /// back-out's), s (at least `memory_s`).
+    pub reverse_memory_s: f32,
+    /// Smallest distance from the LiDAR to a point in its fan that a reverse path may reach,
+    /// metres (backing away from the wall in front needs less than driving on).
+    pub reverse_clearance_m: f32,
 }
 
 impl Default for SafetyFilterConfig {
@@ -60,6 +76,10 @@ impl Default for SafetyFilterConfig {
             front_m: 0.415,
             rear_m: 0.085,
             half_width_m: 0.192,
+            backout_m: 0.0,
+            backout_throttle: 0.25,
+            reverse_memory_s: 10.0,
+            reverse_clearance_m: 0.65,
         }
     }
 }
@@ -78,6 +98,9 @@ impl SafetyFilterConfig {
             ("memory_s", self.memory_s),
             ("lidar_x_m", self.lidar_x_m),
             ("rear_m", self.rear_m),
+            ("backout_m", self.backout_m),
+            ("reverse_clearance_m", self.reverse_clearance_m),
+            ("reverse_memory_s", self.reverse_memory_s),
         ];
         for (name, v) in lengths {
             if !(v.is_finite() && v >= 0.0) {
@@ -92,6 +115,12 @@ impl SafetyFilterConfig {
             if !(v.is_finite() && v > 0.0) {
                 return Err(format!("safety_filter.{name} must be finite and > 0, got {v}"));
             }
+        }
+        if self.backout_m > 0.0 && !(self.backout_throttle > 0.0 && self.backout_throttle <= 1.0) {
+            return Err(format!(
+                "safety_filter.backout_throttle must be in (0, 1], got {}",
+                self.backout_throttle
+            ));
         }
         if self.n_steering < 2 {
             return Err(format!(
@@ -120,6 +149,8 @@ pub enum Intervention {
     Steered,
     /// Zero throttle (the drive brakes), on the clearest arc.
     Braked,
+    /// Reversing out of a dead end (`backout_m`).
+    Reversed,
 }
 
 /// The filter and its memory of obstacle points.
@@ -132,10 +163,36 @@ pub struct SafetyFilter {
     /// Obstacle points in the odometry frame, one per `CELL_M` cell, with the time the cell
     /// was last seen occupied (a wall seen in 45 scans is remembered once).
     memory: HashMap<(i32, i32), f64>,
-    /// Points near the car in its current frame (rebuilt every control).
+    /// Points near the car in its current frame, seen within `memory_s` (rebuilt every
+    /// control).
     near: Vec<[f32; 2]>,
+    /// Older remembered points near the car (only reverse paths are checked against them).
+    near_old: Vec<[f32; 2]>,
     last: Intervention,
+    /// Distance driven over the last control period by odometry, metres.
+    last_ds: f32,
+    /// Consecutive controls braked by the filter at a standstill.
+    stuck: u32,
+    /// Whether controls may reverse (else only `memory_s` of points is kept).
+    reverses: bool,
+    /// A back-out under way: distance still to reverse (m) and its steering (rad).
+    backout: Option<(f32, f64)>,
+    /// How far the car may reverse: the distance it drove forward (less what it reversed since),
+    /// at most `MAX_BACKABLE_M`. Reversing retraces ground the car has driven over; at a spawn
+    /// nothing behind it is known.
+    backable_m: f32,
 }
+
+/// The most a car reverses along the way it came, metres (about what it drove in
+/// `reverse_memory_s` at low speed; farther back, odometry drifts).
+const MAX_BACKABLE_M: f32 = 3.0;
+
+/// Below this speed a braked car counts as stopped, m/s.
+const STILL_MPS: f32 = 0.05;
+/// Controls braked at a standstill before the filter backs out.
+const STUCK_CONTROLS: u32 = 3;
+/// A back-out shorter than this is not worth starting, metres.
+const MIN_BACKOUT_M: f32 = 0.15;
 
 /// Scan points farther than this from the LiDAR are not remembered, metres: within the memory's
 /// time the car cannot reach them without scanning them again.
@@ -147,15 +204,22 @@ const PATH_STEP_M: f32 = 0.04;
 const CELL_M: f64 = 0.05;
 
 impl SafetyFilter {
-    /// A filter with empty memory (`cfg` validated).
-    pub fn new(cfg: SafetyFilterConfig) -> Self {
+    /// A filter with empty memory (`cfg` validated) for a car whose controls may reverse
+    /// (`reverses`: its old points are kept for reverse paths) or not.
+    pub fn new(cfg: SafetyFilterConfig, reverses: bool) -> Self {
         Self {
+            reverses: reverses || cfg.backout_m > 0.0,
             cfg,
             pose: [0.0; 3],
             last_stamp_s: None,
             memory: HashMap::new(),
             near: Vec::new(),
+            near_old: Vec::new(),
             last: Intervention::None,
+            last_ds: 0.0,
+            stuck: 0,
+            backout: None,
+            backable_m: 0.0,
         }
     }
 
@@ -175,6 +239,10 @@ impl SafetyFilter {
         self.last_stamp_s = None;
         self.memory.clear();
         self.last = Intervention::None;
+        self.last_ds = 0.0;
+        self.stuck = 0;
+        self.backout = None;
+        self.backable_m = 0.0;
     }
 
     /// Take in a frame (odometry and scan points) and return the control to send instead of
@@ -199,10 +267,25 @@ impl SafetyFilter {
         });
         let speed = self.observe(frame);
         self.collect_near(speed);
+        if let Some(c) = self.keep_backing_out(speed, fan_half_rad) {
+            self.last = Intervention::Reversed;
+            return c;
+        }
+        if proposed.throttle < 0.0 {
+            self.filter_reverse(speed, proposed, steering_limit_rad, fan_half_rad)
+        } else {
+            self.filter_forward(speed, proposed, steering_limit_rad, fan_half_rad)
+        }
+    }
+
+    /// A forward (or zero-throttle) control: its arc must be clear for reacting, braking and,
+    /// when it drives, `lookahead_m`; else the nearest clear steering, else brake.
+    fn filter_forward(&mut self, speed: f32, proposed: Control, steering_limit_rad: f64, fan_half_rad: f32) -> Control {
         let delta = proposed.steering_rad.clamp(-steering_limit_rad, steering_limit_rad);
         let drives = proposed.throttle > 0.0;
         let need = self.path_needed(speed, drives);
         if self.free_length(delta as f32, need, fan_half_rad) >= need {
+            self.stuck = 0;
             return proposed;
         }
         let n = self.cfg.n_steering;
@@ -212,6 +295,7 @@ impl SafetyFilter {
         candidates.sort_by(|a, b| (a - delta).abs().total_cmp(&(b - delta).abs()));
         for &d in &candidates {
             if self.free_length(d as f32, need, fan_half_rad) >= need {
+                self.stuck = 0;
                 self.last = Intervention::Steered;
                 return Control {
                     throttle: proposed.throttle,
@@ -228,11 +312,121 @@ impl SafetyFilter {
                 best = (d, f);
             }
         }
+        self.stuck = if speed.abs() < STILL_MPS { self.stuck + 1 } else { 0 };
+        if self.cfg.backout_m > 0.0
+            && self.stuck >= STUCK_CONTROLS
+            && let Some(c) = self.start_backing_out(steering_limit_rad, fan_half_rad)
+        {
+            self.stuck = 0;
+            self.last = Intervention::Reversed;
+            return c;
+        }
         self.last = Intervention::Braked;
         Control {
             throttle: 0.0,
             steering_rad: best.0,
         }
+    }
+
+    /// A reverse control: while the car still rolls forward the drive only brakes, so it is
+    /// judged as braking (its throttle kept); otherwise its reverse arc (reacting, braking and
+    /// `lookahead_m`) must be clear of every remembered point, else the nearest clear steering
+    /// reverses, else the car brakes.
+    fn filter_reverse(&mut self, speed: f32, proposed: Control, limit_rad: f64, fan_half_rad: f32) -> Control {
+        if speed > STILL_MPS {
+            let braking = Control {
+                throttle: 0.0,
+                ..proposed
+            };
+            let c = self.filter_forward(speed, braking, limit_rad, fan_half_rad);
+            return Control {
+                throttle: proposed.throttle,
+                ..c
+            };
+        }
+        self.stuck = 0;
+        let back = (-speed).max(0.0);
+        let need =
+            back * self.cfg.reaction_s + back * back / (2.0 * self.cfg.decel_mps2.max(1e-3)) + self.cfg.lookahead_m;
+        let delta = proposed.steering_rad.clamp(-limit_rad, limit_rad);
+        if self.reverse_free_length(delta as f32, need, fan_half_rad) >= need {
+            return proposed;
+        }
+        let n = self.cfg.n_steering;
+        let mut candidates: Vec<f64> = (0..n)
+            .map(|k| -limit_rad + 2.0 * limit_rad * k as f64 / (n - 1) as f64)
+            .collect();
+        candidates.sort_by(|a, b| (a - delta).abs().total_cmp(&(b - delta).abs()));
+        for &d in &candidates {
+            if self.reverse_free_length(d as f32, need, fan_half_rad) >= need {
+                self.last = Intervention::Steered;
+                return Control {
+                    throttle: proposed.throttle,
+                    steering_rad: d,
+                };
+            }
+        }
+        self.last = Intervention::Braked;
+        Control {
+            throttle: 0.0,
+            steering_rad: delta,
+        }
+    }
+
+    /// Begin reversing out of a dead end: the nose should swing towards the open side (the
+    /// one whose nearest point ahead of the LiDAR is farther), so the car reverses on the
+    /// opposite lock (else straight, else the other lock), as far as `backout_m` or the longest
+    /// clear reverse path.
+    fn start_backing_out(&mut self, limit_rad: f64, fan_half_rad: f32) -> Option<Control> {
+        let (mut left, mut right) = (f32::INFINITY, f32::INFINITY);
+        for &[x, y] in &self.near {
+            let lx = x - self.cfg.lidar_x_m;
+            if lx > 0.0 {
+                let d2 = lx * lx + y * y;
+                if y > 0.0 {
+                    left = left.min(d2);
+                } else {
+                    right = right.min(d2);
+                }
+            }
+        }
+        let towards = if left >= right { 1.0 } else { -1.0 };
+        let want = self.cfg.backout_m;
+        let mut best: Option<(f32, f64)> = None;
+        for d in [-towards * limit_rad, 0.0, towards * limit_rad] {
+            let f = self.reverse_free_length(d as f32, want, fan_half_rad);
+            if f >= want {
+                best = Some((f, d));
+                break;
+            }
+            if best.is_none_or(|b| f > b.0) {
+                best = Some((f, d));
+            }
+        }
+        let (len, d) = best.filter(|b| b.0 >= MIN_BACKOUT_M)?;
+        self.backout = Some((len, d));
+        Some(Control {
+            throttle: -(self.cfg.backout_throttle as f64),
+            steering_rad: d,
+        })
+    }
+
+    /// The next control of a back-out under way, or `None` when there is none or it is over
+    /// (done, or its path is no longer clear: then the car stops and the filter decides anew).
+    fn keep_backing_out(&mut self, speed: f32, fan_half_rad: f32) -> Option<Control> {
+        let (left, d) = self.backout?;
+        let left = left - self.last_ds;
+        let back = (-speed).max(0.0);
+        let stop = back * self.cfg.reaction_s + back * back / (2.0 * self.cfg.decel_mps2.max(1e-3));
+        if left <= stop || self.reverse_free_length(d as f32, left, fan_half_rad) < left {
+            self.backout = None;
+            return None;
+        }
+        self.backout = Some((left, d));
+        Some(Control {
+            throttle: -(self.cfg.backout_throttle as f64),
+            steering_rad: d,
+        })
     }
 
     /// Path length a control needs clear: the distance to react and brake to a stop, plus
@@ -254,12 +448,19 @@ impl SafetyFilter {
             let dt = (frame.stamp_s - t0).clamp(0.0, 0.5);
             // Midpoint heading: exact enough for one control period on an arc.
             let th = self.pose[2] + 0.5 * w * dt;
+            self.last_ds = (v * dt).abs() as f32;
+            self.backable_m = (self.backable_m + (v * dt) as f32).clamp(0.0, MAX_BACKABLE_M);
             self.pose[0] += v * dt * th.cos();
             self.pose[1] += v * dt * th.sin();
             self.pose[2] += w * dt;
         }
         self.last_stamp_s = Some(frame.stamp_s);
-        let keep_after = frame.stamp_s - self.cfg.memory_s as f64;
+        let keep_s = if self.reverses {
+            self.cfg.reverse_memory_s.max(self.cfg.memory_s)
+        } else {
+            self.cfg.memory_s
+        };
+        let keep_after = frame.stamp_s - keep_s as f64;
         self.memory.retain(|_, t| *t >= keep_after);
         if let Some(scan) = &frame.scan {
             let (s, c) = self.pose[2].sin_cos();
@@ -281,20 +482,50 @@ impl SafetyFilter {
 
     /// Remembered points that a path from here could reach, in the car's frame.
     fn collect_near(&mut self, speed: f32) {
-        let reach =
-            self.path_needed(speed, true) + 1.0 + self.cfg.front_m + self.cfg.clearance_m + self.cfg.half_width_m;
+        let reach = (self.path_needed(speed, true) + 1.0).max(self.cfg.backout_m + self.cfg.rear_m)
+            + self.cfg.front_m
+            + self.cfg.clearance_m
+            + self.cfg.half_width_m;
         let (s, c) = self.pose[2].sin_cos();
         let (s, c) = (s as f32, c as f32);
+        let recent_after = self.last_stamp_s.unwrap_or(0.0) - self.cfg.memory_s as f64;
         self.near.clear();
-        for &(i, j) in self.memory.keys() {
+        self.near_old.clear();
+        for (&(i, j), &seen) in &self.memory {
             // Relative to the car in f64, then f32: odometry may run far from its origin.
             let dx = ((i as f64 + 0.5) * CELL_M - self.pose[0]) as f32;
             let dy = ((j as f64 + 0.5) * CELL_M - self.pose[1]) as f32;
             let p = [c * dx + s * dy, -s * dx + c * dy];
             if p[0] * p[0] + p[1] * p[1] <= reach * reach {
-                self.near.push(p);
+                if seen >= recent_after {
+                    self.near.push(p);
+                } else {
+                    self.near_old.push(p);
+                }
             }
         }
+    }
+
+    /// How far the car reverses along the arc of steering `delta` before its body (with
+    /// margin) touches any remembered point or the LiDAR comes within `reverse_clearance_m`
+    /// of one in its fan, metres (up to `limit`, and never beyond the way the car came).
+    fn reverse_free_length(&self, delta: f32, limit: f32, fan_half_rad: f32) -> f32 {
+        if limit > self.backable_m {
+            return self.reverse_free_length(delta, self.backable_m, fan_half_rad);
+        }
+        let k = delta.tan() / self.cfg.wheelbase_m;
+        let n = (limit / PATH_STEP_M).ceil().max(1.0) as usize;
+        for i in 1..=n {
+            let sd = -(i as f32 * PATH_STEP_M).min(limit);
+            let (x, y, th) = arc_pose(k, sd);
+            let clear = [&self.near, &self.near_old]
+                .iter()
+                .all(|pts| self.points_clear(pts, x, y, th, fan_half_rad, self.cfg.reverse_clearance_m));
+            if !clear {
+                return (-sd - PATH_STEP_M).max(0.0);
+            }
+        }
+        limit
     }
 
     /// How far along the arc of steering `delta` the car drives before its body (with margin)
@@ -305,20 +536,15 @@ impl SafetyFilter {
         let n = (limit / PATH_STEP_M).ceil().max(1.0) as usize;
         for i in 1..=n {
             let sd = (i as f32 * PATH_STEP_M).min(limit);
-            let (x, y, th) = if k.abs() < 1e-6 {
-                (sd, 0.0, 0.0)
-            } else {
-                let th = k * sd;
-                (th.sin() / k, (1.0 - th.cos()) / k, th)
-            };
-            if !self.pose_clear(x, y, th, fan_half_rad) {
+            let (x, y, th) = arc_pose(k, sd);
+            if !self.points_clear(&self.near, x, y, th, fan_half_rad, self.cfg.clearance_m) {
                 return (sd - PATH_STEP_M).max(0.0);
             }
         }
         limit
     }
 
-    fn pose_clear(&self, x: f32, y: f32, th: f32, fan_half_rad: f32) -> bool {
+    fn points_clear(&self, points: &[[f32; 2]], x: f32, y: f32, th: f32, fan_half_rad: f32, clearance_m: f32) -> bool {
         let cfg = &self.cfg;
         let (s, c) = th.sin_cos();
         let m = cfg.body_margin_m;
@@ -327,8 +553,8 @@ impl SafetyFilter {
         } else {
             f32::INFINITY
         };
-        let c2 = cfg.clearance_m * cfg.clearance_m;
-        for &[px, py] in &self.near {
+        let c2 = clearance_m * clearance_m;
+        for &[px, py] in points {
             let (dx, dy) = (px - x, py - y);
             let bx = c * dx + s * dy;
             let by = -s * dx + c * dy;
@@ -344,18 +570,38 @@ impl SafetyFilter {
     }
 }
 
+/// The rear axle's pose after driving `s` metres (negative: reversing) on an arc of curvature
+/// `k`, from the origin heading along x.
+fn arc_pose(k: f32, s: f32) -> (f32, f32, f32) {
+    if k.abs() < 1e-6 {
+        (s, 0.0, 0.0)
+    } else {
+        let th = k * s;
+        (th.sin() / k, (1.0 - th.cos()) / k, th)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use agvrl_sim::msg::{ImuReading, LaserScan};
 
-    /// A 90 degree scan of a wall `wall_m` ahead of the LiDAR, at rest.
+    /// A 90 degree scan of a wall `wall_m` ahead of the LiDAR, the IMU reading `speed`.
     fn wall_frame(wall_m: f32, stamp_s: f64, speed: f64) -> SensorFrame {
+        slanted_wall_frame(wall_m, 0.0, stamp_s, speed)
+    }
+
+    /// As [`wall_frame`], the wall `x + slope y = wall_m` in the LiDAR's frame (slope > 0:
+    /// nearer on the left).
+    fn slanted_wall_frame(wall_m: f32, slope: f32, stamp_s: f64, speed: f64) -> SensorFrame {
         let n = 101;
         let half = std::f32::consts::FRAC_PI_4;
         let inc = 2.0 * half / (n - 1) as f32;
         let ranges: Vec<f32> = (0..n)
-            .map(|i| (wall_m / (-half + inc * i as f32).cos()).min(12.0))
+            .map(|i| {
+                let b = -half + inc * i as f32;
+                (wall_m / (b.cos() + slope * b.sin())).min(12.0)
+            })
             .collect();
         let hit = ranges.iter().map(|r| *r < 12.0).collect();
         SensorFrame {
@@ -380,11 +626,14 @@ mod tests {
     }
 
     fn on() -> SafetyFilter {
-        SafetyFilter::new(SafetyFilterConfig {
-            enabled: true,
-            decel_mps2: 3.0,
-            ..SafetyFilterConfig::default()
-        })
+        SafetyFilter::new(
+            SafetyFilterConfig {
+                enabled: true,
+                decel_mps2: 3.0,
+                ..SafetyFilterConfig::default()
+            },
+            true,
+        )
     }
 
     const FAN: Option<f32> = Some(std::f32::consts::FRAC_PI_4);
@@ -398,7 +647,7 @@ mod tests {
         let mut f = on();
         assert_eq!(f.filter(&wall_frame(5.0, 0.0, 1.5), go, 0.36, FAN), go);
         assert_eq!(f.last_intervention(), Intervention::None);
-        let mut off = SafetyFilter::new(SafetyFilterConfig::default());
+        let mut off = SafetyFilter::new(SafetyFilterConfig::default(), false);
         assert_eq!(off.filter(&wall_frame(0.7, 0.0, 1.5), go, 0.36, FAN), go);
     }
 
@@ -435,10 +684,13 @@ mod tests {
         // (r sin a, r (1 - cos a)): the body's front edge (0.415 m + 0.08 m margin) reaches it
         // at sin a = 0.495 / r, while it is still within the body's half width.
         let fan = std::f32::consts::FRAC_PI_4;
-        let mut body_only = SafetyFilter::new(SafetyFilterConfig {
-            clearance_m: 0.0,
-            ..on().cfg
-        });
+        let mut body_only = SafetyFilter::new(
+            SafetyFilterConfig {
+                clearance_m: 0.0,
+                ..on().cfg
+            },
+            true,
+        );
         let k = 0.36f32.tan() / 0.33;
         let r = 1.0 / k;
         body_only.near = vec![[r, r]];
@@ -490,5 +742,119 @@ mod tests {
         only_centre(&mut much_later, false);
         f.filter(&much_later, go, 0.36, FAN);
         assert!(f.near.is_empty());
+    }
+
+    /// A filter at rest at time `t_s` that remembers one point, seen at `seen_s`, at (x, y)
+    /// from the rear axle.
+    fn remembering(x: f64, y: f64, seen_s: f64, t_s: f64) -> SafetyFilter {
+        let mut f = on();
+        f.last_stamp_s = Some(t_s);
+        f.backable_m = MAX_BACKABLE_M;
+        let cell = ((x / CELL_M).floor() as i32, (y / CELL_M).floor() as i32);
+        f.memory.insert(cell, seen_s);
+        f
+    }
+
+    #[test]
+    fn a_reverse_control_is_checked_against_points_seen_on_the_way_in() {
+        let back = Control {
+            throttle: -0.25,
+            steering_rad: 0.0,
+        };
+        let at_rest = |t: f64| {
+            let mut fr = wall_frame(12.0, t, 0.0);
+            fr.scan.as_mut().unwrap().hit.fill(false);
+            fr
+        };
+        // 0.3 m behind the rear axle, seen 5 s ago (out of sight since): reversing 0.25 m
+        // (the lookahead at rest) brings the body's back (0.085 m + 0.08 m margin) onto it,
+        // on every steering.
+        let mut f = remembering(-0.3, 0.0, 0.0, 5.0);
+        let c = f.filter(&at_rest(5.0), back, 0.36, FAN);
+        assert_eq!(f.last_intervention(), Intervention::Braked);
+        assert_eq!(c.throttle, 0.0);
+        // Beyond reverse_memory_s it is forgotten; 0.5 m behind it is out of reach.
+        let mut f = remembering(-0.3, 0.0, 0.0, 10.5);
+        assert_eq!(f.filter(&at_rest(10.5), back, 0.36, FAN), back);
+        let mut f = remembering(-0.5, 0.0, 0.0, 5.0);
+        assert_eq!(f.filter(&at_rest(5.0), back, 0.36, FAN), back);
+        // Only reverse paths use old points: one 0.5 m ahead, seen 5 s ago, lets the car drive.
+        let go = Control {
+            throttle: 0.5,
+            steering_rad: 0.0,
+        };
+        let mut f = remembering(0.9, 0.0, 0.0, 5.0);
+        assert_eq!(f.filter(&at_rest(5.0), go, 0.36, FAN), go);
+        assert_eq!(f.last_intervention(), Intervention::None);
+        // Nothing seen, but nothing driven either: a car never reverses where it has not been.
+        let mut f = on();
+        assert_eq!(f.filter(&at_rest(0.0), back, 0.36, FAN).throttle, 0.0);
+        assert_eq!(f.last_intervention(), Intervention::Braked);
+        for k in 1..=10 {
+            let mut fr = at_rest(0.1 * k as f64);
+            fr.imu.as_mut().unwrap().lin_vel_b[0] = 1.0;
+            f.filter(&fr, go, 0.36, FAN);
+        }
+        assert_eq!(f.filter(&at_rest(1.1), back, 0.36, FAN), back);
+        // Rolling forward, reverse only brakes: judged as braking, the wall being far.
+        let mut f = on();
+        assert_eq!(f.filter(&wall_frame(5.0, 0.0, 1.5), back, 0.36, FAN), back);
+        assert_eq!(f.last_intervention(), Intervention::None);
+    }
+
+    #[test]
+    fn a_car_stuck_at_a_wall_backs_out_turning_its_nose_to_the_open_side() {
+        let mut f = SafetyFilter::new(
+            SafetyFilterConfig {
+                backout_m: 0.6,
+                ..on().cfg
+            },
+            true,
+        );
+        f.backable_m = MAX_BACKABLE_M;
+        let go = Control {
+            throttle: 1.0,
+            steering_rad: 0.0,
+        };
+        // A wall 0.8 m ahead, nearer on the left: every arc is blocked within the lookahead.
+        let dt = 0.1;
+        for k in 0..STUCK_CONTROLS - 1 {
+            let c = f.filter(&slanted_wall_frame(0.8, 0.3, k as f64 * dt, 0.0), go, 0.36, FAN);
+            assert_eq!((f.last_intervention(), c.throttle), (Intervention::Braked, 0.0));
+        }
+        let mut t = (STUCK_CONTROLS - 1) as f64 * dt;
+        let c = f.filter(&slanted_wall_frame(0.8, 0.3, t, 0.0), go, 0.36, FAN);
+        assert_eq!(f.last_intervention(), Intervention::Reversed);
+        // Reversing on left lock swings the nose right, to the open side.
+        assert_eq!(
+            c,
+            Control {
+                throttle: -0.25,
+                steering_rad: 0.36
+            }
+        );
+        // At 0.5 m/s back (5 cm a control) it reverses until what is left of 0.6 m is its
+        // stopping distance (0.05 m reacting + 0.042 m braking), then the policy drives again.
+        let mut reversing = 1;
+        loop {
+            t += dt;
+            f.filter(&slanted_wall_frame(0.8, 0.3, t, -0.5), go, 0.36, FAN);
+            if f.last_intervention() != Intervention::Reversed {
+                break;
+            }
+            reversing += 1;
+            assert!(reversing < 30, "never stops reversing");
+        }
+        let want = 1 + ((0.6 - 0.05 - 0.25 / 6.0) / 0.05f64).floor() as i32;
+        assert!(
+            (reversing - want).abs() <= 1,
+            "{reversing} controls reversing, want {want}"
+        );
+        // Without backout_m the car waits.
+        let mut f = on();
+        for k in 0..10 {
+            f.filter(&slanted_wall_frame(0.8, 0.3, k as f64 * dt, 0.0), go, 0.36, FAN);
+            assert_eq!(f.last_intervention(), Intervention::Braked);
+        }
     }
 }

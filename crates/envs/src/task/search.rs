@@ -91,7 +91,10 @@ impl Search {
             start_s: 0.0,
             found: vec![],
             n_subjects: 0,
-            filter: SafetyFilter::new(cfg.common.safety_filter),
+            filter: SafetyFilter::new(
+                cfg.common.safety_filter,
+                cfg.common.action_mapping == crate::task::ActionMapping::ScaledReverse,
+            ),
             interventions: 0,
             explored: (!cfg.common.observation.explored.is_empty())
                 .then(|| ExploredMemory::new(cfg.common.observation.explored)),
@@ -261,7 +264,8 @@ impl Task for Search {
             self.cfg.reward,
             &self.cfg.safe,
             d,
-            c.throttle,
+            // A back-out's reverse throttle earns nothing.
+            c.throttle.max(0.0),
             c.steering_rad,
             self.cfg.slow_penalty,
             new_cells,

@@ -27,8 +27,17 @@ pub struct DriveModel {
 }
 
 impl DriveModel {
-    /// Next wheel speed (rad/s) after `t_s` seconds at throttle `throttle` in [0, 1].
+    /// Next wheel speed (rad/s) after `t_s` seconds at throttle `throttle` in [-1, 1].
+    /// Reverse mirrors the forward model; a car rolling the other way than the throttle asks
+    /// first slows to a stop (as an ESC does before it changes direction).
     pub fn advance(&self, w: f64, throttle: f64, t_s: f64) -> f64 {
+        if w < 0.0 || (w == 0.0 && throttle < 0.0) {
+            return -self.advance_forward(-w, (-throttle).max(0.0), t_s);
+        }
+        self.advance_forward(w, throttle.max(0.0), t_s)
+    }
+
+    fn advance_forward(&self, w: f64, throttle: f64, t_s: f64) -> f64 {
         let dw = self.c_t * throttle - w * (self.c_d * w + self.c_r);
         let coast = (w + t_s * dw).max(0.0);
         if self.brake > 0.0 {
@@ -83,7 +92,33 @@ mod tests {
         // Facts file: terminal w = 35.8 rad/s.
         assert!((w - 35.83).abs() < 0.01, "w = {w}");
         assert!((m.steady_state(1.0) - w).abs() < 1e-6);
-        assert_eq!(m.advance(1.0, 0.0, 10.0), 0.0, "never negative");
+        assert_eq!(m.advance(1.0, 0.0, 10.0), 0.0, "coasting never reverses");
+    }
+
+    #[test]
+    fn reverse_mirrors_forward_and_stops_before_changing_direction() {
+        let m = DriveModel {
+            c_t: 20.0,
+            c_d: 0.01,
+            c_r: 0.2,
+            brake: 60.0,
+        };
+        let dt = 1.0 / 30.0;
+        let (mut f, mut r) = (0.0, 0.0);
+        for _ in 0..600 {
+            f = m.advance(f, 0.4, dt);
+            r = m.advance(r, -0.4, dt);
+            assert_eq!(r, -f);
+        }
+        assert!((r + m.steady_state(0.4)).abs() < 1e-3, "reverse top speed: {r}");
+        // Rolling forward with reverse asked: braked to a stop, never through zero in one period.
+        let w = m.advance(10.0, -1.0, dt);
+        assert_eq!(w, m.advance(10.0, 0.0, dt));
+        assert!(w > 0.0);
+        assert_eq!(m.advance(1.0, -1.0, dt), 0.0);
+        assert!(m.advance(0.0, -1.0, dt) < 0.0);
+        // And rolling backward with forward throttle: braked to a stop first.
+        assert_eq!(m.advance(-1.0, 1.0, dt), 0.0);
     }
 
     #[test]
