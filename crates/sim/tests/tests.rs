@@ -17,13 +17,18 @@ fn tmpdir(name: &str) -> PathBuf {
 
 /// A square room with walls only (inner faces at +-half), written to a temp file.
 fn room(half: f32, name: &str) -> SceneSource {
+    walled_room(half, 0.5, name)
+}
+
+/// As [`room`], with walls `thickness` metres thick.
+fn walled_room(half: f32, thickness: f32, name: &str) -> SceneSource {
     let d = tmpdir(name);
     let p = d.join("room.toml");
     std::fs::write(
         &p,
         format!(
             "name = \"room\"\nkind = \"outdoor\"\n[ground]\nsize_m = [{s}, {s}]\nfriction = 1.0\ncolor = [0.5, 0.5, 0.5]\n\
-             [boundary]\ninner_half_m = {half}\nthickness_m = 0.5\nheight_m = 1.0\ncolor = [0.6, 0.6, 0.6]\n\
+             [boundary]\ninner_half_m = {half}\nthickness_m = {thickness}\nheight_m = 1.0\ncolor = [0.6, 0.6, 0.6]\n\
              [spawn]\nx_m = 0.0\ny_m = 0.0\nyaw_deg = 0.0\n",
             s = 2.0 * half + 2.0
         ),
@@ -251,6 +256,44 @@ mod dynamics {
                 assert!(s.pose2().x_m < 6.0, "{mode:?}: passed the wall, x = {}", s.pose2().x_m);
             }
             assert!(touched, "{mode:?}: driving into the wall must report a contact");
+        }
+    }
+
+    #[test]
+    fn swept_collision_checks_run_only_where_a_substep_could_skip_a_wall() {
+        // At 1.79 m/s and 1/120 s substeps the car moves 1.5 cm (3 cm with the margin): the
+        // built-in scenes' obstacles (7 cm and up) and a 50 cm wall are thicker, a 2 cm wall
+        // is not.
+        for id in SCENE_IDS {
+            let s = sim(SceneSource::Builtin(id.to_string()), DynamicsMode::Raycast);
+            assert!(!s.world().continuous_collision(), "{id}");
+        }
+        assert!(
+            !sim(room(6.0, "thick"), DynamicsMode::Raycast)
+                .world()
+                .continuous_collision()
+        );
+        for mode in MODES {
+            let mut s = sim(walled_room(6.0, 0.02, "thin"), mode);
+            assert!(s.world().continuous_collision(), "{mode:?}");
+            s.reset(PlanarPose {
+                x_m: -5.0,
+                y_m: 0.0,
+                yaw_rad: 0.0,
+            })
+            .unwrap();
+            for _ in 0..400 {
+                s.step(Control {
+                    throttle: 1.0,
+                    steering_rad: 0.0,
+                })
+                .unwrap();
+                assert!(
+                    s.pose2().x_m < 6.0,
+                    "{mode:?}: passed the thin wall, x = {}",
+                    s.pose2().x_m
+                );
+            }
         }
     }
 

@@ -290,7 +290,7 @@ impl Body {
                 let dt = world.pw.integration_parameters.dt;
                 let filter = QueryFilter::default().groups(groups::sensors());
                 let pw = &mut world.pw;
-                let q = pw.broad_phase.as_query_pipeline_mut(
+                let q = world.statics_bvh.as_query_pipeline_mut(
                     pw.narrow_phase.query_dispatcher(),
                     &mut pw.bodies,
                     &mut pw.colliders,
