@@ -288,11 +288,7 @@ impl SafetyFilter {
             self.stuck = 0;
             return proposed;
         }
-        let n = self.cfg.n_steering;
-        let mut candidates: Vec<f64> = (0..n)
-            .map(|k| -steering_limit_rad + 2.0 * steering_limit_rad * k as f64 / (n - 1) as f64)
-            .collect();
-        candidates.sort_by(|a, b| (a - delta).abs().total_cmp(&(b - delta).abs()));
+        let candidates = self.steerings_nearest(delta, steering_limit_rad);
         for &d in &candidates {
             if self.free_length(d as f32, need, fan_half_rad) >= need {
                 self.stuck = 0;
@@ -345,18 +341,12 @@ impl SafetyFilter {
             };
         }
         self.stuck = 0;
-        let back = (-speed).max(0.0);
-        let need =
-            back * self.cfg.reaction_s + back * back / (2.0 * self.cfg.decel_mps2.max(1e-3)) + self.cfg.lookahead_m;
+        let need = self.stop_distance(-speed) + self.cfg.lookahead_m;
         let delta = proposed.steering_rad.clamp(-limit_rad, limit_rad);
         if self.reverse_free_length(delta as f32, need, fan_half_rad) >= need {
             return proposed;
         }
-        let n = self.cfg.n_steering;
-        let mut candidates: Vec<f64> = (0..n)
-            .map(|k| -limit_rad + 2.0 * limit_rad * k as f64 / (n - 1) as f64)
-            .collect();
-        candidates.sort_by(|a, b| (a - delta).abs().total_cmp(&(b - delta).abs()));
+        let candidates = self.steerings_nearest(delta, limit_rad);
         for &d in &candidates {
             if self.reverse_free_length(d as f32, need, fan_half_rad) >= need {
                 self.last = Intervention::Steered;
@@ -416,9 +406,7 @@ impl SafetyFilter {
     fn keep_backing_out(&mut self, speed: f32, fan_half_rad: f32) -> Option<Control> {
         let (left, d) = self.backout?;
         let left = left - self.last_ds;
-        let back = (-speed).max(0.0);
-        let stop = back * self.cfg.reaction_s + back * back / (2.0 * self.cfg.decel_mps2.max(1e-3));
-        if left <= stop || self.reverse_free_length(d as f32, left, fan_half_rad) < left {
+        if left <= self.stop_distance(-speed) || self.reverse_free_length(d as f32, left, fan_half_rad) < left {
             self.backout = None;
             return None;
         }
@@ -432,9 +420,25 @@ impl SafetyFilter {
     /// Path length a control needs clear: the distance to react and brake to a stop, plus
     /// `lookahead_m` when it drives.
     fn path_needed(&self, speed: f32, drives: bool) -> f32 {
-        let v = speed.max(0.0);
-        let stop = v * self.cfg.reaction_s + v * v / (2.0 * self.cfg.decel_mps2.max(1e-3));
+        let stop = self.stop_distance(speed);
         if drives { stop + self.cfg.lookahead_m } else { stop }
+    }
+
+    /// Distance to react and brake to a stop from `speed` along the way it drives (0 when it
+    /// moves the other way), metres.
+    fn stop_distance(&self, speed: f32) -> f32 {
+        let v = speed.max(0.0);
+        v * self.cfg.reaction_s + v * v / (2.0 * self.cfg.decel_mps2.max(1e-3))
+    }
+
+    /// The `n_steering` angles over the steering range, nearest to `delta` first.
+    fn steerings_nearest(&self, delta: f64, limit_rad: f64) -> Vec<f64> {
+        let n = self.cfg.n_steering;
+        let mut candidates: Vec<f64> = (0..n)
+            .map(|k| -limit_rad + 2.0 * limit_rad * k as f64 / (n - 1) as f64)
+            .collect();
+        candidates.sort_by(|a, b| (a - delta).abs().total_cmp(&(b - delta).abs()));
+        candidates
     }
 
     /// Advance odometry to the frame and remember its near scan points; returns forward speed.
