@@ -67,8 +67,8 @@ pub struct World {
     /// The ground's collider.
     pub ground: ColliderHandle,
     /// A tree of the static colliders alone (ground and obstacles), built once: the wheels'
-    /// suspension rays only ever hit those, and walking rapier's broad phase (which also holds
-    /// the moving car) cost a fifth of a step.
+    /// suspension rays only ever hit those, and walking it instead of rapier's broad phase
+    /// (which also holds the moving car) takes 6 % off an oval step.
     pub statics_bvh: BroadPhaseBvh,
 }
 
