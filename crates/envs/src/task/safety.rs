@@ -514,35 +514,34 @@ impl SafetyFilter {
     /// margin) touches any remembered point or the LiDAR comes within `reverse_clearance_m`
     /// of one in its fan, metres (up to `limit`, and never beyond the way the car came).
     fn reverse_free_length(&self, delta: f32, limit: f32, fan_half_rad: f32) -> f32 {
-        if limit > self.backable_m {
-            return self.reverse_free_length(delta, self.backable_m, fan_half_rad);
-        }
-        let k = delta.tan() / self.cfg.wheelbase_m;
-        let n = (limit / PATH_STEP_M).ceil().max(1.0) as usize;
-        for i in 1..=n {
-            let sd = -(i as f32 * PATH_STEP_M).min(limit);
-            let (x, y, th) = arc_pose(k, sd);
-            let clear = [&self.near, &self.near_old]
+        let clearance = self.cfg.reverse_clearance_m;
+        self.walk_arc(delta, limit.min(self.backable_m), -1.0, |x, y, th| {
+            [&self.near, &self.near_old]
                 .iter()
-                .all(|pts| self.points_clear(pts, x, y, th, fan_half_rad, self.cfg.reverse_clearance_m));
-            if !clear {
-                return (-sd - PATH_STEP_M).max(0.0);
-            }
-        }
-        limit
+                .all(|pts| self.points_clear(pts, x, y, th, fan_half_rad, clearance))
+        })
     }
 
     /// How far along the arc of steering `delta` the car drives before its body (with margin)
     /// touches a point or the LiDAR comes within `clearance_m` of a point in its fan, metres
     /// (checked up to `limit`; `limit` itself when the path is clear).
     fn free_length(&self, delta: f32, limit: f32, fan_half_rad: f32) -> f32 {
+        self.walk_arc(delta, limit, 1.0, |x, y, th| {
+            self.points_clear(&self.near, x, y, th, fan_half_rad, self.cfg.clearance_m)
+        })
+    }
+
+    /// Poses every `PATH_STEP_M` along the arc of steering `delta`, forward (`sign` 1) or in
+    /// reverse (-1), up to `limit`: the distance before the first pose `clear` rejects, or
+    /// `limit`.
+    fn walk_arc(&self, delta: f32, limit: f32, sign: f32, clear: impl Fn(f32, f32, f32) -> bool) -> f32 {
         let k = delta.tan() / self.cfg.wheelbase_m;
         let n = (limit / PATH_STEP_M).ceil().max(1.0) as usize;
         for i in 1..=n {
-            let sd = (i as f32 * PATH_STEP_M).min(limit);
-            let (x, y, th) = arc_pose(k, sd);
-            if !self.points_clear(&self.near, x, y, th, fan_half_rad, self.cfg.clearance_m) {
-                return (sd - PATH_STEP_M).max(0.0);
+            let s = (i as f32 * PATH_STEP_M).min(limit);
+            let (x, y, th) = arc_pose(k, sign * s);
+            if !clear(x, y, th) {
+                return (s - PATH_STEP_M).max(0.0);
             }
         }
         limit
