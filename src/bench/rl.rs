@@ -2,14 +2,19 @@
 //! repetitions after a warm-up, on the given CPU backend, single process, one thread unless
 //! the line says `threads=2`.
 //!
-//! `sac_gflops` counts the matrix-product FLOPs one update of `sac/update.rs` performs
-//! (`sac_update_flops`); `sgemm_gflops` is a plain 256x256x256 product on the same device,
-//! the ceiling those figures are bounded by.
+//! `sac_gflops` counts the matrix-product FLOPs one update of `sac/host.rs` performs
+//! (`sac_update_flops`); `sgemm_gflops` is a plain 256x256x256 product on the backend, near
+//! the ceiling of the host path's products too (matrixmultiply's AVX-512 kernel measured
+//! 141-149 GFLOP/s on the update's shapes, one thread). SAC and PPO without an image run on
+//! the host, so `--backend` changes only the figures that go through Burn: `sgemm_gflops`,
+//! `policy_infer_us` and the CNN lines.
 //!
-//! What profiling showed (perf, 2-core AVX-512 machine): SAC's update is ~70 % GEMM, so the
-//! backend's GEMM kernel decides it; Burn's `x86-v4` feature (AVX-512 kernels, picked at run
-//! time) doubled flex's 256^3 product (74 -> 148 GFLOP/s, one thread). ndarray's GEMM is fast
-//! too but its per-op overhead makes SAC ~2x and inference ~4x slower, so flex is the default.
+//! What profiling showed (perf, 2-core AVX-512 machine): through Burn, SAC's update was ~70 %
+//! GEMM, a tenth went to per-op dispatch and graph work repeated in every row block, and
+//! autodiff registers every op under one process-wide lock; on the host a second thread gets
+//! 1.7x. Burn's `x86-v4` feature (AVX-512 kernels, picked at run time) doubled flex's 256^3
+//! product (74 -> 148 GFLOP/s, one thread). ndarray's GEMM is fast too but its per-op
+//! overhead makes inference ~4x slower, so flex is the default.
 //! PPO's small tanh nets spent 2/3 of the update in libm's scalar `tanhf`; tanh is now
 //! `2 sigmoid(2x) - 1`, and PPO's loss head is fused on the host (see `ppo/update.rs`).
 //! Burn's `rayon`/`simd` options gave no measurable gain on this busy machine and are off.
@@ -89,8 +94,8 @@ impl Env for RandomEnv {
 
 /// Matrix-product FLOPs of one SAC update (batch `b`, obs `o`, action `a`, hidden `h`):
 /// actor forward on `[obs; next_obs]` and again on `obs` with gradients, target critics forward, critics forward and backward (no input
-/// gradient at the first layer), critics forward and input-backward for the actor loss,
-/// actor backward.
+/// gradient at the first layer), critics forward and input-backward for the actor loss (at the
+/// first layer only for the action's columns), actor backward (no input gradient).
 fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
     let chain = |input: usize, out: usize| -> (usize, usize) {
         // (all layer MACs, MACs of layers after the first)
@@ -103,10 +108,11 @@ fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
     let (actor, actor_rest) = chain(o, 2 * a);
     let (critic, critic_rest) = chain(o + a, 1);
     let (critic, critic_rest) = (2 * critic, 2 * critic_rest);
+    let first = h.first().copied().unwrap_or(1);
     let macs = 3 * actor // actor on obs and next_obs (plain), on obs again (tracked)
         + critic // target
         + critic + critic + critic_rest // critic loss forward, weight grads, input grads
-        + critic + critic // actor loss: forward, input grads down to the action
+        + critic + critic_rest + 2 * a * first // actor loss: forward, input grads down to the action
         + actor + actor_rest; // actor weight and input grads
     2.0 * (macs * b) as f64
 }
@@ -175,7 +181,7 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
     for threads in [1, 2] {
         let env = VecEnv::new(vec![RandomEnv::new(o, a)], 1)?;
         let mut sac = Sac::new(cfg.clone(), env, &device, 0)?;
-        sac.set_threads(threads);
+        sac.set_threads(threads)?;
         sac.learn(300, &mut |_| Control::Continue)?;
         let mut ups = vec![];
         for _ in 0..reps {

@@ -26,7 +26,8 @@
 //!   gives the same run, bit for bit (also for a fixed `Sac::set_threads` count).
 //! - The Burn `Device` is chosen by the caller ([`device`]); weights are held on the host and
 //!   mirrored to the device, so a policy file loads on any backend without autodiff. PPO
-//!   without an image encoder runs its networks on the host (`ppo/host.rs`), whatever the device.
+//!   and SAC without an image encoder run their networks on the host (`ppo/host.rs`,
+//!   `sac/host.rs`), whatever the device.
 //! - Files (policy, checkpoint) are written atomically and carry a CRC-32; a truncated,
 //!   corrupted or mismatching file is an error, never a silently wrong policy.
 //!
@@ -62,6 +63,8 @@ mod file;
 #[cfg(feature = "train")]
 mod gaussian;
 #[cfg(feature = "train")]
+mod host_gemm;
+#[cfg(feature = "train")]
 pub mod learning;
 pub mod nets;
 pub mod normalize;
@@ -73,6 +76,8 @@ mod progress;
 pub mod rng;
 #[cfg(feature = "train")]
 pub mod sac;
+#[cfg(feature = "train")]
+mod workers;
 
 #[cfg(feature = "train")]
 pub use buffer::ReplayBuffer;

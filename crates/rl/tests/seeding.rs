@@ -15,7 +15,7 @@ fn sac_run_threads(seed: u64, threads: usize) -> (agvrl_rl::PolicyData, Vec<f64>
         ..SacConfig::default()
     };
     let mut sac = Sac::new(cfg, vec_env(2), &default_device(), seed).unwrap();
-    sac.set_threads(threads);
+    sac.set_threads(threads).unwrap();
     let mut losses = vec![];
     sac.learn(300, &mut |p| {
         losses.push(p.losses.value);

@@ -10,9 +10,8 @@
 //! encoder; `tests::host_gradients_match_autodiff` checks it against Burn's autodiff.
 
 use super::Layout;
+use crate::host_gemm::{affine, input_grads, weight_grads};
 use crate::nets::{Activation, HostParams};
-use ndarray::linalg::general_mat_mul;
-use ndarray::{ArrayView2, ArrayViewMut2};
 
 /// tanh within 5e-7 of the exact value (Eigen's and MLAS's rational form, clamped where f32
 /// tanh is +-1), in plain arithmetic so a loop over it vectorises.
@@ -45,44 +44,11 @@ fn activate(v: &mut [f32], act: Activation) {
 fn activation_grad(dh: &mut [f32], y: &[f32], act: Activation) {
     match act {
         Activation::Tanh => dh.iter_mut().zip(y).for_each(|(d, y)| *d *= 1.0 - y * y),
-        Activation::Relu => dh.iter_mut().zip(y).for_each(|(d, y)| {
-            if *y <= 0.0 {
-                *d = 0.0
-            }
-        }),
+        Activation::Relu => dh
+            .iter_mut()
+            .zip(y)
+            .for_each(|(d, y)| *d = if *y > 0.0 { *d } else { 0.0 }),
     }
-}
-
-fn view(v: &[f32], rows: usize, cols: usize) -> ArrayView2<'_, f32> {
-    ArrayView2::from_shape((rows, cols), v).expect("a slice of rows x cols")
-}
-
-fn view_mut(v: &mut [f32], rows: usize, cols: usize) -> ArrayViewMut2<'_, f32> {
-    ArrayViewMut2::from_shape((rows, cols), v).expect("a slice of rows x cols")
-}
-
-/// `out[n x o] = x[n x i] w[i x o] + b[o]`.
-fn affine(x: &[f32], w: &[f32], b: &[f32], (n, i, o): (usize, usize, usize), out: &mut Vec<f32>) {
-    out.clear();
-    for _ in 0..n {
-        out.extend_from_slice(b);
-    }
-    general_mat_mul(1.0, &view(x, n, i), &view(w, i, o), 1.0, &mut view_mut(out, n, o));
-}
-
-/// `dw[i x o] += x[n x i]^T dz[n x o]`, `db[o] += sum over rows of dz`.
-fn weight_grads(x: &[f32], dz: &[f32], (n, i, o): (usize, usize, usize), dw: &mut [f32], db: &mut [f32]) {
-    for r in 0..n {
-        db.iter_mut().zip(&dz[r * o..(r + 1) * o]).for_each(|(b, d)| *b += d);
-    }
-    general_mat_mul(1.0, &view(x, n, i).t(), &view(dz, n, o), 1.0, &mut view_mut(dw, i, o));
-}
-
-/// `dx[n x i] = dz[n x o] w[i x o]^T`.
-fn input_grads(dz: &[f32], w: &[f32], (n, i, o): (usize, usize, usize), dx: &mut Vec<f32>) {
-    dx.clear();
-    dx.resize(n * i, 0.0);
-    general_mat_mul(1.0, &view(dz, n, o), &view(w, i, o).t(), 0.0, &mut view_mut(dx, n, i));
 }
 
 /// One forward pass of `n` rows: every layer's output per member (for the backward pass), the

@@ -12,6 +12,7 @@
 //! replay buffer (`next_obs` is `final_obs` where an episode ended; only termination stops
 //! bootstrapping) -> `update.rs` every `train_freq` steps.
 
+mod host;
 mod update;
 
 pub use crate::config::{EntCoef, SacConfig};
@@ -26,10 +27,12 @@ use crate::normalize::ObsNormalizer;
 use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, unsquash};
 use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
+use crate::workers::Workers;
 use agvrl_envs::{BoxSpace, Env, VecEnv};
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+use std::sync::Arc;
 
 /// A SAC learner bound to a vector env.
 pub struct Sac<E: Env> {
@@ -41,9 +44,10 @@ pub struct Sac<E: Env> {
     obs_dim: usize,
     act_dim: usize,
     actor_spec: MlpSpec,
-    actor: HostParams,
-    critic: HostParams,
-    critic_target: HostParams,
+    /// Master weights (shared with a gradient step's helper threads while it runs).
+    actor: Arc<HostParams>,
+    critic: Arc<HostParams>,
+    critic_target: Arc<HostParams>,
     actor_opt: Adam,
     critic_opt: Adam,
     /// `[log(alpha)]` and its optimiser when alpha is learned.
@@ -62,7 +66,10 @@ pub struct Sac<E: Env> {
     last_obs: Option<Vec<f32>>,
     /// Threads one gradient step may use (row blocks of the minibatch).
     threads: usize,
-    /// Device copies of the actor, critics and target critics, refreshed after each change.
+    /// Helper threads for `threads > 1`.
+    workers: Option<Workers>,
+    /// Device copies of the actor, critics and target critics, refreshed after each change;
+    /// empty on the host path (no image encoder), which reads the master weights.
     actor_dev: Vec<Tensor<3>>,
     critic_dev: Vec<Tensor<3>>,
     target_dev: Vec<Tensor<3>>,
@@ -137,6 +144,7 @@ impl<E: Env> Sac<E> {
                 }
             }
         }
+        let (actor, critic) = (Arc::new(actor), Arc::new(critic));
         let critic_target = critic.clone();
         let ent_init = cfg.ent_coef.auto_init()?;
         let log_ent_coef = HostParams {
@@ -156,6 +164,7 @@ impl<E: Env> Sac<E> {
             buffer: ReplayBuffer::new(cfg.buffer_size, obs_dim, act_dim),
             normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(vec_dim)),
             threads: 1,
+            workers: None,
             cfg_toml: cfg.to_toml()?,
             actor_dev: vec![],
             critic_dev: vec![],
@@ -188,7 +197,21 @@ impl<E: Env> Sac<E> {
         NetParts::mlp(self.cfg.net_arch.len())
     }
 
+    /// Whether gradient steps and actions run on the host ([`host`]) rather than through the
+    /// tensor backend: every config without an image encoder.
+    fn on_host(&self) -> bool {
+        self.cfg.image.is_none()
+    }
+
+    /// Layers of each MLP (hidden + output).
+    fn mlp_layers(&self) -> usize {
+        self.cfg.net_arch.len() + 1
+    }
+
     fn upload_all(&mut self) {
+        if self.on_host() {
+            return;
+        }
         self.actor_dev = self.actor.to_device(&self.device);
         self.critic_dev = self.critic.to_device(&self.device);
         self.target_dev = self.critic_target.to_device(&self.device);
@@ -197,8 +220,15 @@ impl<E: Env> Sac<E> {
     /// Let each gradient step split its minibatch over `threads` threads (default 1). The
     /// result is deterministic for a given thread count but differs from other counts in the
     /// last float bits.
-    pub fn set_threads(&mut self, threads: usize) {
+    pub fn set_threads(&mut self, threads: usize) -> Result<()> {
         self.threads = threads.max(1);
+        self.workers = None;
+        if self.threads > 1 {
+            let workers = Workers::new(self.threads - 1)
+                .map_err(|e| RlError::Internal(format!("cannot start SAC worker threads: {e}")))?;
+            self.workers = Some(workers);
+        }
+        Ok(())
     }
 
     /// The configuration.
@@ -305,12 +335,18 @@ impl<E: Env> Sac<E> {
         if let Some(norm) = &self.normalizer {
             norm.normalize_rows(&mut x, self.obs_dim);
         }
-        let mut x = Tensor::<3>::from_data(TensorData::new(x, [1, n, self.obs_dim]), &self.device);
-        let parts = self.parts();
-        if let Some(spec) = &self.cfg.image {
-            x = encode(parts.encoder_of(&self.actor_dev), spec, x);
-        }
-        let out = to_vec(mlp_forward(parts.mlp_of(&self.actor_dev), x, Activation::Relu, false))?;
+        let out = if self.on_host() {
+            host::forward(&self.actor, self.mlp_layers(), 0, &x, n)
+                .pop()
+                .unwrap_or_default()
+        } else {
+            let mut x = Tensor::<3>::from_data(TensorData::new(x, [1, n, self.obs_dim]), &self.device);
+            let parts = self.parts();
+            if let Some(spec) = &self.cfg.image {
+                x = encode(parts.encoder_of(&self.actor_dev), spec, x);
+            }
+            to_vec(mlp_forward(parts.mlp_of(&self.actor_dev), x, Activation::Relu, false))?
+        };
         let a = self.act_dim;
         let mut acts = Vec::with_capacity(n * a);
         for row in out.chunks_exact(2 * a) {
@@ -403,9 +439,9 @@ impl<E: Env> Sac<E> {
         let spaces = (env.observation_space(), env.action_space());
         let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Sac, spaces)?;
         let mut s = Self::new(h.config.clone(), env, device, h.common.seed)?;
-        s.actor = r.params(&s.actor.shapes)?;
-        s.critic = r.params(&s.critic.shapes)?;
-        s.critic_target = r.params(&s.critic.shapes)?;
+        s.actor = Arc::new(r.params(&s.actor.shapes)?);
+        s.critic = Arc::new(r.params(&s.critic.shapes)?);
+        s.critic_target = Arc::new(r.params(&s.critic.shapes)?);
         s.log_ent_coef = r.params(&s.log_ent_coef.shapes)?;
         s.actor_opt = r.adam(&h.actor_opt, &s.actor.shapes)?;
         s.critic_opt = r.adam(&h.critic_opt, &s.critic.shapes)?;

@@ -1,23 +1,28 @@
 //! One SAC gradient step, in SB3's `SAC.train` order: entropy coefficient, critic update,
 //! actor update through the just-updated critics, Polyak averaging.
 //!
-//! Graph work is kept to what the gradients need: the target and the entropy statistics come
+//! Configs without an image encoder compute the losses' gradients on the host (`host.rs`);
+//! the tensor path below is what images use, and the reference the host path is tested
+//! against. In the tensor path, graph work is kept to what the gradients need: the target and the entropy statistics come
 //! from one plain forward of the actor on `[obs; next_obs]`, the critic loss differentiates only
 //! the critics (one batched forward for both), and the actor loss runs through the updated
 //! critics as constants, so their weight gradients are never formed.
 //!
 //! With `threads > 1` the minibatch is split into row blocks whose losses (sums over rows
-//! divided by the full batch size) are differentiated on separate threads and their gradients
-//! summed in block order: the same update as one thread up to float summation order, and
-//! deterministic for a fixed thread count.
+//! divided by the full batch size) are differentiated on separate threads (the learner's
+//! [`Workers`]) and their gradients summed in block order: the same update as one thread up
+//! to float summation order, and deterministic for a fixed thread count.
 
 use super::Sac;
+use super::host::{CriticPart, Nets, Rows};
 use crate::cnn::{ImageSpec, encode};
 use crate::error::{Result, RlError};
 use crate::nets::{Activation, NetParts, grads_of, mlp_forward, to_vec};
 use crate::policy::{LOG_STD_MAX, LOG_STD_MIN};
+use crate::workers::Workers;
 use agvrl_envs::Env;
 use burn::tensor::{Device, Tensor, TensorData};
+use std::sync::Arc;
 
 /// `(tanh action [m, b, a], log_prob [m, b, 1])` of the squashed Gaussian with
 /// reparameterisation noise `eps`, from actor outputs `[m, b, 2a]`.
@@ -48,19 +53,27 @@ struct Block {
     eps_next: Vec<f32>,
 }
 
-/// What a block contributes to the critic step.
-struct CriticOut {
-    grads: Vec<Vec<f32>>,
-    loss: f64,
-    log_prob_sum: f64,
+impl Block {
+    fn rows(&self) -> Rows<'_> {
+        Rows {
+            obs: &self.obs,
+            next_obs: &self.next_obs,
+            actions: &self.actions,
+            rewards: &self.rewards,
+            not_done: &self.not_done,
+            eps_pi: &self.eps_pi,
+            eps_next: &self.eps_next,
+        }
+    }
 }
 
-/// Device weights and constants every block reads.
-struct Shared<'a> {
-    device: &'a Device,
-    actor: &'a [Tensor<3>],
-    critic: &'a [Tensor<3>],
-    target: &'a [Tensor<3>],
+/// Device weights (handles) and constants every block reads.
+#[derive(Clone)]
+struct Shared {
+    device: Device,
+    actor: Vec<Tensor<3>>,
+    critic: Vec<Tensor<3>>,
+    target: Vec<Tensor<3>>,
     o: usize,
     a: usize,
     /// Full minibatch size: every block's loss is a sum over its rows divided by it.
@@ -72,9 +85,9 @@ struct Shared<'a> {
     image: Option<ImageSpec>,
 }
 
-impl Shared<'_> {
+impl Shared {
     fn t3(&self, v: &[f32], s: [usize; 3]) -> Tensor<3> {
-        Tensor::<3>::from_data(TensorData::new(v.to_vec(), s), self.device)
+        Tensor::<3>::from_data(TensorData::new(v.to_vec(), s), &self.device)
     }
 
     /// The observation as a net's MLP sees it: the image part replaced by the net's encoder
@@ -107,18 +120,18 @@ impl Shared<'_> {
     }
 
     /// Entropy statistics, TD target and critic gradients for one block.
-    fn critic_block(&self, b: &Block) -> Result<CriticOut> {
+    fn critic_block(&self, b: &Block) -> Result<CriticPart> {
         let (n, o, a) = (b.rows, self.o, self.a);
         let obs = self.t3(&b.obs, [1, n, o]);
         let next_obs = self.t3(&b.next_obs, [1, n, o]);
         // One plain actor forward on [obs; next_obs].
         let both = Tensor::cat(vec![obs.clone(), next_obs.clone()], 1);
         let eps = Tensor::cat(vec![self.t3(&b.eps_pi, [1, n, a]), self.t3(&b.eps_next, [1, n, a])], 1);
-        let (act, log_prob) = squashed_sample(self.actor_out(self.actor, both), eps, a);
+        let (act, log_prob) = squashed_sample(self.actor_out(&self.actor, both), eps, a);
         let log_prob_sum = to_vec(log_prob.clone().narrow(1, 0, n).sum())?[0] as f64;
         let (next_action, next_log_prob) = (act.narrow(1, n, n), log_prob.narrow(1, n, n));
         // Target: r + gamma (1 - terminated) (min Q_targ(s', a') - alpha log pi(a'|s')).
-        let q_next = self.q(self.target, self.features(self.target, next_obs), next_action);
+        let q_next = self.q(&self.target, self.features(&self.target, next_obs), next_action);
         let q_next = min_of_twins(q_next) - next_log_prob * self.ent_coef;
         let target_q = self.t3(&b.rewards, [1, n, 1]) + self.t3(&b.not_done, [1, n, 1]) * q_next * self.gamma;
         // 0.5 * sum over both critics of the MSE, one batched forward.
@@ -131,7 +144,7 @@ impl Shared<'_> {
         let q = self.q(&critic, features, self.t3(&b.actions, [1, n, a]).autodiff());
         let loss = (q - target_q.autodiff()).powi_scalar(2).sum() * (0.5 / self.batch as f64);
         let grads = grads_of(&critic, &loss.backward())?;
-        Ok(CriticOut {
+        Ok(CriticPart {
             grads,
             loss: to_vec(loss.inner())?[0] as f64,
             log_prob_sum,
@@ -147,44 +160,71 @@ impl Shared<'_> {
         let out = self.actor_out(&actor, obs.clone().autodiff());
         let (pi_action, log_prob) = squashed_sample(out, self.t3(&b.eps_pi, [1, n, a]).autodiff(), a);
         // The critics' features are constants here: computed plain, then joined to the graph.
-        let critic_features = self.features(self.critic, obs).autodiff();
-        let q_pi = self.q(self.critic, critic_features, pi_action);
+        let critic_features = self.features(&self.critic, obs).autodiff();
+        let q_pi = self.q(&self.critic, critic_features, pi_action);
         let loss = (log_prob * self.ent_coef - min_of_twins(q_pi)).sum() / self.batch as f64;
         let grads = grads_of(&actor, &loss.backward())?;
         Ok((grads, to_vec(loss.inner())?[0] as f64))
     }
 }
 
-/// Run `f` on every block, block 0 on this thread and the others on scoped threads; results
-/// in block order.
-fn run_blocks<T: Send>(blocks: &[Block], f: impl Fn(&Block) -> Result<T> + Sync) -> Result<Vec<T>> {
-    if blocks.len() == 1 {
-        return Ok(vec![f(&blocks[0])?]);
-    }
-    std::thread::scope(|s| {
-        let handles: Vec<_> = blocks[1..].iter().map(|b| s.spawn(|| f(b))).collect();
-        let mut out = vec![f(&blocks[0])?];
-        for h in handles {
-            out.push(
-                h.join()
-                    .map_err(|_| RlError::Internal("SAC worker thread panicked".into()))??,
-            );
-        }
-        Ok(out)
-    })
-}
-
-fn sum_grads(mut parts: impl Iterator<Item = Vec<Vec<f32>>>) -> Vec<Vec<f32>> {
-    let mut acc = parts.next().unwrap_or_default();
-    for g in parts {
-        for (x, y) in acc.iter_mut().zip(g) {
-            x.iter_mut().zip(y).for_each(|(p, q)| *p += q);
-        }
-    }
-    acc
+/// Run `f` on every block, block 0 on this thread and the others on `workers`; results in
+/// block order.
+fn run_blocks<S: Send + Sync + 'static, T: Send + 'static>(
+    workers: Option<&Workers>,
+    shared: &Arc<S>,
+    blocks: &Arc<Vec<Block>>,
+    f: fn(&S, &Block) -> Result<T>,
+) -> Result<Vec<T>> {
+    let Some(workers) = workers.filter(|_| blocks.len() > 1) else {
+        return blocks.iter().map(|b| f(shared, b)).collect();
+    };
+    let jobs = (0..blocks.len())
+        .map(|i| {
+            let (shared, blocks) = (shared.clone(), blocks.clone());
+            Box::new(move || f(&shared, &blocks[i])) as Box<dyn FnOnce() -> Result<T> + Send>
+        })
+        .collect();
+    workers
+        .run(jobs)
+        .into_iter()
+        .map(|r| r.unwrap_or_else(|| Err(RlError::Internal("SAC worker thread panicked".into()))))
+        .collect()
 }
 
 impl<E: Env> Sac<E> {
+    /// The tensor path's weights and constants for one step.
+    fn shared(&self, ent_coef: f64) -> Shared {
+        Shared {
+            device: self.device.clone(),
+            actor: self.actor_dev.clone(),
+            critic: self.critic_dev.clone(),
+            target: self.target_dev.clone(),
+            o: self.obs_dim,
+            a: self.act_dim,
+            batch: self.cfg.batch_size,
+            gamma: self.cfg.gamma,
+            ent_coef,
+            parts: self.parts(),
+            image: self.cfg.image,
+        }
+    }
+
+    /// The host path's weights (shared handles) and constants for one step.
+    fn nets(&self, ent_coef: f64) -> Nets {
+        Nets {
+            actor: self.actor.clone(),
+            critic: self.critic.clone(),
+            target: self.critic_target.clone(),
+            layers: self.mlp_layers(),
+            o: self.obs_dim,
+            a: self.act_dim,
+            batch: self.cfg.batch_size,
+            gamma: self.cfg.gamma,
+            ent_coef,
+        }
+    }
+
     pub(crate) fn update(&mut self) -> Result<()> {
         let (b, o, a) = (self.cfg.batch_size, self.obs_dim, self.act_dim);
         let batch = self.buffer.sample(b, &mut self.rng, self.normalizer.as_ref());
@@ -206,52 +246,59 @@ impl<E: Env> Sac<E> {
                 }
             })
             .collect();
+        let blocks = Arc::new(blocks);
         // alpha for this step is taken before its own update (as SB3).
         let ent_coef = (self.log_ent_coef.data[0][0] as f64).exp();
-        let device = self.device.clone();
-        // Tensor clones are handles; the learner's copies are replaced as the step proceeds.
-        let (actor_dev, critic_dev, target_dev) =
-            (self.actor_dev.clone(), self.critic_dev.clone(), self.target_dev.clone());
-        let shared = Shared {
-            device: &device,
-            actor: &actor_dev,
-            critic: &critic_dev,
-            target: &target_dev,
-            o,
-            a,
-            batch: b,
-            gamma: self.cfg.gamma,
-            ent_coef,
-            parts: self.parts(),
-            image: self.cfg.image,
+        let on_host = self.on_host();
+        // Each phase's shared handles are dropped before the weights they point at are
+        // stepped, so the steps below write in place.
+        let critic_out = if on_host {
+            let nets = Arc::new(self.nets(ent_coef));
+            run_blocks(self.workers.as_ref(), &nets, &blocks, |n, b| {
+                Ok(n.critic_part(&b.rows()))
+            })?
+        } else {
+            let shared = Arc::new(self.shared(ent_coef));
+            run_blocks(self.workers.as_ref(), &shared, &blocks, Shared::critic_block)?
         };
-        let critic_out = run_blocks(&blocks, |blk| shared.critic_block(blk))?;
         let mean_log_prob = critic_out.iter().map(|c| c.log_prob_sum).sum::<f64>() / b as f64;
         let critic_loss: f64 = critic_out.iter().map(|c| c.loss).sum();
-        let critic_grads = sum_grads(critic_out.into_iter().map(|c| c.grads));
         if let Some(opt) = &mut self.ent_opt {
             // d/d(log alpha) of -log alpha * (log_prob + target_entropy).mean()
             let g = -(mean_log_prob + self.target_entropy) as f32;
             opt.step(&mut self.log_ent_coef, &[vec![g]]);
         }
-        self.critic_opt.step(&mut self.critic, &critic_grads);
-        self.critic_dev = self.critic.to_device(&device);
-        let updated_critic = self.critic_dev.clone();
+        let parts: Vec<&[Vec<f32>]> = critic_out.iter().map(|c| c.grads.as_slice()).collect();
+        self.critic_opt.step_sum(Arc::make_mut(&mut self.critic), &parts);
+        if !on_host {
+            self.critic_dev = self.critic.to_device(&self.device);
+        }
 
-        let shared = Shared {
-            critic: &updated_critic,
-            ..shared
+        let actor_out = if on_host {
+            let nets = Arc::new(self.nets(ent_coef));
+            run_blocks(
+                self.workers.as_ref(),
+                &nets,
+                &blocks,
+                |n, b| Ok(n.actor_part(&b.rows())),
+            )?
+        } else {
+            let shared = Arc::new(self.shared(ent_coef));
+            run_blocks(self.workers.as_ref(), &shared, &blocks, Shared::actor_block)?
         };
-        let actor_out = run_blocks(&blocks, |blk| shared.actor_block(blk))?;
         let actor_loss: f64 = actor_out.iter().map(|x| x.1).sum();
-        let actor_grads = sum_grads(actor_out.into_iter().map(|x| x.0));
-        self.actor_opt.step(&mut self.actor, &actor_grads);
-        self.actor_dev = self.actor.to_device(&device);
+        let parts: Vec<&[Vec<f32>]> = actor_out.iter().map(|x| x.0.as_slice()).collect();
+        self.actor_opt.step_sum(Arc::make_mut(&mut self.actor), &parts);
+        if !on_host {
+            self.actor_dev = self.actor.to_device(&self.device);
+        }
 
         self.n_updates += 1;
         if self.n_updates.is_multiple_of(self.cfg.target_update_interval) {
-            self.critic_target.polyak(&self.critic, self.cfg.tau as f32);
-            self.target_dev = self.critic_target.to_device(&device);
+            Arc::make_mut(&mut self.critic_target).polyak(&self.critic, self.cfg.tau as f32);
+            if !on_host {
+                self.target_dev = self.critic_target.to_device(&self.device);
+            }
         }
         if !critic_loss.is_finite() || !actor_loss.is_finite() {
             return Err(RlError::NonFinite("SAC loss"));
@@ -261,5 +308,100 @@ impl<E: Env> Sac<E> {
         self.losses.entropy = -mean_log_prob;
         self.losses.ent_coef = ent_coef;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nets::{HostParams, Init, MlpSpec};
+    use crate::rng::Rng;
+
+    fn mlp(sizes: Vec<usize>, members: usize, rng: &mut Rng) -> HostParams {
+        let spec = MlpSpec {
+            n_members: members,
+            sizes,
+            activation: Activation::Relu,
+            activate_last: false,
+        };
+        spec.init(&[Init::TorchDefault], rng)
+    }
+
+    fn close(p: &[f32], q: &[f32], what: &str) {
+        assert_eq!(p.len(), q.len(), "{what}");
+        for (k, (p, q)) in p.iter().zip(q).enumerate() {
+            assert!((p - q).abs() < 2e-5 + 2e-4 * q.abs(), "{what}[{k}]: {p} vs {q}");
+        }
+    }
+
+    #[test]
+    fn host_gradients_match_autodiff() {
+        for (hidden, o, a, rows) in [(vec![16, 12], 5, 2, 9), (vec![8], 3, 1, 6), (vec![], 4, 3, 5)] {
+            let mut rng = Rng::new(11);
+            let sizes = |i: usize, out: usize| [vec![i], hidden.clone(), vec![out]].concat();
+            let mut actor = mlp(sizes(o, 2 * a), 1, &mut rng);
+            // Push one output's log_std past the clamp: its gradient must vanish on both paths.
+            let last = actor.data.len() - 1;
+            actor.data[last][a] = 40.0;
+            let critic = mlp(sizes(o + a, 1), 2, &mut rng);
+            let target = mlp(sizes(o + a, 1), 2, &mut rng);
+            let block = Block {
+                rows,
+                obs: rng.normals(rows * o),
+                next_obs: rng.normals(rows * o),
+                actions: (0..rows * a).map(|_| rng.uniform() as f32 * 2.0 - 1.0).collect(),
+                rewards: rng.normals(rows),
+                not_done: (0..rows).map(|r| (r % 3 != 0) as u8 as f32).collect(),
+                eps_pi: rng.normals(rows * a),
+                eps_next: rng.normals(rows * a),
+            };
+            let device = crate::device::default_device();
+            let (batch, gamma, ent_coef) = (2 * rows, 0.97, 0.3);
+            let shared = Shared {
+                device: device.clone(),
+                actor: actor.to_device(&device),
+                critic: critic.to_device(&device),
+                target: target.to_device(&device),
+                o,
+                a,
+                batch,
+                gamma,
+                ent_coef,
+                parts: NetParts::mlp(hidden.len()),
+                image: None,
+            };
+            let nets = Nets {
+                actor: Arc::new(actor),
+                critic: Arc::new(critic),
+                target: Arc::new(target),
+                layers: hidden.len() + 1,
+                o,
+                a,
+                batch,
+                gamma,
+                ent_coef,
+            };
+            let what = format!("{hidden:?}");
+            let (t, h) = (shared.critic_block(&block).unwrap(), nets.critic_part(&block.rows()));
+            assert!(
+                (t.loss - h.loss).abs() < 1e-4 * t.loss.abs().max(1e-3),
+                "{what} critic loss"
+            );
+            assert!((t.log_prob_sum - h.log_prob_sum).abs() < 1e-3, "{what} log prob");
+            for (k, (tg, hg)) in t.grads.iter().zip(&h.grads).enumerate() {
+                close(hg, tg, &format!("{what} critic grad {k}"));
+            }
+            let ((tg, tl), (hg, hl)) = (shared.actor_block(&block).unwrap(), nets.actor_part(&block.rows()));
+            assert!(
+                (tl - hl).abs() < 1e-4 * tl.abs().max(1e-3),
+                "{what} actor loss {tl} vs {hl}"
+            );
+            for (k, (tg, hg)) in tg.iter().zip(&hg).enumerate() {
+                close(hg, tg, &format!("{what} actor grad {k}"));
+            }
+            // The clamped log_std's bias got no gradient, the free ones did.
+            assert_eq!(hg[last][a], 0.0, "{what}");
+            assert!(hg[last][..a].iter().all(|g| *g != 0.0), "{what}");
+        }
     }
 }
