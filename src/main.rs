@@ -2,6 +2,9 @@
 //! car sees, and measure speed. `cargo run --release` with no arguments trains the default
 //! racing policy (configs/default.toml).
 
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn main() {
     std::process::exit(agvrl::cli::main_with(std::env::args_os()));
 }
