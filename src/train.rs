@@ -215,7 +215,10 @@ pub fn train(a: TrainArgs) -> Result<()> {
         let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
             Box::new(Ppo::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?)
         } else {
-            Box::new(Sac::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?)
+            Box::new(sac_with_threads(
+                Sac::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?,
+                &cfg,
+            )?)
         };
         let target = match a.steps {
             Some(more) => learner.num_timesteps() + more,
@@ -324,12 +327,22 @@ pub fn train_run(
     let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
         Box::new(Ppo::new(cfg.ppo.clone(), vec_env(&cfg)?, device, cfg.seed)?)
     } else {
-        Box::new(Sac::new(cfg.sac.clone(), vec_env(&cfg)?, device, cfg.seed)?)
+        Box::new(sac_with_threads(
+            Sac::new(cfg.sac.clone(), vec_env(&cfg)?, device, cfg.seed)?,
+            &cfg,
+        )?)
     };
     let files = |name: &str| run.file(name);
     let text = run_learner(learner.as_mut(), &cfg, cfg.steps, &files, "", stop, progress)?;
     let dir = run.finish()?;
     Ok((dir, text))
+}
+
+/// `sac` splitting each gradient step over the run's `threads` (between the env rounds the
+/// cores are the learner's).
+fn sac_with_threads<E: Env>(mut sac: Sac<E>, cfg: &RunConfig) -> Result<Sac<E>> {
+    sac.set_threads(cfg.threads)?;
+    Ok(sac)
 }
 
 static STOP_HANDLER: std::sync::OnceLock<()> = std::sync::OnceLock::new();

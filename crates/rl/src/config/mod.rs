@@ -31,7 +31,7 @@ pub struct RunConfig {
     pub seed: u64,
     /// Parallel envs.
     pub n_envs: usize,
-    /// Threads stepping the envs.
+    /// Threads stepping the envs; SAC's gradient steps split their minibatch over as many.
     pub threads: usize,
     /// How many of the `n_envs` training envs drive on seeded procedural layouts of the env's
     /// kind and size instead of its built-in map (layout randomisation; evaluation always uses
