@@ -93,8 +93,8 @@ impl Env for RandomEnv {
 }
 
 /// Matrix-product FLOPs of one SAC update (batch `b`, obs `o`, action `a`, hidden `h`):
-/// actor forward on `[obs; next_obs]` and again on `obs` with gradients, target critics forward, critics forward and backward (no input
-/// gradient at the first layer), critics forward and input-backward for the actor loss (at the
+/// actor forward on `[obs; next_obs]` (once: the actor loss reuses its obs rows), target
+/// critics forward, critics forward and backward (no input gradient at the first layer), critics forward and input-backward for the actor loss (at the
 /// first layer only for the action's columns), actor backward (no input gradient).
 fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
     let chain = |input: usize, out: usize| -> (usize, usize) {
@@ -109,7 +109,7 @@ fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
     let (critic, critic_rest) = chain(o + a, 1);
     let (critic, critic_rest) = (2 * critic, 2 * critic_rest);
     let first = h.first().copied().unwrap_or(1);
-    let macs = 3 * actor // actor on obs and next_obs (plain), on obs again (tracked)
+    let macs = 2 * actor // actor on obs and next_obs (the actor loss reuses the obs rows)
         + critic // target
         + critic + critic + critic_rest // critic loss forward, weight grads, input grads
         + critic + critic_rest + 2 * a * first // actor loss: forward, input grads down to the action

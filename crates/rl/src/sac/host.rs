@@ -156,11 +156,21 @@ pub(crate) struct Rows<'a> {
     pub(crate) eps_next: &'a [f32],
 }
 
+/// The actor's pass on a block's observations: every layer's output and the squashed sample
+/// with the block's `eps_pi`. The critic step computes it and the actor step reuses it (the
+/// actor does not change in between).
+pub(crate) struct ActorPass {
+    outs: Vec<Vec<f32>>,
+    squashed: Squashed,
+}
+
 /// What a block contributes to the critic step.
 pub(crate) struct CriticPart {
     pub(crate) grads: Vec<Vec<f32>>,
     pub(crate) loss: f64,
     pub(crate) log_prob_sum: f64,
+    /// For the actor step (the host path's only).
+    pub(crate) actor_pass: Option<ActorPass>,
 }
 
 impl Nets {
@@ -174,15 +184,14 @@ impl Nets {
     pub(crate) fn critic_part(&self, b: &Rows<'_>) -> CriticPart {
         let (o, a) = (self.o, self.a);
         let n = b.rewards.len();
-        // One actor pass on [obs; next_obs].
+        // One actor pass on [obs; next_obs]; the obs rows are kept for the actor step.
         let both = [b.obs, b.next_obs].concat();
-        let eps = [b.eps_pi, b.eps_next].concat();
-        let out = forward(&self.actor, self.layers, 0, &both, 2 * n)
-            .pop()
-            .unwrap_or_default();
-        let s = squash(&out, &eps, a);
-        let log_prob_sum = s.log_prob[..n].iter().sum::<f32>() as f64;
-        let (next_action, next_log_prob) = (&s.action[n * a..], &s.log_prob[n..]);
+        let outs = forward(&self.actor, self.layers, 0, &both, 2 * n);
+        let out = outs.last().map_or(&[][..], |v| v.as_slice());
+        let pi = squash(&out[..n * 2 * a], b.eps_pi, a);
+        let next = squash(&out[n * 2 * a..], b.eps_next, a);
+        let log_prob_sum = pi.log_prob.iter().sum::<f32>() as f64;
+        let (next_action, next_log_prob) = (&next.action, &next.log_prob);
         let x_next = join(b.next_obs, o, next_action, a);
         let [q1, q2] = self
             .twins(&self.target, &x_next, n)
@@ -208,20 +217,27 @@ impl Nets {
                 .sum::<f64>();
             backward(&self.critic, self.layers, m, &x, &outs, d, Some(&mut grads));
         }
+        let actor_pass = ActorPass {
+            outs: outs.iter().map(|o| o[..o.len() / 2].to_vec()).collect(),
+            squashed: pi,
+        };
         CriticPart {
             grads,
             loss: loss * 0.5 / self.batch as f64,
             log_prob_sum,
+            actor_pass: Some(actor_pass),
         }
     }
 
     /// The actor's gradients of `sum(alpha log pi - min Q(s, pi(s))) / batch`, the critics held
-    /// constant, and that loss.
-    pub(crate) fn actor_part(&self, b: &Rows<'_>) -> (Vec<Vec<f32>>, f64) {
+    /// constant, and that loss; `pass` is this block's from [`Nets::critic_part`].
+    pub(crate) fn actor_part(&self, b: &Rows<'_>, pass: ActorPass) -> (Vec<Vec<f32>>, f64) {
         let (o, a) = (self.o, self.a);
         let n = b.rewards.len();
-        let actor_outs = forward(&self.actor, self.layers, 0, b.obs, n);
-        let s = squash(actor_outs.last().map_or(&[][..], |v| v.as_slice()), b.eps_pi, a);
+        let ActorPass {
+            outs: actor_outs,
+            squashed: s,
+        } = pass;
         let x = join(b.obs, o, &s.action, a);
         let twins = self.twins(&self.critic, &x, n);
         let (q1, q2) = (&twins[0][self.layers - 1], &twins[1][self.layers - 1]);

@@ -14,7 +14,7 @@
 //! to float summation order, and deterministic for a fixed thread count.
 
 use super::Sac;
-use super::host::{CriticPart, Nets, Rows};
+use super::host::{ActorPass, CriticPart, Nets, Rows};
 use crate::cnn::{ImageSpec, encode};
 use crate::error::{Result, RlError};
 use crate::nets::{Activation, NetParts, grads_of, mlp_forward, to_vec};
@@ -148,6 +148,7 @@ impl Shared {
             grads,
             loss: to_vec(loss.inner())?[0] as f64,
             log_prob_sum,
+            actor_pass: None,
         })
     }
 
@@ -168,21 +169,24 @@ impl Shared {
     }
 }
 
-/// Run `f` on every block, block 0 on this thread and the others on `workers`; results in
-/// block order.
-fn run_blocks<S: Send + Sync + 'static, T: Send + 'static>(
+/// Run `f` on every block with its input, block 0 on this thread and the others on
+/// `workers`; results in block order.
+fn run_blocks<S: Send + Sync + 'static, X: Send + 'static, T: Send + 'static>(
     workers: Option<&Workers>,
     shared: &Arc<S>,
     blocks: &Arc<Vec<Block>>,
-    f: fn(&S, &Block) -> Result<T>,
+    inputs: Vec<X>,
+    f: fn(&S, &Block, X) -> Result<T>,
 ) -> Result<Vec<T>> {
     let Some(workers) = workers.filter(|_| blocks.len() > 1) else {
-        return blocks.iter().map(|b| f(shared, b)).collect();
+        return blocks.iter().zip(inputs).map(|(b, x)| f(shared, b, x)).collect();
     };
-    let jobs = (0..blocks.len())
-        .map(|i| {
+    let jobs = inputs
+        .into_iter()
+        .enumerate()
+        .map(|(i, x)| {
             let (shared, blocks) = (shared.clone(), blocks.clone());
-            Box::new(move || f(&shared, &blocks[i])) as Box<dyn FnOnce() -> Result<T> + Send>
+            Box::new(move || f(&shared, &blocks[i], x)) as Box<dyn FnOnce() -> Result<T> + Send>
         })
         .collect();
     workers
@@ -252,14 +256,17 @@ impl<E: Env> Sac<E> {
         let on_host = self.on_host();
         // Each phase's shared handles are dropped before the weights they point at are
         // stepped, so the steps below write in place.
-        let critic_out = if on_host {
+        let none = || vec![(); blocks.len()];
+        let mut critic_out = if on_host {
             let nets = Arc::new(self.nets(ent_coef));
-            run_blocks(self.workers.as_ref(), &nets, &blocks, |n, b| {
+            run_blocks(self.workers.as_ref(), &nets, &blocks, none(), |n, b, ()| {
                 Ok(n.critic_part(&b.rows()))
             })?
         } else {
             let shared = Arc::new(self.shared(ent_coef));
-            run_blocks(self.workers.as_ref(), &shared, &blocks, Shared::critic_block)?
+            run_blocks(self.workers.as_ref(), &shared, &blocks, none(), |s, b, ()| {
+                s.critic_block(b)
+            })?
         };
         let mean_log_prob = critic_out.iter().map(|c| c.log_prob_sum).sum::<f64>() / b as f64;
         let critic_loss: f64 = critic_out.iter().map(|c| c.loss).sum();
@@ -276,15 +283,15 @@ impl<E: Env> Sac<E> {
 
         let actor_out = if on_host {
             let nets = Arc::new(self.nets(ent_coef));
-            run_blocks(
-                self.workers.as_ref(),
-                &nets,
-                &blocks,
-                |n, b| Ok(n.actor_part(&b.rows())),
-            )?
+            let passes: Vec<ActorPass> = critic_out.iter_mut().filter_map(|c| c.actor_pass.take()).collect();
+            run_blocks(self.workers.as_ref(), &nets, &blocks, passes, |n, b, pass| {
+                Ok(n.actor_part(&b.rows(), pass))
+            })?
         } else {
             let shared = Arc::new(self.shared(ent_coef));
-            run_blocks(self.workers.as_ref(), &shared, &blocks, Shared::actor_block)?
+            run_blocks(self.workers.as_ref(), &shared, &blocks, none(), |s, b, ()| {
+                s.actor_block(b)
+            })?
         };
         let actor_loss: f64 = actor_out.iter().map(|x| x.1).sum();
         let parts: Vec<&[Vec<f32>]> = actor_out.iter().map(|x| x.0.as_slice()).collect();
@@ -391,7 +398,11 @@ mod tests {
             for (k, (tg, hg)) in t.grads.iter().zip(&h.grads).enumerate() {
                 close(hg, tg, &format!("{what} critic grad {k}"));
             }
-            let ((tg, tl), (hg, hl)) = (shared.actor_block(&block).unwrap(), nets.actor_part(&block.rows()));
+            let pass = h.actor_pass.expect("the host path keeps the actor pass");
+            let ((tg, tl), (hg, hl)) = (
+                shared.actor_block(&block).unwrap(),
+                nets.actor_part(&block.rows(), pass),
+            );
             assert!(
                 (tl - hl).abs() < 1e-4 * tl.abs().max(1e-3),
                 "{what} actor loss {tl} vs {hl}"
