@@ -5,7 +5,8 @@
 //!
 //! Speed: the scene is static, so each scan first culls the scene's colliders to those whose
 //! bounding box meets the scan's reach, then tests each ray against that short list (a slab test
-//! on the box before the exact shape cast).
+//! on the box before the exact shape cast), nearest box first, skipping boxes hidden behind the
+//! hits found so far (a fifth of a scan in urban-20, where cars stand behind cars).
 
 use crate::msg::LaserScan;
 use crate::world::StaticIndex;
@@ -72,7 +73,8 @@ impl LidarConfig {
 pub struct Lidar {
     cfg: LidarConfig,
     dirs_s: Vec<Vector>,
-    candidates: Vec<usize>,
+    /// (distance to the box, index) of the scene entries a scan may reach.
+    candidates: Vec<(f32, usize)>,
 }
 
 impl Lidar {
@@ -119,6 +121,8 @@ impl Lidar {
         let full = self.cfg.fov_deg >= 360.0;
         let mut best = vec![rmax; n];
         let mut best_id: Vec<Option<Option<u32>>> = vec![None; n];
+        // Nearest boxes first, so that a box no nearer than every hit so far in its rays is
+        // skipped whole: none of its points could be a nearer hit.
         self.candidates.clear();
         self.candidates.extend(
             scene
@@ -126,16 +130,18 @@ impl Lidar {
                 .iter()
                 .enumerate()
                 .filter(|(_, e)| e.aabb.intersects(&reach))
-                .map(|(i, _)| i),
+                .map(|(i, e)| (distance_to_box(&e.aabb, origin), i)),
         );
-        for &ci in &self.candidates {
+        self.candidates
+            .sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for &(d, ci) in &self.candidates {
             let e = &scene.entries[ci];
             let (lo, hi) = if level && angle_increment > 0.0 {
                 ray_span(&e.aabb, origin, yaw, angle_min, angle_increment, n, full)
             } else {
                 (0, n as i64 - 1)
             };
-            if lo > hi {
+            if lo > hi || (lo..=hi).all(|k| best[k.rem_euclid(n as i64) as usize] <= d) {
                 continue;
             }
             for k in lo..=hi {
@@ -252,6 +258,13 @@ fn atan2_approx(y: f32, x: f32) -> f32 {
     if y < 0.0 { -r } else { r }
 }
 
+/// Distance from `p` to the nearest point of `aabb` (0 inside).
+#[inline]
+fn distance_to_box(aabb: &Aabb, p: Vector) -> f32 {
+    let gap = (aabb.mins - p).max(p - aabb.maxs).max(Vector::ZERO);
+    gap.length()
+}
+
 /// Whether the ray `origin + t dir` (with `inv` = 1/dir) meets `aabb` for some t in [0, tmax].
 #[inline]
 fn slab_hit(aabb: &Aabb, origin: Vector, inv: Vector, tmax: f32) -> bool {
@@ -284,5 +297,14 @@ mod tests {
         }
         assert!(worst < 1e-5, "worst error {worst} rad");
         assert_eq!(atan2_approx(0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn distance_to_a_box_is_zero_inside_and_euclidean_outside() {
+        let b = Aabb::new(Vector::new(1.0, -1.0, 0.0), Vector::new(3.0, 1.0, 2.0));
+        assert_eq!(distance_to_box(&b, Vector::new(2.0, 0.0, 1.0)), 0.0);
+        // Facing a face, then off a vertical edge (3-4-5).
+        assert!((distance_to_box(&b, Vector::new(-1.5, 0.5, 1.0)) - 2.5).abs() < 1e-6);
+        assert!((distance_to_box(&b, Vector::new(6.0, 5.0, 1.0)) - 5.0).abs() < 1e-6);
     }
 }
