@@ -10,11 +10,27 @@ fn agvrl(args: &[&str]) -> Output {
         .expect("run agvrl")
 }
 
-fn tmp(name: &str) -> PathBuf {
+/// A test's scratch directory, removed when the test ends, whether it passed or not.
+struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn tmp(name: &str) -> Scratch {
     let d = std::env::temp_dir().join(format!("agvrl-e2e-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
-    d
+    Scratch(d)
 }
 
 fn stdout(o: &Output) -> String {
@@ -421,7 +437,6 @@ mod cli {
         ]);
         assert!(!o.status.success());
         assert_eq!(stderr(&o).trim().lines().count(), 1, "{}", stderr(&o));
-        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]
@@ -481,7 +496,6 @@ mod cli {
         // Learning starts after 100 env steps: 38 vector steps of 8 envs train, 8 steps each.
         assert_eq!(last["steps"], 400);
         assert_eq!(last["updates"], 304, "{last}");
-        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]
@@ -522,7 +536,6 @@ mod cli {
             trained > -500.0 && random < -900.0,
             "trained {trained}, random {random}"
         );
-        let _ = std::fs::remove_dir_all(&d);
     }
 
     fn key<'a>(out: &'a str, k: &str) -> &'a str {
@@ -634,7 +647,6 @@ mod cli {
             "1",
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
-        let _ = std::fs::remove_dir_all(&d);
     }
 }
 
@@ -808,7 +820,7 @@ mod trials {
         let children: Vec<_> = (0..3)
             .map(|_| {
                 Command::new(env!("CARGO_BIN_EXE_agvrl"))
-                    .current_dir(&d)
+                    .current_dir(&*d)
                     .args(["train", "--config", cfg.to_str().unwrap(), "--progress", "none"])
                     .stdout(Stdio::piped())
                     .stderr(Stdio::piped())
