@@ -9,19 +9,49 @@ const MODES: [DynamicsMode; 2] = [DynamicsMode::Raycast, DynamicsMode::Multibody
 const L_XTENTH: f64 = 0.330;
 const LIDAR_MOUNT: [f32; 3] = [0.16, 0.0, 0.22];
 
-fn tmpdir(name: &str) -> PathBuf {
+/// A scratch directory, removed with everything in it when the guard drops.
+struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = std::path::Path;
+    fn deref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn tmpdir(name: &str) -> Scratch {
     let d = std::env::temp_dir().join(format!("agvrl-sim-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
-    d
+    Scratch(d)
+}
+
+/// A scene file in a scratch directory; the file lives as long as the guard (a `Sim` reads it
+/// once, when it is built).
+struct Room {
+    path: PathBuf,
+    _dir: Scratch,
+}
+
+impl Room {
+    fn src(&self) -> SceneSource {
+        SceneSource::File(self.path.clone())
+    }
 }
 
 /// A square room with walls only (inner faces at +-half), written to a temp file.
-fn room(half: f32, name: &str) -> SceneSource {
+fn room(half: f32, name: &str) -> Room {
     walled_room(half, 0.5, name)
 }
 
 /// As [`room`], with walls `thickness` metres thick.
-fn walled_room(half: f32, thickness: f32, name: &str) -> SceneSource {
+fn walled_room(half: f32, thickness: f32, name: &str) -> Room {
     let d = tmpdir(name);
     let p = d.join("room.toml");
     std::fs::write(
@@ -34,7 +64,7 @@ fn walled_room(half: f32, thickness: f32, name: &str) -> SceneSource {
         ),
     )
     .unwrap();
-    SceneSource::File(p)
+    Room { path: p, _dir: d }
 }
 
 fn sim(scene: SceneSource, mode: DynamicsMode) -> Sim {
@@ -60,7 +90,7 @@ mod dynamics {
     #[test]
     fn full_throttle_reaches_model_steady_state_without_slip() {
         for mode in MODES {
-            let mut s = sim(room(40.0, "ss"), mode);
+            let mut s = sim(room(40.0, "ss").src(), mode);
             s.reset(PlanarPose {
                 x_m: -30.0,
                 y_m: 0.0,
@@ -100,7 +130,7 @@ mod dynamics {
     #[test]
     fn reverse_backs_the_car_at_the_models_steady_speed_on_the_mirrored_arc() {
         for mode in MODES {
-            let mut s = sim(room(40.0, "rev"), mode);
+            let mut s = sim(room(40.0, "rev").src(), mode);
             s.reset(PlanarPose {
                 x_m: 30.0,
                 y_m: 0.0,
@@ -129,7 +159,7 @@ mod dynamics {
             assert!(s.pose2().y_m.abs() < 0.5, "{mode:?}: drifted to y = {}", s.pose2().y_m);
         }
         // Reversing on left lock turns the car clockwise, on the forward arc's radius.
-        let mut s = sim(room(40.0, "rev-arc"), DynamicsMode::Raycast);
+        let mut s = sim(room(40.0, "rev-arc").src(), DynamicsMode::Raycast);
         s.reset(PlanarPose {
             x_m: 0.0,
             y_m: 0.0,
@@ -154,7 +184,7 @@ mod dynamics {
         let a = 3.0;
         for mode in MODES {
             let mut s = Sim::new(SimConfig {
-                scene: room(40.0, "brake"),
+                scene: room(40.0, "brake").src(),
                 settings: SimSettings {
                     dynamics: mode,
                     brake_mps2: a,
@@ -204,7 +234,7 @@ mod dynamics {
     fn low_speed_turning_radius_matches_ackermann_geometry() {
         for mode in MODES {
             for delta in [0.2f64, -0.3] {
-                let mut s = sim(room(40.0, "turn"), mode);
+                let mut s = sim(room(40.0, "turn").src(), mode);
                 // T = 0.15 gives w = 10 rad/s, 0.5 m/s.
                 run(
                     &mut s,
@@ -237,7 +267,7 @@ mod dynamics {
     #[test]
     fn no_tunnelling_through_a_wall_at_top_speed() {
         for mode in MODES {
-            let mut s = sim(room(6.0, "wall"), mode);
+            let mut s = sim(room(6.0, "wall").src(), mode);
             s.reset(PlanarPose {
                 x_m: -5.0,
                 y_m: 0.0,
@@ -269,12 +299,12 @@ mod dynamics {
             assert!(!s.world().continuous_collision(), "{id}");
         }
         assert!(
-            !sim(room(6.0, "thick"), DynamicsMode::Raycast)
+            !sim(room(6.0, "thick").src(), DynamicsMode::Raycast)
                 .world()
                 .continuous_collision()
         );
         for mode in MODES {
-            let mut s = sim(walled_room(6.0, 0.02, "thin"), mode);
+            let mut s = sim(walled_room(6.0, 0.02, "thin").src(), mode);
             assert!(s.world().continuous_collision(), "{mode:?}");
             s.reset(PlanarPose {
                 x_m: -5.0,
@@ -300,7 +330,7 @@ mod dynamics {
     #[test]
     fn no_jitter_at_rest() {
         for mode in MODES {
-            let mut s = sim(room(10.0, "rest"), mode);
+            let mut s = sim(room(10.0, "rest").src(), mode);
             run(&mut s, Control::default(), 60);
             let p0 = s.pose2();
             run(&mut s, Control::default(), 60);
@@ -431,7 +461,7 @@ mod sensor_readings {
         let half = 4.0;
         for mode in MODES {
             for (x, y, yaw) in [(1.3f32, -0.7f32, 0.4f32), (-2.0, 1.5, 2.5), (0.5, 2.0, -1.2)] {
-                let mut s = sim(room(half, "lidar"), mode);
+                let mut s = sim(room(half, "lidar").src(), mode);
                 s.reset(PlanarPose {
                     x_m: x,
                     y_m: y,
@@ -467,8 +497,9 @@ mod sensor_readings {
     #[test]
     fn the_vehicle_never_sees_itself() {
         for mode in MODES {
+            let walls = room(20.0, "self");
             let cfg = SimConfig {
-                scene: room(20.0, "self"),
+                scene: walls.src(),
                 settings: SimSettings {
                     dynamics: mode,
                     lidar: sensors::LidarConfig {
@@ -517,7 +548,7 @@ mod sensor_readings {
     #[test]
     fn imu_at_rest_reads_gravity_and_no_rates() {
         for mode in MODES {
-            let mut s = sim(room(10.0, "imu"), mode);
+            let mut s = sim(room(10.0, "imu").src(), mode);
             s.reset(PlanarPose {
                 x_m: 1.0,
                 y_m: 2.0,
@@ -541,7 +572,7 @@ mod sensor_readings {
     #[test]
     fn gps_displacement_equals_integrated_imu_velocity() {
         for mode in MODES {
-            let mut s = sim(room(20.0, "gps"), mode);
+            let mut s = sim(room(20.0, "gps").src(), mode);
             run(
                 &mut s,
                 Control {
@@ -576,8 +607,9 @@ mod sensor_readings {
 
     #[test]
     fn gps_geodetic_fix_moves_north_with_y() {
+        let walls = room(20.0, "geo");
         let cfg = SimConfig {
-            scene: room(20.0, "geo"),
+            scene: walls.src(),
             settings: SimSettings {
                 gps: sensors::GpsConfig {
                     origin: Some(msg::Geodetic {
@@ -770,7 +802,7 @@ mod errors {
             "m.urdf",
             "<robot name=\"m\"><link name=\"a\"><collision><geometry><mesh filename=\"gone.obj\"/></geometry></collision></link></robot>",
         );
-        let src = AssetSource::Dir(d.clone());
+        let src = AssetSource::Dir(d.to_path_buf());
         let model = urdf::UrdfModel::read(&src, "m.urdf").unwrap();
         let e = model.collision_shapes(&src, Vector::ONE, |_| true).err().unwrap();
         assert!(e.to_string().contains("gone.obj"), "{e}");
@@ -859,7 +891,7 @@ mod camera_images {
 
     #[test]
     fn depth_of_a_wall_facing_the_camera_is_exact_at_every_pixel() {
-        let s = cam_sim(room(5.0, "cam-depth"), 64, 48, 10.0);
+        let s = cam_sim(room(5.0, "cam-depth").src(), 64, 48, 10.0);
         let pose = Pose::from_parts(Vector::new(1.0, 0.3, 0.5), Rotation::IDENTITY);
         let f = s.render_at(&pose);
         assert_eq!(f.frame.depth_m.len(), 64 * 48);
