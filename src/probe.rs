@@ -116,6 +116,8 @@ mod tests {
         let rgb: Vec<u8> = (0..w * h * 3).map(|i| (i * 37 % 251) as u8).collect();
         let p = std::env::temp_dir().join(format!("agvrl-png-{}.png", std::process::id()));
         super::write_png(&p, w, h, &rgb).unwrap();
-        assert_eq!(super::read_png(&p).unwrap(), (w, h, rgb));
+        let back = super::read_png(&p);
+        let _ = std::fs::remove_file(&p);
+        assert_eq!(back.unwrap(), (w, h, rgb));
     }
 }
