@@ -66,10 +66,59 @@ pub struct World {
     pub statics: StaticIndex,
     /// The ground's collider.
     pub ground: ColliderHandle,
-    /// A tree of the static colliders alone (ground and obstacles), built once: the wheels'
-    /// suspension rays only ever hit those, and walking it instead of rapier's broad phase
-    /// (which also holds the moving car) takes 6 % off an oval step.
-    pub statics_bvh: BroadPhaseBvh,
+    /// The static colliders around the car, for the wheels' suspension rays.
+    pub(crate) near: NearStatics,
+}
+
+/// A tree of the static colliders (ground and obstacles) around one place, for the wheels'
+/// suspension rays: they only ever hit those, and a tree of the few colliders near the car
+/// is walked in a fraction of the time of the whole scene's (which would also hold the car).
+#[derive(Clone)]
+pub(crate) struct NearStatics {
+    /// Every static collider with its box.
+    all: Vec<(ColliderHandle, Aabb)>,
+    bvh: BroadPhaseBvh,
+    /// Where the tree was built and the half size of its box; `None` until first used.
+    built: Option<(Vector, f32)>,
+}
+
+impl NearStatics {
+    /// How far the car may move before the tree is rebuilt, metres.
+    const SLACK_M: f32 = 0.5;
+
+    fn new(pw: &PhysicsWorld) -> Self {
+        let all = pw
+            .colliders
+            .iter()
+            .filter(|(_, co)| co.parent().is_some_and(|b| pw.bodies[b].is_fixed()))
+            .map(|(h, co)| (h, co.compute_aabb()))
+            .collect();
+        Self {
+            all,
+            bvh: BroadPhaseBvh::new(),
+            built: None,
+        }
+    }
+
+    /// The tree, holding every static collider that a segment starting within `reach_m` of
+    /// `at` and ending within `reach_m` of it can meet.
+    pub(crate) fn around(&mut self, params: &IntegrationParameters, at: Vector, reach_m: f32) -> &BroadPhaseBvh {
+        let fresh = self
+            .built
+            .is_some_and(|(c, half)| half >= reach_m + Self::SLACK_M && (at - c).abs().max_element() <= Self::SLACK_M);
+        if !fresh {
+            let half = reach_m + Self::SLACK_M;
+            let region = Aabb::new(at - Vector::splat(half), at + Vector::splat(half));
+            self.bvh = BroadPhaseBvh::new();
+            for (h, aabb) in &self.all {
+                if aabb.intersects(&region) {
+                    self.bvh.set_aabb(params, *h, *aabb);
+                }
+            }
+            self.built = Some((at, half));
+        }
+        &self.bvh
+    }
 }
 
 impl World {
@@ -131,17 +180,12 @@ impl World {
                 });
             }
         }
-        let mut statics_bvh = BroadPhaseBvh::new();
-        for (h, co) in pw.colliders.iter() {
-            if co.parent().is_some_and(|b| pw.bodies[b].is_fixed()) {
-                statics_bvh.set_aabb(&pw.integration_parameters, h, co.compute_aabb());
-            }
-        }
+        let near = NearStatics::new(&pw);
         Self {
             pw,
             statics,
             ground,
-            statics_bvh,
+            near,
         }
     }
 
@@ -220,5 +264,81 @@ impl World {
         pw.ccd_solver.clone_from(&snap.ccd_solver);
         pw.physics_pipeline = PhysicsPipeline::new();
         pw.collision_pipeline = CollisionPipeline::new();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::assets::AssetSource;
+
+    /// Rays that start and end within the reach of the point the near tree was asked about hit
+    /// what they hit in a tree of the whole scene, to the bit; the tree is rebuilt as the point
+    /// wanders off.
+    #[test]
+    fn the_near_tree_answers_rays_within_reach_like_the_whole_scene() {
+        for id in ["urban-20", "oval"] {
+            let scene = Scene::builtin(&AssetSource::builtin(), id).unwrap();
+            let mut w = World::new(&scene, 1.0 / 120.0);
+            let mut full = BroadPhaseBvh::new();
+            for (h, aabb) in &w.near.all {
+                full.set_aabb(&w.pw.integration_parameters, *h, *aabb);
+            }
+            let filter = QueryFilter::default().groups(groups::sensors());
+            let [hx, hy] = scene.half_extent_m();
+            let reach = 0.6f32;
+            let (mut hits, mut rebuilds, mut last) = (0, 0, None);
+            let mut x = 0.37f64;
+            let mut next = || {
+                x = (x * 3.97 * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
+                x as f32
+            };
+            // A walk across the map, with rays in every direction (the ground, walls, boxes).
+            let mut at = Vector::new(-hx * 0.9, -hy * 0.9, 0.1);
+            for _ in 0..3000 {
+                at += Vector::new(0.05 + 0.1 * next(), 0.05 + 0.1 * next(), 0.0);
+                if at.x > hx || at.y > hy {
+                    at = Vector::new(-hx * 0.9 + 2.0 * hx * next() * 0.9, -hy * 0.9, 0.1);
+                }
+                let a = Vector::new(next() - 0.5, next() - 0.5, next() - 0.8).normalize() * reach * next();
+                let b = Vector::new(next() - 0.5, next() - 0.5, next() - 0.8).normalize() * reach * next();
+                let ray = Ray::new(at + a, b - a);
+                let pw = &mut w.pw;
+                let near = w.near.around(&pw.integration_parameters, at, reach);
+                let got = near
+                    .as_query_pipeline(pw.narrow_phase.query_dispatcher(), &pw.bodies, &pw.colliders, filter)
+                    .cast_ray_and_get_normal(&ray, 1.0, true);
+                let want = full
+                    .as_query_pipeline(pw.narrow_phase.query_dispatcher(), &pw.bodies, &pw.colliders, filter)
+                    .cast_ray_and_get_normal(&ray, 1.0, true);
+                // A ray starting inside overlapping solids may name either of them (at 0).
+                let key = |h: Option<(ColliderHandle, RayIntersection)>| {
+                    h.map(|(c, i)| {
+                        let inside = i.time_of_impact == 0.0;
+                        let c = if inside { None } else { Some(c) };
+                        let n = if inside {
+                            [0; 3]
+                        } else {
+                            i.normal.to_array().map(f32::to_bits)
+                        };
+                        (c, i.time_of_impact.to_bits(), n)
+                    })
+                };
+                assert_eq!(
+                    key(got),
+                    key(want),
+                    "{id}: ray from {:?} along {:?}",
+                    ray.origin,
+                    ray.dir
+                );
+                hits += usize::from(want.is_some_and(|(c, _)| c != w.ground));
+                if w.near.built != last {
+                    rebuilds += 1;
+                    last = w.near.built;
+                }
+            }
+            assert!(hits > 20, "{id}: only {hits} rays met an obstacle");
+            assert!(rebuilds > 20, "{id}: the tree was rebuilt {rebuilds} times");
+        }
     }
 }

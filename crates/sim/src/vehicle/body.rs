@@ -288,9 +288,17 @@ impl Body {
                     wheel.friction_slip = p.tyre_friction;
                 }
                 let dt = world.pw.integration_parameters.dt;
+                let at = rb.position().translation;
                 let filter = QueryFilter::default().groups(groups::sensors());
                 let pw = &mut world.pw;
-                let q = world.statics_bvh.as_query_pipeline_mut(
+                // Every suspension ray starts and ends this close to the chassis origin.
+                let reach = controller
+                    .wheels()
+                    .iter()
+                    .map(|w| w.chassis_connection_point_cs.length() + w.suspension_rest_length + w.radius)
+                    .fold(0.0f32, f32::max);
+                let near = world.near.around(&pw.integration_parameters, at, reach);
+                let q = near.as_query_pipeline_mut(
                     pw.narrow_phase.query_dispatcher(),
                     &mut pw.bodies,
                     &mut pw.colliders,
