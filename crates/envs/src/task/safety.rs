@@ -168,6 +168,11 @@ pub struct SafetyFilter {
     near: Vec<[f32; 2]>,
     /// Older remembered points near the car (only reverse paths are checked against them).
     near_old: Vec<[f32; 2]>,
+    /// `near` and `near_old` bucketed by place, for the path checks (`near_old`'s only once a
+    /// reverse path is checked this control: most controls check none).
+    near_grid: PointGrid,
+    near_old_grid: PointGrid,
+    near_old_gridded: bool,
     last: Intervention,
     /// Distance driven over the last control period by odometry, metres.
     last_ds: f32,
@@ -215,6 +220,9 @@ impl SafetyFilter {
             memory: HashMap::new(),
             near: Vec::new(),
             near_old: Vec::new(),
+            near_grid: PointGrid::default(),
+            near_old_grid: PointGrid::default(),
+            near_old_gridded: false,
             last: Intervention::None,
             last_ds: 0.0,
             stuck: 0,
@@ -329,6 +337,7 @@ impl SafetyFilter {
     /// `lookahead_m`) must be clear of every remembered point, else the nearest clear steering
     /// reverses, else the car brakes.
     fn filter_reverse(&mut self, speed: f32, proposed: Control, limit_rad: f64, fan_half_rad: f32) -> Control {
+        self.grid_old_points();
         if speed > STILL_MPS {
             let braking = Control {
                 throttle: 0.0,
@@ -368,6 +377,7 @@ impl SafetyFilter {
     /// opposite lock (else straight, else the other lock), as far as `backout_m` or the longest
     /// clear reverse path.
     fn start_backing_out(&mut self, limit_rad: f64, fan_half_rad: f32) -> Option<Control> {
+        self.grid_old_points();
         let (mut left, mut right) = (f32::INFINITY, f32::INFINITY);
         for &[x, y] in &self.near {
             let lx = x - self.cfg.lidar_x_m;
@@ -405,6 +415,7 @@ impl SafetyFilter {
     /// (done, or its path is no longer clear: then the car stops and the filter decides anew).
     fn keep_backing_out(&mut self, speed: f32, fan_half_rad: f32) -> Option<Control> {
         let (left, d) = self.backout?;
+        self.grid_old_points();
         let left = left - self.last_ds;
         if left <= self.stop_distance(-speed) || self.reverse_free_length(d as f32, left, fan_half_rad) < left {
             self.backout = None;
@@ -508,17 +519,39 @@ impl SafetyFilter {
                 }
             }
         }
+        self.near_grid.rebuild(&self.near);
+        self.near_old_gridded = false;
+    }
+
+    /// Bucket `near_old` for the reverse path checks of this control.
+    fn grid_old_points(&mut self) {
+        if !self.near_old_gridded {
+            self.near_old_grid.rebuild(&self.near_old);
+            self.near_old_gridded = true;
+        }
+    }
+
+    /// How far from a pose (the rear axle) a point can be and still fail its check: the body's
+    /// farthest corner with margin, or the LiDAR's mount plus `clearance_m`, plus room for
+    /// rounding.
+    fn pose_reach(&self, clearance_m: f32) -> f32 {
+        let cfg = &self.cfg;
+        let m = cfg.body_margin_m;
+        let corner = (cfg.rear_m + m).max(cfg.front_m + m).hypot(cfg.half_width_m + m);
+        corner.max(cfg.lidar_x_m.abs() + clearance_m) + 1e-3
     }
 
     /// How far the car reverses along the arc of steering `delta` before its body (with
     /// margin) touches any remembered point or the LiDAR comes within `reverse_clearance_m`
     /// of one in its fan, metres (up to `limit`, and never beyond the way the car came).
     fn reverse_free_length(&self, delta: f32, limit: f32, fan_half_rad: f32) -> f32 {
+        debug_assert!(self.near_old_gridded, "near_old is bucketed before a reverse check");
         let clearance = self.cfg.reverse_clearance_m;
+        let r = self.pose_reach(clearance);
         self.walk_arc(delta, limit.min(self.backable_m), -1.0, |x, y, th| {
-            [&self.near, &self.near_old]
+            [&self.near_grid, &self.near_old_grid]
                 .iter()
-                .all(|pts| self.points_clear(pts, x, y, th, fan_half_rad, clearance))
+                .all(|g| self.points_clear(g.around(x, y, r), x, y, th, fan_half_rad, clearance))
         })
     }
 
@@ -526,8 +559,10 @@ impl SafetyFilter {
     /// touches a point or the LiDAR comes within `clearance_m` of a point in its fan, metres
     /// (checked up to `limit`; `limit` itself when the path is clear).
     fn free_length(&self, delta: f32, limit: f32, fan_half_rad: f32) -> f32 {
+        let r = self.pose_reach(self.cfg.clearance_m);
         self.walk_arc(delta, limit, 1.0, |x, y, th| {
-            self.points_clear(&self.near, x, y, th, fan_half_rad, self.cfg.clearance_m)
+            let pts = self.near_grid.around(x, y, r);
+            self.points_clear(pts, x, y, th, fan_half_rad, self.cfg.clearance_m)
         })
     }
 
@@ -547,7 +582,17 @@ impl SafetyFilter {
         limit
     }
 
-    fn points_clear(&self, points: &[[f32; 2]], x: f32, y: f32, th: f32, fan_half_rad: f32, clearance_m: f32) -> bool {
+    /// Whether the body (with margin) at pose `(x, y, th)` touches none of `points` and the LiDAR
+    /// keeps `clearance_m` from those in its fan.
+    fn points_clear<'a>(
+        &self,
+        points: impl IntoIterator<Item = &'a [f32; 2]>,
+        x: f32,
+        y: f32,
+        th: f32,
+        fan_half_rad: f32,
+        clearance_m: f32,
+    ) -> bool {
         let cfg = &self.cfg;
         let (s, c) = th.sin_cos();
         let m = cfg.body_margin_m;
@@ -570,6 +615,105 @@ impl SafetyFilter {
             }
         }
         true
+    }
+}
+
+/// Points bucketed into square cells (a CSR layout rebuilt every control), so that checking a
+/// pose visits the points in the cells around it instead of every remembered point: a wall seen
+/// for 1.5 s is hundreds of points, and a control checks tens of poses.
+#[derive(Clone, Debug, Default)]
+struct PointGrid {
+    /// The points, cell after cell (row-major: x index, then y index).
+    points: Vec<[f32; 2]>,
+    /// Cell `c` holds `points[starts[c]..starts[c + 1]]`.
+    starts: Vec<u32>,
+    /// Where each input point goes (workspace).
+    fill: Vec<u32>,
+    min: [f32; 2],
+    cell_m: f32,
+    /// 1 / `cell_m`.
+    per_m: f32,
+    dims: [usize; 2],
+}
+
+impl PointGrid {
+    /// Cell side, metres (at least: a grid is kept under `MAX_CELLS` cells).
+    const CELL_M: f32 = 0.25;
+    const MAX_CELLS: usize = 1 << 14;
+
+    fn rebuild(&mut self, pts: &[[f32; 2]]) {
+        self.points.clear();
+        self.starts.clear();
+        self.dims = [0, 0];
+        if pts.is_empty() {
+            return;
+        }
+        let (mut lo, mut hi) = ([f32::MAX; 2], [f32::MIN; 2]);
+        for p in pts {
+            for a in 0..2 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        self.cell_m = Self::CELL_M.max(extent / (Self::MAX_CELLS as f32).sqrt());
+        self.per_m = 1.0 / self.cell_m;
+        self.min = lo;
+        self.dims = [0, 1].map(|a| ((hi[a] - lo[a]) / self.cell_m) as usize + 1);
+        let n = self.dims[0] * self.dims[1];
+        self.starts.resize(n + 1, 0);
+        self.fill.clear();
+        for p in pts {
+            let c = self.cell_of(p);
+            self.fill.push(c as u32);
+            self.starts[c + 1] += 1;
+        }
+        for c in 0..n {
+            self.starts[c + 1] += self.starts[c];
+        }
+        self.points.resize(pts.len(), [0.0; 2]);
+        // Scatter: `fill` turns from each point's cell into its slot.
+        let mut next = self.starts[..n].to_vec();
+        for (p, c) in pts.iter().zip(&mut self.fill) {
+            let slot = &mut next[*c as usize];
+            self.points[*slot as usize] = *p;
+            *slot += 1;
+        }
+    }
+
+    /// The cell index of coordinate `v` along axis `a`, clamped to the grid (monotonic in `v`,
+    /// so a range of coordinates maps to a range of cells; `as` saturates below 0 to 0).
+    fn index(&self, v: f32, a: usize) -> usize {
+        (((v - self.min[a]) * self.per_m) as usize).min(self.dims[a] - 1)
+    }
+
+    fn cell_of(&self, p: &[f32; 2]) -> usize {
+        self.index(p[0], 0) * self.dims[1] + self.index(p[1], 1)
+    }
+
+    /// Every point in the cells that meet the square of half side `r` around `(x, y)` (so every
+    /// point within `r` of it, and some more).
+    fn around(&self, x: f32, y: f32, r: f32) -> impl Iterator<Item = &[f32; 2]> {
+        let span = |v: f32, a: usize| {
+            let (lo, hi) = (v - r, v + r);
+            let max = self.min[a] + self.dims[a] as f32 * self.cell_m;
+            if self.dims[a] == 0 || hi < self.min[a] || lo > max {
+                return (1, 0);
+            }
+            (self.index(lo, a), self.index(hi, a))
+        };
+        let (i0, i1) = span(x, 0);
+        let (j0, j1) = span(y, 1);
+        let empty = j0 > j1;
+        (i0..=i1).flat_map(move |i| {
+            let row = i * self.dims[1];
+            let (s, e) = if empty {
+                (0, 0)
+            } else {
+                (self.starts[row + j0] as usize, self.starts[row + j1 + 1] as usize)
+            };
+            self.points[s..e].iter()
+        })
     }
 }
 
@@ -641,6 +785,57 @@ mod tests {
 
     const FAN: Option<f32> = Some(std::f32::consts::FRAC_PI_4);
 
+    /// The grid only skips points that cannot fail a pose's check: for clusters of points
+    /// (walls, a corner), poses anywhere around them, both clearances and two fans, a check over
+    /// the grid's points around the pose agrees with the check over every point.
+    #[test]
+    fn a_pose_check_over_the_grid_agrees_with_one_over_every_point() {
+        let f = on();
+        let mut x = 0.123f64;
+        let mut next = || {
+            x = (x * 3.99 * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
+            x as f32
+        };
+        let mut grid = PointGrid::default();
+        let (mut checks, mut blocked) = (0, 0);
+        for _ in 0..40 {
+            // A few walls of 5 cm points, some far off the rest.
+            let mut pts = Vec::new();
+            for _ in 0..(1 + (next() * 5.0) as usize) {
+                let (x0, y0, a) = (8.0 * next() - 4.0, 8.0 * next() - 4.0, 6.3 * next());
+                for k in 0..(next() * 80.0) as usize {
+                    let t = 0.05 * k as f32;
+                    pts.push([x0 + t * a.cos(), y0 + t * a.sin()]);
+                }
+            }
+            grid.rebuild(&pts);
+            assert_eq!(grid.points.len(), pts.len());
+            for _ in 0..200 {
+                let (px, py, th) = (10.0 * next() - 5.0, 10.0 * next() - 5.0, 6.3 * next() - 3.15);
+                for clearance in [f.cfg.clearance_m, f.cfg.reverse_clearance_m] {
+                    for fan in [std::f32::consts::FRAC_PI_4, std::f32::consts::PI] {
+                        let all = f.points_clear(&pts, px, py, th, fan, clearance);
+                        let near = grid.around(px, py, f.pose_reach(clearance));
+                        assert_eq!(
+                            f.points_clear(near, px, py, th, fan, clearance),
+                            all,
+                            "pose {px} {py} {th}"
+                        );
+                        checks += 1;
+                        blocked += usize::from(!all);
+                    }
+                }
+            }
+        }
+        // Both outcomes are exercised.
+        assert!(
+            blocked > checks / 20 && blocked < checks - checks / 20,
+            "{blocked} of {checks} blocked"
+        );
+        grid.rebuild(&[]);
+        assert_eq!(grid.around(0.0, 0.0, 1.0).count(), 0);
+    }
+
     #[test]
     fn a_clear_path_passes_unchanged_and_a_disabled_filter_never_acts() {
         let go = Control {
@@ -697,6 +892,7 @@ mod tests {
         let k = 0.36f32.tan() / 0.33;
         let r = 1.0 / k;
         body_only.near = vec![[r, r]];
+        body_only.near_grid.rebuild(&body_only.near);
         let free = body_only.free_length(0.36, 3.0, fan);
         let quarter = std::f32::consts::FRAC_PI_2 * r;
         let want = quarter - r * (0.495 / r).asin();
@@ -707,6 +903,7 @@ mod tests {
         // The LiDAR's clearance stops the path earlier; the straight path passes the point by.
         let mut f = on();
         f.near = body_only.near.clone();
+        f.near_grid.rebuild(&f.near);
         assert!(f.free_length(0.36, 3.0, fan) < free);
         assert_eq!(f.free_length(0.0, 3.0, fan), 3.0);
     }
