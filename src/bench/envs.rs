@@ -11,6 +11,9 @@ use std::hint::black_box;
 use std::ops::Range;
 use std::time::Instant;
 
+/// The shipped search policy's settings file.
+const SHIPPED_SEARCH_TOML: &str = include_str!("../../assets/policies/search.toml");
+
 fn action_elem(t: usize, k: usize) -> f32 {
     ((((t * 7919 + k * 104_729) % 2001) as f32) / 1000.0) - 1.0
 }
@@ -79,6 +82,34 @@ pub(super) fn run(quick: bool) -> Vec<String> {
             ));
         }
         out.push(format!("{line} reps={reps}"));
+    }
+    // The shipped search policy's car (270 degree LiDAR, the safety filter and its back-out),
+    // driven forward by random actions (a uniform a0 would reverse half the time and the car
+    // would stay near its spawn): what its training and evaluation step. The filter checks
+    // paths against the points it remembers, so these envs cost more than the bare task's.
+    let shipped = agvrl_rl::RunConfig::from_toml(SHIPPED_SEARCH_TOML, "assets/policies/search.toml");
+    for id in ["search-urban-20", "search-outdoor-50"] {
+        let Ok(cfg) = &shipped else { break };
+        let env_config = agvrl_envs::EnvConfig {
+            action_mapping: agvrl_envs::ActionMapping::Scaled,
+            ..cfg.eval_env_config()
+        };
+        let Ok(mut env) = make(id, &env_config) else {
+            continue;
+        };
+        let _ = env.reset(Some(0));
+        let env = std::slice::from_mut(&mut env);
+        drive(env, 1, 1..1 + steps / 5);
+        let t = (0..reps)
+            .map(|r| {
+                let t0 = 1 + steps / 5 + r * steps;
+                timed_s(|| drive(env, 1, t0..t0 + steps))
+            })
+            .collect();
+        out.push(format!(
+            "env={id} settings=shipped_search_forward steps_per_s={:.0} reps={reps}",
+            steps as f64 / median(t)
+        ));
     }
     for (id, n_envs) in [
         ("racing-oval", 8),
