@@ -531,14 +531,47 @@ impl SafetyFilter {
         }
     }
 
-    /// How far from a pose (the rear axle) a point can be and still fail its check: the body's
-    /// farthest corner with margin, or the LiDAR's mount plus `clearance_m`, plus room for
-    /// rounding.
-    fn pose_reach(&self, clearance_m: f32) -> f32 {
+    /// A box (min, max corners, in the car's frame) holding every point that can fail the check
+    /// of pose `(x, y, th)` ([`Self::points_clear`]): the body's rectangle with margin, and the
+    /// LiDAR's sector of radius `clearance_m` over its fan (a disk for a fan of 90 degrees or
+    /// more), widened by 1 mm for rounding.
+    fn pose_box(&self, x: f32, y: f32, th: f32, fan_half_rad: f32, clearance_m: f32) -> ([f32; 2], [f32; 2]) {
+        use std::f32::consts::FRAC_PI_2;
         let cfg = &self.cfg;
         let m = cfg.body_margin_m;
-        let corner = (cfg.rear_m + m).max(cfg.front_m + m).hypot(cfg.half_width_m + m);
-        corner.max(cfg.lidar_x_m.abs() + clearance_m) + 1e-3
+        let (s, c) = th.sin_cos();
+        let (mut lo, mut hi) = ([f32::MAX; 2], [f32::MIN; 2]);
+        let mut add = |px: f32, py: f32| {
+            lo = [lo[0].min(px), lo[1].min(py)];
+            hi = [hi[0].max(px), hi[1].max(py)];
+        };
+        for bx in [-cfg.rear_m - m, cfg.front_m + m] {
+            for by in [-cfg.half_width_m - m, cfg.half_width_m + m] {
+                add(x + c * bx - s * by, y + s * bx + c * by);
+            }
+        }
+        let (ax, ay) = (x + c * cfg.lidar_x_m, y + s * cfg.lidar_x_m);
+        let r = clearance_m;
+        if fan_half_rad >= FRAC_PI_2 {
+            add(ax - r, ay - r);
+            add(ax + r, ay + r);
+        } else {
+            add(ax, ay);
+            // The arc's ends, at headings th -+ fan.
+            let (sf, cf) = fan_half_rad.sin_cos();
+            add(ax + r * (c * cf + s * sf), ay + r * (s * cf - c * sf));
+            add(ax + r * (c * cf - s * sf), ay + r * (s * cf + c * sf));
+            // The circle's extremes along the axes that lie within the fan (an axis within
+            // the fan makes an angle of at most the fan with the heading; the slack only
+            // widens the box).
+            for (ex, ey) in [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)] {
+                if ex * c + ey * s >= cf - 1e-4 {
+                    add(ax + r * ex, ay + r * ey);
+                }
+            }
+        }
+        let pad = 1e-3;
+        ([lo[0] - pad, lo[1] - pad], [hi[0] + pad, hi[1] + pad])
     }
 
     /// How far the car reverses along the arc of steering `delta` before its body (with
@@ -547,11 +580,11 @@ impl SafetyFilter {
     fn reverse_free_length(&self, delta: f32, limit: f32, fan_half_rad: f32) -> f32 {
         debug_assert!(self.near_old_gridded, "near_old is bucketed before a reverse check");
         let clearance = self.cfg.reverse_clearance_m;
-        let r = self.pose_reach(clearance);
         self.walk_arc(delta, limit.min(self.backable_m), -1.0, |x, y, th| {
+            let (lo, hi) = self.pose_box(x, y, th, fan_half_rad, clearance);
             [&self.near_grid, &self.near_old_grid]
                 .iter()
-                .all(|g| self.points_clear(g.around(x, y, r), x, y, th, fan_half_rad, clearance))
+                .all(|g| self.points_clear(g.within(lo, hi), x, y, th, fan_half_rad, clearance))
         })
     }
 
@@ -559,10 +592,10 @@ impl SafetyFilter {
     /// touches a point or the LiDAR comes within `clearance_m` of a point in its fan, metres
     /// (checked up to `limit`; `limit` itself when the path is clear).
     fn free_length(&self, delta: f32, limit: f32, fan_half_rad: f32) -> f32 {
-        let r = self.pose_reach(self.cfg.clearance_m);
+        let clearance = self.cfg.clearance_m;
         self.walk_arc(delta, limit, 1.0, |x, y, th| {
-            let pts = self.near_grid.around(x, y, r);
-            self.points_clear(pts, x, y, th, fan_half_rad, self.cfg.clearance_m)
+            let (lo, hi) = self.pose_box(x, y, th, fan_half_rad, clearance);
+            self.points_clear(self.near_grid.within(lo, hi), x, y, th, fan_half_rad, clearance)
         })
     }
 
@@ -691,19 +724,19 @@ impl PointGrid {
         self.index(p[0], 0) * self.dims[1] + self.index(p[1], 1)
     }
 
-    /// Every point in the cells that meet the square of half side `r` around `(x, y)` (so every
-    /// point within `r` of it, and some more).
-    fn around(&self, x: f32, y: f32, r: f32) -> impl Iterator<Item = &[f32; 2]> {
-        let span = |v: f32, a: usize| {
-            let (lo, hi) = (v - r, v + r);
+    /// Every point in the cells that meet the box from `lo` to `hi` (so every point in it, and
+    /// some more).
+    fn within(&self, lo: [f32; 2], hi: [f32; 2]) -> impl Iterator<Item = &[f32; 2]> {
+        let span = |a: usize| {
+            let (lo, hi) = (lo[a], hi[a]);
             let max = self.min[a] + self.dims[a] as f32 * self.cell_m;
             if self.dims[a] == 0 || hi < self.min[a] || lo > max {
                 return (1, 0);
             }
             (self.index(lo, a), self.index(hi, a))
         };
-        let (i0, i1) = span(x, 0);
-        let (j0, j1) = span(y, 1);
+        let (i0, i1) = span(0);
+        let (j0, j1) = span(1);
         let empty = j0 > j1;
         (i0..=i1).flat_map(move |i| {
             let row = i * self.dims[1];
@@ -786,8 +819,8 @@ mod tests {
     const FAN: Option<f32> = Some(std::f32::consts::FRAC_PI_4);
 
     /// The grid only skips points that cannot fail a pose's check: for clusters of points
-    /// (walls, a corner), poses anywhere around them, both clearances and two fans, a check over
-    /// the grid's points around the pose agrees with the check over every point.
+    /// (walls, a corner), poses anywhere around them at any heading, both clearances and four
+    /// fans, a check over the grid's points in the pose's box agrees with one over every point.
     #[test]
     fn a_pose_check_over_the_grid_agrees_with_one_over_every_point() {
         let f = on();
@@ -813,9 +846,10 @@ mod tests {
             for _ in 0..200 {
                 let (px, py, th) = (10.0 * next() - 5.0, 10.0 * next() - 5.0, 6.3 * next() - 3.15);
                 for clearance in [f.cfg.clearance_m, f.cfg.reverse_clearance_m] {
-                    for fan in [std::f32::consts::FRAC_PI_4, std::f32::consts::PI] {
+                    for fan in [std::f32::consts::FRAC_PI_4, 1.2, 1.8, std::f32::consts::PI] {
                         let all = f.points_clear(&pts, px, py, th, fan, clearance);
-                        let near = grid.around(px, py, f.pose_reach(clearance));
+                        let (lo, hi) = f.pose_box(px, py, th, fan, clearance);
+                        let near = grid.within(lo, hi);
                         assert_eq!(
                             f.points_clear(near, px, py, th, fan, clearance),
                             all,
@@ -833,7 +867,7 @@ mod tests {
             "{blocked} of {checks} blocked"
         );
         grid.rebuild(&[]);
-        assert_eq!(grid.around(0.0, 0.0, 1.0).count(), 0);
+        assert_eq!(grid.within([-1.0; 2], [1.0; 2]).count(), 0);
     }
 
     #[test]
