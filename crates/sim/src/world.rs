@@ -72,7 +72,7 @@ pub struct World {
 
 /// A tree of the static colliders (ground and obstacles) around one place, for the wheels'
 /// suspension rays: they only ever hit those, and a tree of the few colliders near the car
-/// is walked in a fraction of the time of the whole scene's (which would also hold the car).
+/// is walked in a fraction of the time of a tree of the whole scene.
 #[derive(Clone)]
 pub(crate) struct NearStatics {
     /// Every static collider with its box.

@@ -660,8 +660,9 @@ struct PointGrid {
     points: Vec<[f32; 2]>,
     /// Cell `c` holds `points[starts[c]..starts[c + 1]]`.
     starts: Vec<u32>,
-    /// Where each input point goes (workspace).
-    fill: Vec<u32>,
+    /// Workspaces of `rebuild`: each input point's cell, and each cell's next free slot.
+    cell_of_point: Vec<u32>,
+    cursor: Vec<u32>,
     min: [f32; 2],
     cell_m: f32,
     /// 1 / `cell_m`.
@@ -695,20 +696,20 @@ impl PointGrid {
         self.dims = [0, 1].map(|a| ((hi[a] - lo[a]) / self.cell_m) as usize + 1);
         let n = self.dims[0] * self.dims[1];
         self.starts.resize(n + 1, 0);
-        self.fill.clear();
+        self.cell_of_point.clear();
         for p in pts {
             let c = self.cell_of(p);
-            self.fill.push(c as u32);
+            self.cell_of_point.push(c as u32);
             self.starts[c + 1] += 1;
         }
         for c in 0..n {
             self.starts[c + 1] += self.starts[c];
         }
         self.points.resize(pts.len(), [0.0; 2]);
-        // Scatter: `fill` turns from each point's cell into its slot.
-        let mut next = self.starts[..n].to_vec();
-        for (p, c) in pts.iter().zip(&mut self.fill) {
-            let slot = &mut next[*c as usize];
+        self.cursor.clear();
+        self.cursor.extend_from_slice(&self.starts[..n]);
+        for (p, c) in pts.iter().zip(&self.cell_of_point) {
+            let slot = &mut self.cursor[*c as usize];
             self.points[*slot as usize] = *p;
             *slot += 1;
         }
