@@ -94,8 +94,9 @@ impl Env for RandomEnv {
 
 /// Matrix-product FLOPs of one SAC update (batch `b`, obs `o`, action `a`, hidden `h`):
 /// actor forward on `[obs; next_obs]` (once: the actor loss reuses its obs rows), target
-/// critics forward, critics forward and backward (no input gradient at the first layer), critics forward and input-backward for the actor loss (at the
-/// first layer only for the action's columns), actor backward (no input gradient).
+/// critics forward, critics forward and backward (no input gradient at the first layer),
+/// critics forward and input-backward for the actor loss (at the first layer only for the
+/// action's columns), actor backward (no input gradient).
 fn sac_update_flops(b: usize, o: usize, a: usize, h: &[usize]) -> f64 {
     let chain = |input: usize, out: usize| -> (usize, usize) {
         // (all layer MACs, MACs of layers after the first)

@@ -13,8 +13,8 @@
 //! `[obs | action]`.
 
 use crate::gaussian::HALF_LN_2PI_F32;
-use crate::host_gemm::{affine, input_grads, view, view_mut, weight_grads};
-use crate::nets::HostParams;
+use crate::host_gemm::{activate, activation_grad, affine, input_grads, view, view_mut, weight_grads};
+use crate::nets::{Activation, HostParams};
 use crate::policy::{LOG_STD_MAX, LOG_STD_MIN};
 use ndarray::linalg::general_mat_mul;
 
@@ -31,7 +31,7 @@ pub(crate) fn forward(p: &HostParams, layers: usize, m: usize, x: &[f32], n: usi
         let mut out = Vec::new();
         affine(outs.last().map_or(x, |h| h.as_slice()), w, b, (n, i, o), &mut out);
         if l + 1 < layers {
-            out.iter_mut().for_each(|v| *v = v.max(0.0));
+            activate(&mut out, Activation::Relu);
         }
         outs.push(out);
     }
@@ -55,10 +55,7 @@ fn backward(
     for l in (0..layers).rev() {
         let [_, i, o] = p.shapes[2 * l];
         if l + 1 < layers {
-            // A select, not a branch: the loop vectorises.
-            d.iter_mut()
-                .zip(&outs[l])
-                .for_each(|(d, y)| *d = if *y > 0.0 { *d } else { 0.0 });
+            activation_grad(&mut d, &outs[l], Activation::Relu);
         }
         let input = if l == 0 { x } else { &outs[l - 1] };
         if let Some(g) = grads.as_deref_mut() {
