@@ -49,8 +49,10 @@ pub(super) fn run(quick: bool) -> Vec<String> {
             };
             let spawn = sim.default_spawn();
             let mut x = 0.31;
+            let mut stepped = 0u64;
             // Episodes restart when the car strays, so every scene is timed while driving.
             let mut drive = |sim: &mut Sim, n: usize, scan: bool| {
+                stepped += n as u64;
                 for _ in 0..n {
                     if sim.steps() > 150 || !sim.contacts().is_empty() {
                         let _ = sim.reset(spawn);
@@ -75,8 +77,10 @@ pub(super) fn run(quick: bool) -> Vec<String> {
                     let _ = sim.reset(PlanarPose { ..spawn });
                 }
             }) / 100.0;
+            // Share of the control steps that skipped rapier's pipeline (SimSettings::free_flight).
+            let free_pct = 100.0 * sim.free_flight_steps() as f64 / stepped.max(1) as f64;
             out.push(format!(
-                "scene={id} mode={} physics_step_us={:.1} lidar_scan_us={:.1} sim_steps_per_s={:.0} scene_load_ms={:.1} reset_us={:.2} reps={reps}",
+                "scene={id} mode={} physics_step_us={:.1} lidar_scan_us={:.1} sim_steps_per_s={:.0} free_flight_pct={free_pct:.1} scene_load_ms={:.1} reset_us={:.2} reps={reps}",
                 mode_name(mode),
                 phys_s * 1e6,
                 scan_s * 1e6,

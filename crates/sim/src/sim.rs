@@ -72,6 +72,12 @@ pub struct SimSettings {
     pub subject_seed: u64,
     /// The vehicle's camera (on its camera link), when set.
     pub camera: Option<crate::sensors::CameraConfig>,
+    /// Ray-cast mode: control periods in which no contact can start skip rapier's pipeline
+    /// and integrate the lone chassis as rapier's solver would. The motion is the same to the
+    /// bit up to the first contact; at a contact, rapier's narrow phase depends on when the
+    /// pair was first seen, so the contact step itself may differ in the last bits. `false`
+    /// sends every step through rapier.
+    pub free_flight: bool,
 }
 
 impl Default for SceneSource {
@@ -94,6 +100,7 @@ impl Default for SimSettings {
             subjects: 0,
             subject_seed: 0,
             camera: None,
+            free_flight: true,
         }
     }
 }
@@ -141,6 +148,8 @@ pub struct Sim {
     steps: u64,
     vel_w: (Vector, Vector),
     pristine: (crate::world::WorldSnapshot, Body),
+    /// Control steps taken without rapier's pipeline since the simulator was built.
+    free_steps: u64,
 }
 
 impl Sim {
@@ -247,6 +256,7 @@ impl Sim {
             steps: 0,
             vel_w: (Vector::ZERO, Vector::ZERO),
             pristine,
+            free_steps: 0,
         };
         sim.reset(pose2)?;
         Ok(sim)
@@ -346,10 +356,13 @@ impl Sim {
         let bp = body_params(&self.params);
         let steer = (self.wheel_angles.0 as f32, self.wheel_angles.1 as f32);
         let mut before = self.base_pose();
+        // The first step after a reset runs through rapier: it applies the reset's mass and pose.
+        let free = self.cfg.settings.free_flight && self.steps > 0 && self.body.free_of_contacts(&self.world, t as f32);
+        self.free_steps += u64::from(free);
         for _ in 0..self.cfg.settings.substeps {
             before = self.base_pose();
             self.body
-                .substep(&mut self.world, &self.model, self.wheel_speed as f32, steer, bp);
+                .substep(&mut self.world, &self.model, self.wheel_speed as f32, steer, bp, free);
         }
         self.time_s += t;
         self.steps += 1;
@@ -371,6 +384,12 @@ impl Sim {
         self.vel_w = (lin, ang);
         self.imu.update(lin, ang, t as f32);
         Ok(())
+    }
+
+    /// Control steps that skipped rapier's pipeline (see `SimSettings::free_flight`) since the
+    /// simulator was built.
+    pub fn free_flight_steps(&self) -> u64 {
+        self.free_steps
     }
 
     /// Simulated time since reset, seconds.

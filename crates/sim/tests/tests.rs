@@ -392,6 +392,65 @@ mod dynamics {
         }
     }
 
+    /// Control periods that cannot meet a contact skip rapier's pipeline. The car must move as
+    /// it does through rapier to the bit, on every scene, up to each contact (where episodes
+    /// restart, as in the tasks); the skipping must really happen.
+    #[test]
+    fn free_flight_moves_the_car_as_rapier_does_to_the_bit_up_to_a_contact() {
+        // The built-in scenes, and a small room of 2 cm walls where swept collision checks run.
+        let thin = walled_room(2.5, 0.02, "free-flight");
+        let mut scenes: Vec<(String, SceneSource)> = SCENE_IDS
+            .iter()
+            .map(|id| (id.to_string(), SceneSource::Builtin(id.to_string())))
+            .collect();
+        scenes.push(("thin walls".into(), thin.src()));
+        for (id, scene) in scenes {
+            let make = |free_flight| {
+                Sim::new(SimConfig {
+                    scene: scene.clone(),
+                    settings: SimSettings {
+                        free_flight,
+                        ..Default::default()
+                    },
+                })
+                .unwrap()
+            };
+            let (mut a, mut b) = (make(true), make(false));
+            assert_eq!(a.world().continuous_collision(), id == "thin walls", "{id}");
+            let spawn = a.default_spawn();
+            let (mut x, mut compared, mut episodes) = (0.31f64, 0, 0);
+            for _ in 0..1200 {
+                if a.steps() > 150 || !a.contacts().is_empty() || !b.contacts().is_empty() {
+                    a.reset(spawn).unwrap();
+                    b.reset(spawn).unwrap();
+                    episodes += 1;
+                }
+                x = (x * 3.9 * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
+                let c = Control {
+                    throttle: 0.4 + 0.6 * x,
+                    steering_rad: 0.36 * (2.0 * x - 1.0),
+                };
+                a.step(c).unwrap();
+                b.step(c).unwrap();
+                if a.contacts().is_empty() && b.contacts().is_empty() {
+                    let (pa, pb) = (a.base_pose(), b.base_pose());
+                    assert!(
+                        pa == pb && a.linvel_w() == b.linvel_w() && a.angvel_w() == b.angvel_w(),
+                        "{id}: step {} of episode {episodes} differs: {pa:?} against {pb:?}",
+                        a.steps()
+                    );
+                    compared += 1;
+                }
+            }
+            assert_eq!(b.free_flight_steps(), 0, "{id}: free flight was off");
+            assert!(
+                a.free_flight_steps() > 900 && compared > 1100 && episodes >= 7,
+                "{id}: {} free steps, {compared} compared, {episodes} episodes",
+                a.free_flight_steps()
+            );
+        }
+    }
+
     #[test]
     fn ackermann_can_be_switched_to_autovrl_equal_angles() {
         let mut s = Sim::new(SimConfig {

@@ -47,6 +47,8 @@ pub(crate) enum Body {
         chassis: RigidBodyHandle,
         controller: DynamicRayCastVehicleController,
         colliders: Vec<ColliderHandle>,
+        /// Each collider's box in the chassis frame, and whether it may touch the ground.
+        bounds: Vec<(Aabb, bool)>,
     },
     Multibody(Box<MultibodyCar>),
 }
@@ -96,7 +98,9 @@ impl Body {
                 .can_sleep(false),
         );
         let mut colliders = Vec::new();
+        let mut bounds = Vec::new();
         for s in &model.body_shapes {
+            bounds.push((s.shape.compute_aabb(&s.pose), true));
             colliders.push(
                 world.pw.insert_collider(
                     ColliderBuilder::new(s.shape.clone())
@@ -110,6 +114,8 @@ impl Body {
         }
         for w in &model.wheels {
             let rot = Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2);
+            let shape = Cylinder::new(w.width_m / 2.0, w.radius_m);
+            bounds.push((shape.compute_aabb(&Pose::from_parts(w.center_b, rot)), false));
             colliders.push(
                 world.pw.insert_collider(
                     ColliderBuilder::cylinder(w.width_m / 2.0, w.radius_m)
@@ -153,6 +159,7 @@ impl Body {
             chassis,
             controller,
             colliders,
+            bounds,
         }
     }
 
@@ -230,6 +237,40 @@ impl Body {
         }
     }
 
+    /// Whether the next `period_s` seconds can skip rapier's pipeline (see [`free_flight`]):
+    /// only the chassis moves, and no contact can start on the way. The car's boxes, widened by
+    /// twice the distance its farthest point can travel plus rapier's contact prediction
+    /// distance and a margin, must stay clear of every obstacle's box and of the ground.
+    pub(crate) fn free_of_contacts(&self, world: &World, period_s: f32) -> bool {
+        let Body::Raycast { chassis, bounds, .. } = self else {
+            return false;
+        };
+        let rb = &world.pw.bodies[*chassis];
+        let pose = *rb.position();
+        let com = rb.mass_properties().local_mprops.local_com;
+        let mut car = Aabb::new_invalid();
+        let mut lowest = f32::INFINITY;
+        let mut radius = 0.0f32;
+        for (local, touches_ground) in bounds {
+            let b = local.transform_by(&pose);
+            car.merge(&b);
+            if *touches_ground {
+                lowest = lowest.min(b.mins.z);
+            }
+            radius = radius.max((local.mins - com).abs().max(local.maxs - com).abs().length());
+        }
+        let (v, w) = (rb.linvel(), rb.angvel());
+        let prediction = world.pw.integration_parameters.prediction_distance();
+        let gap = 2.0 * (v.length() + w.length() * radius) * period_s + prediction + FREE_MARGIN_M;
+        // Only a climb or a roll or pitch brings the chassis nearer the ground.
+        let drop = 2.0 * (v.z.abs() + w.truncate().length() * radius) * period_s + prediction + GROUND_MARGIN_M;
+        let reach = car.loosened(gap);
+        world.statics.entries.iter().all(|e| match e.object_id {
+            None => lowest - drop > e.aabb.maxs.z,
+            Some(_) => !e.aabb.intersects(&reach),
+        })
+    }
+
     /// Put the car at `pose`, at rest, with parameters `p` (no bodies are rebuilt).
     pub(crate) fn reset(
         &mut self,
@@ -265,6 +306,7 @@ impl Body {
         w_radps: f32,
         steer: (f32, f32),
         p: BodyParams,
+        free: bool,
     ) {
         match self {
             Body::Raycast {
@@ -305,7 +347,11 @@ impl Body {
                     filter,
                 );
                 controller.update_vehicle(dt, q);
-                world.pw.step();
+                if free {
+                    free_flight(&mut world.pw, *chassis);
+                } else {
+                    world.pw.step();
+                }
             }
             Body::Multibody(car) => {
                 let max_t = model.spec.drive.max_torque_nm as f32;
@@ -332,6 +378,95 @@ impl Body {
                 world.pw.step();
             }
         }
+    }
+}
+
+/// Clearance kept beyond rapier's contact prediction distance before a step may skip rapier,
+/// metres: rapier recycles contact points up to 5 cm, and 5 cm also covers the car's speed
+/// changing by up to 3 m/s within a control period (90 m/s^2) beyond the doubled travel.
+const FREE_MARGIN_M: f32 = 0.05;
+/// The same beneath the chassis, metres: the ground is flat and the chassis rides 5 cm above it.
+const GROUND_MARGIN_M: f32 = 0.01;
+
+/// One rapier step of a lone dynamic body that has no contact and no joint, without rapier's
+/// pipeline (broad phase, narrow phase, islands and a staged solver cost about 30k instructions
+/// a step for one free body). These are the operations rapier's solver applies to such a body,
+/// in its order: gravity and the gyroscopic correction per internal substep, the speed caps,
+/// the linearised pose integration, then damping (rapier 0.36's staged solver; the test
+/// `free_flight_moves_the_car_as_rapier_does_to_the_bit_up_to_a_contact` drives every scene
+/// both ways and pins it). The colliders and the broad phase catch up at the next rapier step
+/// through the body's position change.
+fn free_flight(pw: &mut PhysicsWorld, chassis: RigidBodyHandle) {
+    let params = pw.integration_parameters;
+    let gravity = pw.gravity;
+    let rb = &mut pw.bodies[chassis];
+    let mp = rb.mass_properties();
+    let lm = &mp.local_mprops;
+    let n = params.num_solver_iterations;
+    let h = params.dt / n as f32;
+    let force = rb.user_force() + gravity * mp.effective_mass() * rb.gravity_scale();
+    let incr_lin = force * mp.effective_inv_mass * h;
+    let incr_ang = mp.effective_world_inv_inertia * rb.user_torque() * h;
+    let gyro = rb.gyroscopic_forces_enabled();
+    let (principal_frame, principal_inertia, inv_principal_inertia) = (
+        lm.principal_inertia_local_frame,
+        lm.principal_inertia(),
+        lm.inv_principal_inertia,
+    );
+    let local_com = lm.local_com;
+    let com_pose = rb.position().prepend_translation(local_com);
+    let (mut trans, mut rot) = (com_pose.translation, com_pose.rotation);
+    let (mut lin, mut ang) = (rb.linvel(), rb.angvel());
+    let max_lin = params.max_linear_velocity();
+    let max_ang = std::f64::consts::FRAC_PI_4 as f32 * params.inv_dt();
+    for _ in 0..n {
+        lin += incr_lin;
+        ang += incr_ang;
+        if gyro {
+            ang = gyroscopic_corrected_angvel(ang, rot * principal_frame, principal_inertia, inv_principal_inertia, h);
+        }
+        if max_lin != f32::MAX {
+            let l = lin.length();
+            if l > max_lin {
+                lin *= max_lin / l;
+            }
+        }
+        // The chassis does not allow fast rotation (rapier's default).
+        let a = ang.length();
+        if a > max_ang {
+            ang *= max_ang / a;
+        }
+        let hang = ang * (h * 0.5);
+        rot = (Rotation::from_xyzw(hang.x, hang.y, hang.z, 1.0) * rot).normalize();
+        trans += lin * h;
+    }
+    let one = 1.0f32;
+    lin *= one / (one + params.dt * rb.linear_damping());
+    ang *= one / (one + params.dt * rb.angular_damping());
+    let next = Pose::from_parts(trans, rot).prepend_translation(-local_com);
+    rb.set_linvel(lin, false);
+    rb.set_angvel(ang, false);
+    rb.set_position(next, false);
+}
+
+/// rapier's explicit gyroscopic correction that keeps the angular momentum's norm.
+fn gyroscopic_corrected_angvel(
+    angvel: Vector,
+    principal_axes: Rotation,
+    principal_inertia: Vector,
+    inv_principal_inertia: Vector,
+    dt: f32,
+) -> Vector {
+    let w = principal_axes.inverse() * angvel;
+    let curr_momentum = principal_inertia * w;
+    let explicit_gyro_momentum = -w.cross(curr_momentum) * dt;
+    let total_momentum = curr_momentum + explicit_gyro_momentum;
+    let total_momentum_sqnorm = total_momentum.length_squared();
+    if total_momentum_sqnorm != 0.0 {
+        let capped_momentum = total_momentum * (curr_momentum.length_squared() / total_momentum_sqnorm).sqrt();
+        principal_axes * (inv_principal_inertia * capped_momentum)
+    } else {
+        angvel
     }
 }
 
