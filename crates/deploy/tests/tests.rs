@@ -10,6 +10,30 @@ fn shipped_policy(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../assets/policies/{name}.agvrl"))
 }
 
+/// A scratch directory of this test process, removed when the test ends, passed or failed.
+struct Scratch(std::path::PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("agvrl-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        Self(dir)
+    }
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = std::path::Path;
+    fn deref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
 /// An untrained policy with the spaces of `id`.
 fn policy_for(id: &str) -> Policy {
     let env = make(id, &EnvConfig::default()).unwrap();
@@ -438,8 +462,7 @@ fn deploy_links_no_rerun_openssl_zenoh_or_autodiff() {
 /// rejects a trace whose action was changed by more than the tolerance.
 #[test]
 fn a_trace_replays_to_the_same_actions_and_a_changed_action_is_caught() {
-    let dir = std::env::temp_dir().join(format!("agvrl-trace-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("trace");
     let trace = dir.join("run.jsonl");
     let policy = shipped_policy("racing-oval-ppo");
     let drive = |args: &[&std::ffi::OsStr]| {
@@ -483,7 +506,6 @@ fn a_trace_replays_to_the_same_actions_and_a_changed_action_is_caught() {
     let o = drive(&["--check-trace".as_ref(), bad.as_os_str()]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("(tick 30)"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The shipped search policy, with its settings file (the safety filter on), drives every
@@ -517,8 +539,7 @@ fn the_shipped_search_policy_drives_every_search_scene_in_agvrl_drive() {
 /// instead of driving on defaults.
 #[test]
 fn agvrl_drive_refuses_a_settings_file_that_agvrl_train_would_refuse() {
-    let dir = std::env::temp_dir().join(format!("agvrl-sidecar-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("sidecar");
     let policy = dir.join("racing.agvrl");
     std::fs::copy(shipped_policy("racing-oval-ppo"), &policy).unwrap();
     let drive = || {
@@ -545,5 +566,4 @@ fn agvrl_drive_refuses_a_settings_file_that_agvrl_train_would_refuse() {
     .unwrap();
     let o = drive();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    std::fs::remove_dir_all(&dir).unwrap();
 }
