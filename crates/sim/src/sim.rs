@@ -555,7 +555,9 @@ impl Sim {
         })
     }
 
-    /// The physics world (read-only), for renderers and tests.
+    /// The physics world (read-only), for renderers and tests. With free flight the vehicle's
+    /// colliders keep the pose of the last step that went through rapier; the vehicle's pose is
+    /// `base_pose`.
     pub fn world(&self) -> &World {
         &self.world
     }
