@@ -11,26 +11,11 @@ fn agvrl(args: &[&str]) -> Output {
 }
 
 /// A test's scratch directory, removed when the test ends, whether it passed or not.
-struct Scratch(PathBuf);
-
-impl std::ops::Deref for Scratch {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn tmp(name: &str) -> Scratch {
-    let d = std::env::temp_dir().join(format!("agvrl-e2e-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    Scratch(d)
+fn tmp(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("agvrl-e2e-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 fn stdout(o: &Output) -> String {
@@ -119,8 +104,8 @@ mod cli {
     #[test]
     fn train_writes_a_complete_run_directory_and_eval_reads_it() {
         let d = tmp("train");
-        let run = d.join("run");
-        let cfg = tiny_config(&d);
+        let run = d.path().join("run");
+        let cfg = tiny_config(d.path());
         let o = agvrl(&[
             "train",
             "--config",
@@ -193,8 +178,8 @@ mod cli {
     #[test]
     fn ctrl_c_leaves_a_complete_run_that_resume_continues() {
         let d = tmp("ctrlc");
-        let run = d.join("run");
-        let cfg = tiny_config(&d);
+        let run = d.path().join("run");
+        let cfg = tiny_config(d.path());
         /// Kills the training process if the test fails half-way.
         struct Guard(Option<std::process::Child>);
         impl Drop for Guard {
@@ -261,21 +246,27 @@ mod cli {
     fn bad_inputs_fail_with_a_one_line_error() {
         let d = tmp("bad");
         let train_with = |config: &str, out: &str| {
-            let bad = d.join("bad.toml");
+            let bad = d.path().join("bad.toml");
             std::fs::write(&bad, config).unwrap();
             agvrl(&[
                 "train",
                 "--config",
                 bad.to_str().unwrap(),
                 "--out",
-                d.join(out).to_str().unwrap(),
+                d.path().join(out).to_str().unwrap(),
             ])
         };
         let o = train_with("env = \"racing-oval\"\nlearning_rat = 0.1\n", "r");
         assert!(!o.status.success());
         assert!(stderr(&o).contains("learning_rat"), "{}", stderr(&o));
         assert_eq!(stderr(&o).trim().lines().count(), 1, "{}", stderr(&o));
-        let o = agvrl(&["train", "--env", "racing-moon", "--out", d.join("r2").to_str().unwrap()]);
+        let o = agvrl(&[
+            "train",
+            "--env",
+            "racing-moon",
+            "--out",
+            d.path().join("r2").to_str().unwrap(),
+        ]);
         assert!(!o.status.success());
         let e = stderr(&o);
         assert!(e.contains("racing-moon") && e.contains("racing-oval"), "{e}");
@@ -338,14 +329,14 @@ mod cli {
     #[test]
     fn eval_and_view_write_recordings_and_search_eval_reports_coverage() {
         let d = tmp("rerun");
-        let cfg = d.join("search.toml");
+        let cfg = d.path().join("search.toml");
         std::fs::write(
             &cfg,
             "env = \"search-outdoor-20\"\nalgo = \"ppo\"\nsteps = 256\nseed = 2\nn_envs = 2\nthreads = 1\n\
              procedural_layouts = 1\neval_episodes = 1\n[env_config]\nmax_steps = 60\n[ppo]\nn_steps = 128\nbatch_size = 64\nn_epochs = 1\n",
         )
         .unwrap();
-        let run = d.join("run");
+        let run = d.path().join("run");
         let o = agvrl(&[
             "train",
             "--config",
@@ -354,8 +345,8 @@ mod cli {
             run.to_str().unwrap(),
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
-        let rrd = d.join("eval.rrd");
-        let png = d.join("paths.png");
+        let rrd = d.path().join("eval.rrd");
+        let png = d.path().join("paths.png");
         let o = agvrl(&[
             "eval",
             "--run",
@@ -404,7 +395,7 @@ mod cli {
         assert!(!o.status.success(), "a search policy on the pendulum must be refused");
         assert!(stderr(&o).contains("does not fit"), "{}", stderr(&o));
         // `view` without a policy drives random actions into a file.
-        let view = d.join("view.rrd");
+        let view = d.path().join("view.rrd");
         let o = agvrl(&[
             "view",
             "--env",
@@ -486,7 +477,7 @@ mod cli {
             "--set",
             "eval_episodes=1",
             "--out",
-            d.join("run").to_str().unwrap(),
+            d.path().join("run").to_str().unwrap(),
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
         let last = json_lines(&stdout(&o))
@@ -505,7 +496,7 @@ mod cli {
         // random policy scores about -1,200 there). With one gradient step per vector step (1/8 of
         // the updates) seed 0 scores -1,600.
         let d = tmp("sac-learns");
-        let run = d.join("run");
+        let run = d.path().join("run");
         let o = agvrl(&[
             "train",
             "--env",
@@ -588,14 +579,14 @@ mod cli {
     #[test]
     fn eval_of_a_policy_file_draws_its_episodes_from_the_seed_and_the_layout_option() {
         let d = tmp("evalpolicy");
-        let cfg = d.join("search.toml");
+        let cfg = d.path().join("search.toml");
         std::fs::write(
             &cfg,
             "env = \"search-urban-20\"\nalgo = \"ppo\"\nsteps = 128\nseed = 3\nn_envs = 1\nthreads = 1\n\
              eval_episodes = 1\n[env_config]\nmax_steps = 30\n[ppo]\nn_steps = 128\nbatch_size = 64\nn_epochs = 1\n",
         )
         .unwrap();
-        let run = d.join("run");
+        let run = d.path().join("run");
         let o = agvrl(&[
             "train",
             "--config",
@@ -605,9 +596,9 @@ mod cli {
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
         // A policy with its run config beside it, as the shipped ones are.
-        let policy = d.join("p.agvrl");
+        let policy = d.path().join("p.agvrl");
         std::fs::copy(run.join("policy.agvrl"), &policy).unwrap();
-        std::fs::copy(run.join("config.toml"), d.join("p.toml")).unwrap();
+        std::fs::copy(run.join("config.toml"), d.path().join("p.toml")).unwrap();
         let ev = |extra: &[&str]| {
             let mut args = vec!["eval", "--policy", policy.to_str().unwrap(), "--episodes", "3"];
             args.extend_from_slice(extra);
@@ -633,7 +624,7 @@ mod cli {
         let r = ev(&["--seed", "11", "--random"]);
         assert_eq!(key(&r, "policy"), "random");
         // Without a FILE.toml the env must be named.
-        std::fs::remove_file(d.join("p.toml")).unwrap();
+        std::fs::remove_file(d.path().join("p.toml")).unwrap();
         let o = agvrl(&["eval", "--policy", policy.to_str().unwrap()]);
         assert!(!o.status.success());
         assert!(stderr(&o).contains("--env"), "{}", stderr(&o));
@@ -660,8 +651,8 @@ mod trials {
     #[test]
     fn progress_json_prints_one_object_per_update_and_the_run_at_the_end() {
         let d = tmp("json");
-        let cfg = tiny_config(&d);
-        let run = d.join("run");
+        let cfg = tiny_config(d.path());
+        let run = d.path().join("run");
         let o = agvrl(&[
             "train",
             "--config",
@@ -693,8 +684,8 @@ mod trials {
     #[test]
     fn sigterm_stops_a_training_with_a_complete_run_directory() {
         let d = tmp("sigterm");
-        let cfg = tiny_config(&d);
-        let run = d.join("run");
+        let cfg = tiny_config(d.path());
+        let run = d.path().join("run");
         let mut child = Command::new(env!("CARGO_BIN_EXE_agvrl"))
             .args([
                 "train",
@@ -735,15 +726,15 @@ mod trials {
     #[test]
     fn a_training_whose_parent_dies_stops_with_a_complete_run_directory() {
         let d = tmp("orphan");
-        let cfg = tiny_config(&d);
-        let run = d.join("run");
+        let cfg = tiny_config(d.path());
+        let run = d.path().join("run");
         // sh starts the training in the background and is killed; the training is reparented.
         let script = format!(
             "'{}' train --config '{}' --steps 100000000 --progress json --out '{}' > '{}' 2>&1 & echo $!; sleep 60",
             env!("CARGO_BIN_EXE_agvrl"),
             cfg.display(),
             run.display(),
-            d.join("log").display()
+            d.path().join("log").display()
         );
         let mut sh = Command::new("sh")
             .args(["-c", &script])
@@ -774,8 +765,8 @@ mod trials {
     #[test]
     fn set_overrides_dotted_keys_of_the_run_config() {
         let d = tmp("set");
-        let cfg = tiny_config(&d);
-        let run = d.join("run");
+        let cfg = tiny_config(d.path());
+        let run = d.path().join("run");
         let o = agvrl(&[
             "train",
             "--config",
@@ -816,11 +807,11 @@ mod trials {
     #[test]
     fn trainings_started_together_get_run_directories_of_their_own() {
         let d = tmp("together");
-        let cfg = tiny_config(&d);
+        let cfg = tiny_config(d.path());
         let children: Vec<_> = (0..3)
             .map(|_| {
                 Command::new(env!("CARGO_BIN_EXE_agvrl"))
-                    .current_dir(&*d)
+                    .current_dir(d.path())
                     .args(["train", "--config", cfg.to_str().unwrap(), "--progress", "none"])
                     .stdout(Stdio::piped())
                     .stderr(Stdio::piped())
@@ -844,12 +835,12 @@ mod trials {
         dirs.dedup();
         assert_eq!(dirs.len(), 3, "{dirs:?}");
         for dir in &dirs {
-            let dir = d.join(dir);
+            let dir = d.path().join(dir);
             for f in ["config.toml", "policy.agvrl", "metrics.csv", "eval.txt"] {
                 assert!(dir.join(f).is_file(), "{}/{f}", dir.display());
             }
         }
-        let partial = std::fs::read_dir(d.join("runs"))
+        let partial = std::fs::read_dir(d.path().join("runs"))
             .unwrap()
             .filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().ends_with(".partial"))
             .count();

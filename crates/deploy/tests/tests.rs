@@ -10,28 +10,12 @@ fn shipped_policy(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../assets/policies/{name}.agvrl"))
 }
 
-/// A scratch directory of this test process, removed when the test ends, passed or failed.
-struct Scratch(std::path::PathBuf);
-
-impl Scratch {
-    fn new(name: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("agvrl-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        Self(dir)
-    }
-}
-
-impl std::ops::Deref for Scratch {
-    type Target = std::path::Path;
-    fn deref(&self) -> &std::path::Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
+/// A scratch directory, removed when the test ends, passed or failed.
+fn scratch(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("agvrl-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 /// An untrained policy with the spaces of `id`.
@@ -462,8 +446,8 @@ fn deploy_links_no_rerun_openssl_zenoh_or_autodiff() {
 /// rejects a trace whose action was changed by more than the tolerance.
 #[test]
 fn a_trace_replays_to_the_same_actions_and_a_changed_action_is_caught() {
-    let dir = Scratch::new("trace");
-    let trace = dir.join("run.jsonl");
+    let dir = scratch("trace");
+    let trace = dir.path().join("run.jsonl");
     let policy = shipped_policy("racing-oval-ppo");
     let drive = |args: &[&std::ffi::OsStr]| {
         std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
@@ -483,7 +467,7 @@ fn a_trace_replays_to_the_same_actions_and_a_changed_action_is_caught() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = std::fs::read_to_string(&trace).unwrap();
     assert_eq!(text.lines().count(), 60);
-    assert!(!dir.join("run.jsonl.part").exists());
+    assert!(!dir.path().join("run.jsonl.part").exists());
 
     let o = drive(&[
         "--check-trace".as_ref(),
@@ -501,7 +485,7 @@ fn a_trace_replays_to_the_same_actions_and_a_changed_action_is_caught() {
     let mut rows: Vec<serde_json::Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     let a = rows[29]["action"][0].as_f64().unwrap();
     rows[29]["action"][0] = serde_json::json!(a + 1e-3);
-    let bad = dir.join("bad.jsonl");
+    let bad = dir.path().join("bad.jsonl");
     std::fs::write(&bad, rows.iter().map(|r| format!("{r}\n")).collect::<String>()).unwrap();
     let o = drive(&["--check-trace".as_ref(), bad.as_os_str()]);
     let err = String::from_utf8_lossy(&o.stderr);
@@ -539,8 +523,8 @@ fn the_shipped_search_policy_drives_every_search_scene_in_agvrl_drive() {
 /// instead of driving on defaults.
 #[test]
 fn agvrl_drive_refuses_a_settings_file_that_agvrl_train_would_refuse() {
-    let dir = Scratch::new("sidecar");
-    let policy = dir.join("racing.agvrl");
+    let dir = scratch("sidecar");
+    let policy = dir.path().join("racing.agvrl");
     std::fs::copy(shipped_policy("racing-oval-ppo"), &policy).unwrap();
     let drive = || {
         std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
@@ -551,7 +535,7 @@ fn agvrl_drive_refuses_a_settings_file_that_agvrl_train_would_refuse() {
             .unwrap()
     };
     std::fs::write(
-        dir.join("racing.toml"),
+        dir.path().join("racing.toml"),
         "env = \"racing-oval\"\n[env_config]\nsubstepz = 8\n",
     )
     .unwrap();
@@ -560,7 +544,7 @@ fn agvrl_drive_refuses_a_settings_file_that_agvrl_train_would_refuse() {
     assert!(!o.status.success() && err.contains("substepz"), "{err}");
     // The same file with the key spelt right drives.
     std::fs::write(
-        dir.join("racing.toml"),
+        dir.path().join("racing.toml"),
         "env = \"racing-oval\"\n[env_config]\nsubsteps = 8\n",
     )
     .unwrap();

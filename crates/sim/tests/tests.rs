@@ -10,33 +10,18 @@ const L_XTENTH: f64 = 0.330;
 const LIDAR_MOUNT: [f32; 3] = [0.16, 0.0, 0.22];
 
 /// A scratch directory, removed with everything in it when the guard drops.
-struct Scratch(PathBuf);
-
-impl std::ops::Deref for Scratch {
-    type Target = std::path::Path;
-    fn deref(&self) -> &std::path::Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn tmpdir(name: &str) -> Scratch {
-    let d = std::env::temp_dir().join(format!("agvrl-sim-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    Scratch(d)
+fn tmpdir(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("agvrl-sim-test-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 /// A scene file in a scratch directory; the file lives as long as the guard (a `Sim` reads it
 /// once, when it is built).
 struct Room {
     path: PathBuf,
-    _dir: Scratch,
+    _dir: tempfile::TempDir,
 }
 
 impl Room {
@@ -53,7 +38,7 @@ fn room(half: f32, name: &str) -> Room {
 /// As [`room`], with walls `thickness` metres thick.
 fn walled_room(half: f32, thickness: f32, name: &str) -> Room {
     let d = tmpdir(name);
-    let p = d.join("room.toml");
+    let p = d.path().join("room.toml");
     std::fs::write(
         &p,
         format!(
@@ -814,11 +799,11 @@ mod errors {
     fn broken_urdf_names_the_file_and_problem() {
         let d = tmpdir("badurdf");
         let toml = AssetSource::builtin().read("vehicles/xtenth_car.toml").unwrap();
-        write(&d, "car.toml", &toml.replace("xtenth_car.urdf", "car.urdf"));
-        write(&d, "car.urdf", "<robot name=\"x\"><link name=\"a\"></robot>");
+        write(d.path(), "car.toml", &toml.replace("xtenth_car.urdf", "car.urdf"));
+        write(d.path(), "car.urdf", "<robot name=\"x\"><link name=\"a\"></robot>");
         let e = Sim::new(SimConfig {
             settings: SimSettings {
-                vehicle: d.join("car.toml").display().to_string(),
+                vehicle: d.path().join("car.toml").display().to_string(),
                 ..Default::default()
             },
             ..SimConfig::default()
@@ -834,16 +819,20 @@ mod errors {
         let d = tmpdir("badjoint");
         let src = AssetSource::builtin();
         write(
-            &d,
+            d.path(),
             "car.toml",
             &src.read("vehicles/xtenth_car.toml")
                 .unwrap()
                 .replace("rear_left_wheel_joint", "no_such_joint"),
         );
-        write(&d, "xtenth_car.urdf", &src.read("vehicles/xtenth_car.urdf").unwrap());
+        write(
+            d.path(),
+            "xtenth_car.urdf",
+            &src.read("vehicles/xtenth_car.urdf").unwrap(),
+        );
         let e = Sim::new(SimConfig {
             settings: SimSettings {
-                vehicle: d.join("car.toml").display().to_string(),
+                vehicle: d.path().join("car.toml").display().to_string(),
                 ..Default::default()
             },
             ..SimConfig::default()
@@ -857,11 +846,11 @@ mod errors {
     fn missing_mesh_names_the_mesh_file() {
         let d = tmpdir("mesh");
         write(
-            &d,
+            d.path(),
             "m.urdf",
             "<robot name=\"m\"><link name=\"a\"><collision><geometry><mesh filename=\"gone.obj\"/></geometry></collision></link></robot>",
         );
-        let src = AssetSource::Dir(d.to_path_buf());
+        let src = AssetSource::Dir(d.path().to_path_buf());
         let model = urdf::UrdfModel::read(&src, "m.urdf").unwrap();
         let e = model.collision_shapes(&src, Vector::ONE, |_| true).err().unwrap();
         assert!(e.to_string().contains("gone.obj"), "{e}");
@@ -870,9 +859,9 @@ mod errors {
     #[test]
     fn bad_scene_toml_names_the_file_and_key() {
         let d = tmpdir("scene");
-        write(&d, "s.toml", "name = \"s\"\nkind = \"outdoor\"\nbogus_key = 1\n");
+        write(d.path(), "s.toml", "name = \"s\"\nkind = \"outdoor\"\nbogus_key = 1\n");
         let e = Sim::new(SimConfig {
-            scene: SceneSource::File(d.join("s.toml")),
+            scene: SceneSource::File(d.path().join("s.toml")),
             ..SimConfig::default()
         })
         .err()
@@ -892,12 +881,12 @@ mod errors {
     fn scene_with_unknown_model_lists_known_models() {
         let d = tmpdir("model");
         write(
-            &d,
+            d.path(),
             "s.toml",
             "name = \"s\"\nkind = \"outdoor\"\n[ground]\nsize_m = [10.0, 10.0]\nfriction = 1.0\ncolor = [0.5, 0.5, 0.5]\n[spawn]\nx_m = 0.0\ny_m = 0.0\nyaw_deg = 0.0\n[[object]]\nmodel = \"ufo\"\nx_m = 3.0\ny_m = 3.0\n",
         );
         let e = Sim::new(SimConfig {
-            scene: SceneSource::File(d.join("s.toml")),
+            scene: SceneSource::File(d.path().join("s.toml")),
             ..SimConfig::default()
         })
         .err()
@@ -970,7 +959,7 @@ mod camera_images {
         let edge = tan_x * (1.0 - 1.0 / w as f32);
         let dist = 4.0;
         std::fs::write(
-            d.join("edge.toml"),
+            d.path().join("edge.toml"),
             format!(
                 "name = \"edge\"\nkind = \"outdoor\"\n[ground]\nsize_m = [30.0, 30.0]\nfriction = 1.0\ncolor = [0.5, 0.5, 0.5]\n\
                  [spawn]\nx_m = -5.0\ny_m = 0.0\nyaw_deg = 0.0\n\
@@ -981,7 +970,7 @@ mod camera_images {
             ),
         )
         .unwrap();
-        let s = cam_sim(SceneSource::File(d.join("edge.toml")), w, h, fov);
+        let s = cam_sim(SceneSource::File(d.path().join("edge.toml")), w, h, fov);
         let f = s.render_at(&Pose::from_parts(Vector::new(0.0, 0.0, 1.0), Rotation::IDENTITY));
         let at = |u: usize, v: usize| f.frame.segmentation[v * w as usize + u];
         let v = h as usize / 2;
