@@ -16,7 +16,7 @@ pub enum SearchReward {
     /// 0.005 d^2 + 5 T^2 - 2 delta^2.
     PaperCases,
     /// agvrl's shaped form for collision-free exploration: 0.5 T^2, minus 0.1 (delta / 0.36)^2,
-    /// plus 0.5 per newly covered 0.5 m cell, minus (1 - d) / 0.4 when d < 1.0 (0 at 1 m, 1 at
+    /// plus 0.5 (`new_cell`) per newly covered 0.5 m cell, minus (1 - d) / 0.4 when d < 1.0 (0 at 1 m, 1 at
     /// the 0.6 m termination), and -20 once on a collision. AutoVRL's forms charge -50 on every
     /// step under 1 m but only once for ending the episode, so a car that came within 1 m of
     /// an obstacle scores best by crashing at once; here recovering always costs less than a
@@ -53,6 +53,8 @@ pub struct SafeShaping {
     /// learns to propose safe controls and to keep out of places where the filter must brake
     /// (a car braked in a dead end has no reverse and stays there). 0 (the default): free.
     pub filter: f64,
+    /// Paid per newly covered 0.5 m cell (>= 0).
+    pub new_cell: f64,
 }
 
 impl Default for SafeShaping {
@@ -63,6 +65,7 @@ impl Default for SafeShaping {
             collision: -20.0,
             near_speed_mps: 0.0,
             filter: 0.0,
+            new_cell: 0.5,
         }
     }
 }
@@ -94,6 +97,9 @@ impl SafeShaping {
         if !(self.filter.is_finite() && self.filter <= 0.0) {
             return Err(format!("safe_reward.filter must be <= 0, got {}", self.filter));
         }
+        if !(self.new_cell.is_finite() && self.new_cell >= 0.0) {
+            return Err(format!("safe_reward.new_cell must be >= 0, got {}", self.new_cell));
+        }
         Ok(())
     }
 }
@@ -121,7 +127,7 @@ pub fn search(
         SearchReward::Safe => {
             r.throttle = 0.5 * t * t;
             r.steering = -0.1 * (delta / 0.36).powi(2);
-            r.coverage = 0.5 * new_cells as f64;
+            r.coverage = safe.new_cell * new_cells as f64;
             if d < safe.near_m {
                 r.proximity = -safe.near_weight * ((safe.near_m - d) / (safe.near_m - SAFE_FULL_M)).min(1.0);
             }
@@ -307,7 +313,9 @@ mod tests {
             collision: -100.0,
             near_speed_mps: 0.0,
             filter: 0.0,
+            new_cell: 2.0,
         };
+        assert_eq!(search(SearchReward::Safe, &wide, 3.0, 0.0, 0.0, false, 3).coverage, 6.0);
         // Halfway between 1.6 m and 0.6 m: half of the weight.
         let r = search(SearchReward::Safe, &wide, 1.1, 0.0, 0.0, false, 0);
         assert!((r.proximity + 1.0).abs() < 1e-12, "{r:?}");
@@ -344,6 +352,12 @@ mod tests {
                 .validate()
                 .unwrap_err()
                 .contains("filter")
+        );
+        assert!(
+            SafeShaping { new_cell: -0.1, ..wide }
+                .validate()
+                .unwrap_err()
+                .contains("new_cell")
         );
     }
 
