@@ -3,6 +3,7 @@
 
 use crate::config::RunConfig;
 use crate::episode::{Observer, RandomActions, StepView, drive, make_sim_env};
+use crate::planner;
 use crate::plots::{self, Path2};
 use crate::train::POLICY_FILE;
 use crate::viz::{self, Recorder};
@@ -60,8 +61,22 @@ pub struct EvalArgs {
     pub env: Option<String>,
     /// Drive uniform random actions instead of the policy, on the same episodes: the baseline
     /// the policy should beat (e.g. its coverage).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "planner")]
     pub random: bool,
+    /// Drive a planner that knows the map and its exact pose instead of the policy, on the same
+    /// episodes and car (search envs): a reference for how much ground there is to cover.
+    #[arg(long)]
+    pub planner: bool,
+}
+
+/// Who drives an evaluation.
+pub enum Driver<'a> {
+    /// The policy, deterministic actions.
+    Policy(&'a mut Policy),
+    /// Uniform random actions, the baseline a policy should beat.
+    Random,
+    /// The map-aware coverage planner (`crate::planner`), search envs only.
+    Planner,
 }
 
 /// What deterministic evaluation found.
@@ -79,6 +94,8 @@ pub struct Summary {
     pub ended: Vec<&'static str>,
     /// Steps whose control the safety filter changed, summed over episodes (`None`: no filter).
     pub filter_interventions: Option<u64>,
+    /// Path length, summed over episodes (search envs).
+    pub distance_m: f64,
 }
 
 impl Summary {
@@ -98,6 +115,10 @@ impl Summary {
         }
         if let Some(c) = self.coverage {
             v.push(format!("coverage={c:.3}"));
+            v.push(format!(
+                "distance_m_per_episode={:.1}",
+                self.distance_m / self.episodes.max(1) as f64
+            ));
         }
         if let Some(n) = self.filter_interventions {
             v.push(format!(
@@ -140,6 +161,7 @@ fn account(s: &mut Summary, st: &Step, cov_sum: &mut f64) {
     }
     if let Some(c) = &st.info.search {
         *cov_sum += c.coverage;
+        s.distance_m += c.distance_m;
         s.subjects.0 += c.subjects_found;
         s.subjects.1 += c.subjects_total;
         s.subjects.2.extend(&c.find_times_s);
@@ -151,7 +173,7 @@ fn account(s: &mut Summary, st: &Step, cov_sum: &mut f64) {
 
 /// Deterministic evaluation; `obs` sees every step of vehicle envs.
 pub fn evaluate(
-    mut policy: Option<&mut Policy>,
+    mut driver: Driver<'_>,
     env_id: &str,
     env_cfg: &EnvConfig,
     episodes: usize,
@@ -169,41 +191,49 @@ pub fn evaluate(
         racing: false,
         ended: Vec::new(),
         filter_interventions: None,
+        distance_m: 0.0,
     };
     let search = agvrl_envs::registry::spec(env_id).is_some_and(|s| s.task == agvrl_envs::TaskKind::Search);
+    if matches!(driver, Driver::Planner) && !search {
+        bail!("the planner covers ground: it needs a search env, not {env_id}");
+    }
     if search && env_cfg.safety_filter.enabled {
         s.filter_interventions = Some(0);
     }
     let mut cov_sum = 0.0;
-    let check = |o: &agvrl_envs::BoxSpace, a: &agvrl_envs::BoxSpace, p: &Option<&mut Policy>| match p {
-        Some(p) => p.check_spaces(o, a).context("the policy does not fit this env"),
-        None => Ok(()),
+    let check = |o: &agvrl_envs::BoxSpace, a: &agvrl_envs::BoxSpace, d: &Driver<'_>| match d {
+        Driver::Policy(p) => p.check_spaces(o, a).context("the policy does not fit this env"),
+        _ => Ok(()),
     };
-    // Without a policy: uniform random actions, the baseline a policy should beat.
     let mut random = RandomActions::new(seed);
-    let mut act_of = |policy: &mut Option<&mut Policy>, space: &agvrl_envs::BoxSpace, o: &[f32]| -> Result<Vec<f32>> {
-        Ok(match policy {
-            Some(p) => p.act(o, true)?,
-            None => random.sample(&space.low, &space.high),
+    let mut act_of = |driver: &mut Driver<'_>, space: &agvrl_envs::BoxSpace, o: &[f32]| -> Result<Vec<f32>> {
+        Ok(match driver {
+            Driver::Policy(p) => p.act(o, true)?,
+            _ => random.sample(&space.low, &space.high),
         })
     };
     match make_sim_env(env_id, env_cfg)? {
         Some(mut env) => {
-            check(&env.observation_space(), &env.action_space(), &policy)?;
+            check(&env.observation_space(), &env.action_space(), &driver)?;
             let space = env.action_space();
             for k in 0..episodes {
-                let mut act = |o: &[f32]| act_of(&mut policy, &space, o);
-                let (ret, last) = drive(&mut env, seed + k as u64, k, &mut act, obs)?;
+                let (ret, last) = match driver {
+                    Driver::Planner => planner::drive(&mut env, seed + k as u64, k, obs)?,
+                    _ => {
+                        let mut act = |o: &[f32]| act_of(&mut driver, &space, o);
+                        drive(&mut env, seed + k as u64, k, &mut act, obs)?
+                    }
+                };
                 s.mean_return += ret;
                 account(&mut s, &last, &mut cov_sum);
             }
         }
         None => {
             let mut env = make(env_id, env_cfg)?;
-            check(&env.observation_space(), &env.action_space(), &policy)?;
+            check(&env.observation_space(), &env.action_space(), &driver)?;
             let space = env.action_space();
             for k in 0..episodes {
-                let act = |o: &[f32]| act_of(&mut policy, &space, o);
+                let act = |o: &[f32]| act_of(&mut driver, &space, o);
                 let (ret, last) = agvrl_rl::eval::run_episode(&mut *env, seed + k as u64, act, |_, _, _| Ok(()))?;
                 s.mean_return += ret;
                 account(&mut s, &last, &mut cov_sum);
@@ -317,7 +347,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         bail!("--episodes must be at least 1");
     }
     let src = eval_source(&a)?;
-    let mut policy = match a.random {
+    let mut policy = match a.random || a.planner {
         true => None,
         false => {
             Some(Policy::load(&src.policy_path).with_context(|| format!("loading {}", src.policy_path.display()))?)
@@ -362,14 +392,19 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     if let Some(sink) = viz::sink_of(a.rerun.as_deref(), a.spawn_viewer) {
         watch.rec = Some(Recorder::new(sink, &format!("{} eval", src.policy_path.display()))?);
     }
-    let s = evaluate(policy.as_mut(), &env_id, &env_cfg, a.episodes, seed, &mut |v| {
-        watch.see(v)
-    })?;
+    let driver = match (&mut policy, a.planner) {
+        (Some(p), _) => Driver::Policy(p),
+        (None, true) => Driver::Planner,
+        (None, false) => Driver::Random,
+    };
+    let s = evaluate(driver, &env_id, &env_cfg, a.episodes, seed, &mut |v| watch.see(v))?;
     println!("env={env_id}");
     println!(
         "policy={}",
         if a.random {
             "random".to_string()
+        } else if a.planner {
+            "planner".to_string()
         } else if a.run.is_some() {
             POLICY_FILE.to_string()
         } else {

@@ -2,7 +2,7 @@
 //! checkpoints, progress, and the evaluation at the end (`crate::eval`).
 
 use crate::config::{DEFAULT_TOML, RunConfig};
-use crate::eval::{Watch, evaluate};
+use crate::eval::{Driver, Watch, evaluate};
 use crate::plots::{self};
 use crate::runs::{RunDir, stamp, write_atomic};
 use crate::viz::{self, Recorder, Sink};
@@ -444,7 +444,7 @@ fn run_learner(
         )?);
     }
     let summary = evaluate(
-        Some(&mut policy),
+        Driver::Policy(&mut policy),
         &cfg.env,
         &cfg.eval_env_config(),
         cfg.eval_episodes,
