@@ -428,7 +428,12 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         println!("rrd={}", p.display());
     }
     if let Some(p) = &a.plot {
-        if !watch.plot(p, &format!("{env_id} {}: deterministic evaluation", src.algo))? {
+        let driver = match (a.random, a.planner) {
+            (true, _) => "random actions",
+            (_, true) => "map-aware planner",
+            _ => src.algo.as_str(),
+        };
+        if !watch.plot(p, &format!("{env_id} {driver}: deterministic evaluation"))? {
             bail!("{env_id} has no map to draw");
         }
         println!("plot={}", p.display());
