@@ -8,6 +8,9 @@
 //! by pure pursuit at full throttle.
 
 use crate::episode::{Observer, SimEnv, observe};
+use agvrl_envs::api::MapInfo;
+use agvrl_envs::task::CoverageGrid;
+use agvrl_envs::task::search::SearchConfig;
 use agvrl_envs::{Step, Vehicle};
 use anyhow::{Context, Result};
 use std::cell::RefCell;
@@ -15,8 +18,6 @@ use std::collections::BinaryHeap;
 
 // Tuned on validation episodes (seed base 1,000,000) of the 20 m scenes, not on the README's.
 const PLAN_CELL_M: f32 = 0.25;
-/// The search task's coverage radius (`SearchConfig::coverage_radius_m`).
-const COVER_M: f32 = 2.0;
 const INFLATE_M: f32 = 0.4;
 const REPLAN_EVERY: u64 = 5;
 const LOOKAHEAD_M: f32 = 0.8;
@@ -37,69 +38,20 @@ struct Planner {
     nx: i32,
     ny: i32,
     open: Vec<bool>,
-    /// For each planning cell, the coverage cells within `COVER_M` of its centre.
+    /// For each planning cell, the coverage cells within the coverage radius of its centre.
     sees: Vec<Vec<u32>>,
-    cover: CoverGrid,
+    cover: CoverageGrid,
+    cover_m: f32,
     covered: Vec<bool>,
     /// Targets given up after the car got stuck on the way.
     banned: Vec<bool>,
 }
 
-/// The coverage cells (the task's free 0.5 m cells), indexed by position.
-struct CoverGrid {
-    origin: [f32; 2],
-    cell: f32,
-    nx: i32,
-    ny: i32,
-    index: Vec<i32>,
-    xy: Vec<[f32; 2]>,
-}
-
-impl CoverGrid {
-    fn new(free: &[[f32; 2]], half: [f32; 2], cell: f32) -> Self {
-        let origin = [-half[0], -half[1]];
-        let nx = (2.0 * half[0] / cell).ceil() as i32;
-        let ny = (2.0 * half[1] / cell).ceil() as i32;
-        let mut index = vec![-1; (nx * ny) as usize];
-        for (n, c) in free.iter().enumerate() {
-            let i = ((c[0] - origin[0]) / cell).floor() as i32;
-            let j = ((c[1] - origin[1]) / cell).floor() as i32;
-            if (0..nx).contains(&i) && (0..ny).contains(&j) {
-                index[(i * ny + j) as usize] = n as i32;
-            }
-        }
-        Self {
-            origin,
-            cell,
-            nx,
-            ny,
-            index,
-            xy: free.to_vec(),
-        }
-    }
-
-    /// The cells within `COVER_M` of (x, y).
-    fn near(&self, x: f32, y: f32, out: &mut Vec<u32>) {
-        out.clear();
-        let lo = |v: f32, o: f32| ((v - COVER_M - o) / self.cell).floor() as i32;
-        let hi = |v: f32, o: f32| ((v + COVER_M - o) / self.cell).ceil() as i32;
-        for i in lo(x, self.origin[0]).max(0)..=hi(x, self.origin[0]).min(self.nx - 1) {
-            for j in lo(y, self.origin[1]).max(0)..=hi(y, self.origin[1]).min(self.ny - 1) {
-                let n = self.index[(i * self.ny + j) as usize];
-                if n >= 0 {
-                    let c = self.xy[n as usize];
-                    if (c[0] - x).powi(2) + (c[1] - y).powi(2) <= COVER_M * COVER_M {
-                        out.push(n as u32);
-                    }
-                }
-            }
-        }
-    }
-}
-
 impl Planner {
-    fn new(sim: &agvrl_sim::Sim, free: &[[f32; 2]], half: [f32; 2], cover_cell: f32) -> Self {
-        let cover = CoverGrid::new(free, half, cover_cell);
+    fn new(sim: &agvrl_sim::Sim, map: &MapInfo) -> Self {
+        let cover = CoverageGrid::new(map);
+        let cover_m = SearchConfig::default().coverage_radius_m;
+        let half = map.half_extent_m;
         let origin = [-half[0], -half[1]];
         let nx = (2.0 * half[0] / PLAN_CELL_M) as i32;
         let ny = (2.0 * half[1] / PLAN_CELL_M) as i32;
@@ -111,7 +63,7 @@ impl Planner {
                 let k = (i * ny + j) as usize;
                 open[k] = sim.free_at(x, y, INFLATE_M);
                 if open[k] {
-                    cover.near(x, y, &mut sees[k]);
+                    cover.for_each_within(x, y, cover_m, |c| sees[k].push(c as u32));
                 }
             }
         }
@@ -120,9 +72,10 @@ impl Planner {
             nx,
             ny,
             open,
+            covered: vec![false; cover.len()],
             sees,
             cover,
-            covered: vec![false; free.len()],
+            cover_m,
             banned: vec![false; (nx * ny) as usize],
         }
     }
@@ -142,11 +95,8 @@ impl Planner {
     }
 
     fn visit(&mut self, x: f32, y: f32) {
-        let mut near = Vec::new();
-        self.cover.near(x, y, &mut near);
-        for n in near {
-            self.covered[n as usize] = true;
-        }
+        let covered = &mut self.covered;
+        self.cover.for_each_within(x, y, self.cover_m, |c| covered[c] = true);
     }
 
     /// The path (cell centres, from the car) to the best target, if any.
@@ -250,7 +200,7 @@ impl CoveragePlanner {
         let sim = car.sim();
         let p = sim.pose2();
         Ok(Self {
-            grid: Planner::new(sim, &map.free_cells, map.half_extent_m, map.cell_m),
+            grid: Planner::new(sim, map),
             wheelbase_m: sim.vehicle().wheelbase_m,
             steering_limit_rad: car.steering_limit_rad() as f32,
             path: Vec::new(),

@@ -22,7 +22,7 @@ pub use termination::{common_termination, min_range_ahead_m, min_range_m, termin
 pub use racing::Racing;
 pub use reward::{SafeShaping, SearchReward};
 pub use safety::{Intervention, SafetyFilter, SafetyFilterConfig};
-pub use search::Search;
+pub use search::{CoverageGrid, Search};
 
 /// What a task concluded about one step.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -54,7 +54,7 @@ impl Default for SearchConfig {
 pub struct Search {
     cfg: SearchConfig,
     steering_limit: f64,
-    grid: Grid,
+    grid: CoverageGrid,
     covered: Vec<bool>,
     n_covered: usize,
     distance_m: f64,
@@ -67,8 +67,9 @@ pub struct Search {
     explored: Option<ExploredMemory>,
 }
 
+/// The free cells of a map that coverage counts, indexed by position.
 #[derive(Default)]
-struct Grid {
+pub struct CoverageGrid {
     origin: [f32; 2],
     cell: f32,
     nx: i32,
@@ -77,13 +78,76 @@ struct Grid {
     n_free: usize,
 }
 
+impl CoverageGrid {
+    /// The grid of `map`'s free cells; cell k is the k-th in map order that lies on the map.
+    pub fn new(map: &MapInfo) -> Self {
+        let cell = map.cell_m.max(1e-3);
+        let origin = [-map.half_extent_m[0], -map.half_extent_m[1]];
+        let nx = (2.0 * map.half_extent_m[0] / cell).ceil() as i32;
+        let ny = (2.0 * map.half_extent_m[1] / cell).ceil() as i32;
+        let mut index = vec![-1; (nx * ny).max(0) as usize];
+        let mut n_free = 0;
+        for c in &map.free_cells {
+            let i = ((c[0] - origin[0]) / cell).floor() as i32;
+            let j = ((c[1] - origin[1]) / cell).floor() as i32;
+            if (0..nx).contains(&i) && (0..ny).contains(&j) {
+                index[(i * ny + j) as usize] = n_free as i32;
+                n_free += 1;
+            }
+        }
+        Self {
+            origin,
+            cell,
+            nx,
+            ny,
+            index,
+            n_free,
+        }
+    }
+
+    /// Number of free cells.
+    pub fn len(&self) -> usize {
+        self.n_free
+    }
+
+    /// Whether the map has no free cell.
+    pub fn is_empty(&self) -> bool {
+        self.n_free == 0
+    }
+
+    /// Call `f` with every free cell whose centre lies within `r` of (x, y).
+    pub fn for_each_within(&self, x: f32, y: f32, r: f32, mut f: impl FnMut(usize)) {
+        let (i0, i1) = (
+            ((x - r - self.origin[0]) / self.cell).floor() as i32,
+            ((x + r - self.origin[0]) / self.cell).ceil() as i32,
+        );
+        let (j0, j1) = (
+            ((y - r - self.origin[1]) / self.cell).floor() as i32,
+            ((y + r - self.origin[1]) / self.cell).ceil() as i32,
+        );
+        for i in i0.max(0)..i1.min(self.nx) {
+            for j in j0.max(0)..j1.min(self.ny) {
+                let k = self.index[(i * self.ny + j) as usize];
+                if k < 0 {
+                    continue;
+                }
+                let cx = self.origin[0] + (i as f32 + 0.5) * self.cell;
+                let cy = self.origin[1] + (j as f32 + 0.5) * self.cell;
+                if (cx - x).powi(2) + (cy - y).powi(2) <= r * r {
+                    f(k as usize);
+                }
+            }
+        }
+    }
+}
+
 impl Search {
     /// A search task.
     pub fn new(cfg: SearchConfig, steering_limit_rad: f64) -> Self {
         Self {
             cfg,
             steering_limit: steering_limit_rad,
-            grid: Grid::default(),
+            grid: CoverageGrid::default(),
             covered: vec![],
             n_covered: 0,
             distance_m: 0.0,
@@ -123,38 +187,18 @@ impl Search {
     }
 
     fn cover(&mut self, x: f32, y: f32) {
-        let g = &self.grid;
-        if g.n_free == 0 {
-            return;
-        }
-        let r = self.cfg.coverage_radius_m;
-        let (i0, i1) = (
-            ((x - r - g.origin[0]) / g.cell).floor() as i32,
-            ((x + r - g.origin[0]) / g.cell).ceil() as i32,
-        );
-        let (j0, j1) = (
-            ((y - r - g.origin[1]) / g.cell).floor() as i32,
-            ((y + r - g.origin[1]) / g.cell).ceil() as i32,
-        );
-        for i in i0.max(0)..i1.min(g.nx) {
-            for j in j0.max(0)..j1.min(g.ny) {
-                let k = g.index[(i * g.ny + j) as usize];
-                if k < 0 || self.covered[k as usize] {
-                    continue;
-                }
-                let cx = g.origin[0] + (i as f32 + 0.5) * g.cell;
-                let cy = g.origin[1] + (j as f32 + 0.5) * g.cell;
-                if (cx - x).powi(2) + (cy - y).powi(2) <= r * r {
-                    self.covered[k as usize] = true;
-                    self.n_covered += 1;
-                }
+        let (covered, n_covered) = (&mut self.covered, &mut self.n_covered);
+        self.grid.for_each_within(x, y, self.cfg.coverage_radius_m, |k| {
+            if !covered[k] {
+                covered[k] = true;
+                *n_covered += 1;
             }
-        }
+        });
     }
 
     fn info(&self) -> SearchInfo {
-        let coverage = if self.grid.n_free > 0 {
-            self.n_covered as f64 / self.grid.n_free as f64
+        let coverage = if !self.grid.is_empty() {
+            self.n_covered as f64 / self.grid.len() as f64
         } else {
             0.0
         };
@@ -199,36 +243,12 @@ impl Task for Search {
             m.clear();
             m.visit(frame);
         }
-        self.grid = Grid::default();
+        self.grid = map.map(CoverageGrid::new).unwrap_or_default();
         self.start_s = frame.stamp_s;
         self.found.clear();
         self.n_subjects = map.map(|m| m.subjects.len()).unwrap_or(0);
         self.look(frame, map);
-        if let Some(m) = map {
-            let cell = m.cell_m.max(1e-3);
-            let origin = [-m.half_extent_m[0], -m.half_extent_m[1]];
-            let nx = (2.0 * m.half_extent_m[0] / cell).ceil() as i32;
-            let ny = (2.0 * m.half_extent_m[1] / cell).ceil() as i32;
-            let mut index = vec![-1; (nx * ny).max(0) as usize];
-            let mut n_free = 0;
-            for c in &m.free_cells {
-                let i = ((c[0] - origin[0]) / cell).floor() as i32;
-                let j = ((c[1] - origin[1]) / cell).floor() as i32;
-                if (0..nx).contains(&i) && (0..ny).contains(&j) {
-                    index[(i * ny + j) as usize] = n_free as i32;
-                    n_free += 1;
-                }
-            }
-            self.grid = Grid {
-                origin,
-                cell,
-                nx,
-                ny,
-                index,
-                n_free,
-            };
-        }
-        self.covered = vec![false; self.grid.n_free];
+        self.covered = vec![false; self.grid.len()];
         self.n_covered = 0;
         self.distance_m = 0.0;
         self.last_xy = frame.gps.as_ref().map(|g| [g.position_m[0], g.position_m[1]]);
