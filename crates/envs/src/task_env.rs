@@ -93,6 +93,7 @@ impl<V: Vehicle, T: Task> Env for TaskEnv<V, T> {
         space.clamp(&mut a);
         let frame = self.last.as_ref().ok_or(EnvError::NeedsReset)?;
         let control = self.task.control(&a, self.vehicle.steering_limit_rad(), frame);
+        let corrected_action = self.task.corrected_action();
         self.vehicle.actuate(control)?;
         let frame = self.vehicle.sense()?;
         self.task.needs().check(&frame)?;
@@ -117,6 +118,7 @@ impl<V: Vehicle, T: Task> Env for TaskEnv<V, T> {
                 racing: out.racing,
                 search: out.search,
                 final_obs: None,
+                corrected_action,
                 episode: None,
             },
         })

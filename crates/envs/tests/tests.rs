@@ -968,6 +968,55 @@ mod safety_filter {
     }
 
     #[test]
+    fn corrected_steps_report_the_action_of_the_control_sent_and_an_advising_filter_sends_the_policy_s() {
+        // Random forward actions through an acting and an advising filter: both report a
+        // correction (an action in the box, not the proposed one) on exactly the steps the
+        // filter changed; behind the acting one the car never crashes, behind the advising one
+        // the policy's actions drive and it does.
+        for advisory in [false, true] {
+            let cfg = EnvConfig {
+                max_steps: 400,
+                action_mapping: agvrl_envs::task::ActionMapping::ScaledReverse,
+                safety_filter: SafetyFilterConfig {
+                    advisory,
+                    ..filtered(true).safety_filter
+                },
+                ..filtered(true)
+            };
+            let mut env = make("search-urban-20", &cfg).unwrap();
+            let mut rng = StdRng::seed_from_u64(5);
+            env.reset(Some(0)).unwrap();
+            let (mut corrected, mut last) = (0, 0);
+            loop {
+                let a = [rng.random_range(0.5..1.0), rng.random_range(-1.0..1.0)];
+                let st = env.step(&a).unwrap();
+                let n = st.info.search.as_ref().unwrap().filter_interventions;
+                assert_eq!(
+                    st.info.corrected_action.is_some(),
+                    n > last,
+                    "step with {n} interventions"
+                );
+                if let Some(c) = &st.info.corrected_action {
+                    corrected += 1;
+                    assert_eq!(c.len(), 2);
+                    assert!(c.iter().all(|v| (-1.0..=1.0).contains(v)), "{c:?}");
+                    assert_ne!(c.as_slice(), &a[..], "a correction differs from the proposal");
+                }
+                last = n;
+                if st.done() {
+                    assert_eq!(
+                        st.terminated, advisory,
+                        "advisory {advisory}: {:?}",
+                        st.info.termination
+                    );
+                    break;
+                }
+            }
+            assert!(corrected > 0, "advisory {advisory}: the filter never acted");
+        }
+    }
+
+    #[test]
     fn a_car_sent_straight_at_a_wall_stops_short_of_it() {
         // The oval's outer wall ahead, full throttle, no steering: the filter brakes or steers
         // away, and the LiDAR never comes within the racing task's 0.8 m.

@@ -115,6 +115,17 @@ pub struct SearchInfo {
     pub find_times_s: Vec<f64>,
     /// Steps since reset whose control the safety filter changed.
     pub filter_interventions: u64,
+    /// Of those, the steps it steered to another angle (throttle kept)...
+    pub filter_steered: u64,
+    /// ...the steps it braked...
+    pub filter_braked: u64,
+    /// ...and the steps it reversed out of a dead end (the back-outs' ticks).
+    pub filter_reversed: u64,
+    /// Back-outs begun since reset.
+    pub filter_backouts: u64,
+    /// r_m after this step: the smallest LiDAR range within the task's clearance fan, metres
+    /// (infinite without a scan).
+    pub clearance_m: f64,
 }
 
 /// Why an episode terminated.
@@ -153,6 +164,9 @@ pub struct Info {
     /// The last observation of an episode that a vector env auto-reset; `Step::obs` is then the
     /// first observation of the next episode.
     pub final_obs: Option<Vec<f32>>,
+    /// On a step whose control a safety filter changed, the action that maps to the control
+    /// sent instead (in the action space): what a learner can teach the policy to propose.
+    pub corrected_action: Option<Vec<f32>>,
     /// Return and length of the episode that ended on this step (set by `TimeLimit`/`VecEnv`
     /// bookkeeping when the episode ends).
     pub episode: Option<EpisodeSummary>,

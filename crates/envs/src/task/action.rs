@@ -54,6 +54,29 @@ impl ActionMapping {
             }
         }
     }
+
+    /// The action whose control is `c` (the inverse of [`ActionMapping::control`] on the
+    /// controls it can produce; others are clamped into the action box first): what a policy
+    /// would have had to propose to get the control a safety filter sent instead of its own.
+    pub fn action(self, c: Control, delta_max_rad: f64) -> [f64; 2] {
+        let steer = if delta_max_rad > 0.0 {
+            (c.steering_rad / delta_max_rad).clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+        match self {
+            ActionMapping::Paper => [
+                c.throttle.clamp(0.0, 1.0),
+                c.steering_rad.clamp(-delta_max_rad, delta_max_rad),
+            ],
+            ActionMapping::Scaled => [2.0 * c.throttle.clamp(0.0, 1.0) - 1.0, steer],
+            ActionMapping::ScaledStop => [c.throttle.clamp(0.0, 1.0), steer],
+            ActionMapping::ScaledReverse => {
+                let t = c.throttle.clamp(-REVERSE_THROTTLE_MAX, 1.0);
+                [if t < 0.0 { t / REVERSE_THROTTLE_MAX } else { t }, steer]
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -94,6 +117,39 @@ mod tests {
         assert_eq!(m.control(-0.4, 0.0, 0.36).throttle, -0.4 * REVERSE_THROTTLE_MAX);
         assert_eq!(m.control(5.0, 0.0, 0.36).throttle, 1.0);
         assert_eq!(m.control(f64::NAN, 0.0, 0.36), Control::default());
+    }
+
+    #[test]
+    fn action_of_a_control_maps_back_to_that_control() {
+        let limit = 0.36;
+        for m in [
+            ActionMapping::Paper,
+            ActionMapping::Scaled,
+            ActionMapping::ScaledStop,
+            ActionMapping::ScaledReverse,
+        ] {
+            let lowest = if m == ActionMapping::ScaledReverse {
+                -REVERSE_THROTTLE_MAX
+            } else {
+                0.0
+            };
+            for t in [lowest, -0.125, 0.0, 0.25, 1.0] {
+                for s in [-limit, -0.09, 0.0, 0.27, limit] {
+                    let c = Control {
+                        throttle: t.max(lowest),
+                        steering_rad: s,
+                    };
+                    let [a0, a1] = m.action(c, limit);
+                    assert!((-1.0..=1.0).contains(&a0) && (-1.0..=1.0).contains(&a1), "{m:?} {c:?}");
+                    let back = m.control(a0, a1, limit);
+                    assert!(
+                        (back.throttle - c.throttle).abs() < 1e-12
+                            && (back.steering_rad - c.steering_rad).abs() < 1e-12,
+                        "{m:?}: {c:?} -> [{a0}, {a1}] -> {back:?}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -50,6 +50,11 @@ pub trait Task: Send {
     fn intervention(&self) -> Intervention {
         Intervention::None
     }
+    /// When the safety filter changed (or, advising, would have changed) the last control:
+    /// the action that maps to the filter's control, what the policy should have proposed.
+    fn corrected_action(&self) -> Option<Vec<f32>> {
+        None
+    }
     /// Start an episode from its first frame.
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>);
     /// The observation of a frame.
@@ -70,6 +75,9 @@ impl<T: Task + ?Sized> Task for Box<T> {
     }
     fn intervention(&self) -> Intervention {
         (**self).intervention()
+    }
+    fn corrected_action(&self) -> Option<Vec<f32>> {
+        (**self).corrected_action()
     }
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         (**self).reset(frame, map)
@@ -126,6 +134,12 @@ impl CommonConfig {
     /// Map an action to a control.
     pub fn control(&self, action: &[f32], steering_limit_rad: f64) -> Control {
         map_control(self.action_mapping, action, steering_limit_rad)
+    }
+
+    /// The action that maps to `control` ([`ActionMapping::action`]).
+    pub fn action_of(&self, control: Control, steering_limit_rad: f64) -> Vec<f32> {
+        let [a0, a1] = self.action_mapping.action(control, steering_limit_rad);
+        vec![a0 as f32, a1 as f32]
     }
 }
 

@@ -35,6 +35,7 @@ pub struct Racing {
     info: RacingInfo,
     lap_start_s: f64,
     filter: SafetyFilter,
+    correction: Option<Vec<f32>>,
 }
 
 impl Racing {
@@ -51,6 +52,7 @@ impl Racing {
                 cfg.common.safety_filter,
                 cfg.common.action_mapping == crate::task::ActionMapping::ScaledReverse,
             ),
+            correction: None,
         }
     }
 }
@@ -66,15 +68,22 @@ impl Task for Racing {
 
     fn control(&mut self, action: &[f32], steering_limit_rad: f64, frame: &SensorFrame) -> Control {
         let proposed = self.cfg.common.control(action, steering_limit_rad);
-        self.filter.filter(frame, proposed, steering_limit_rad, None)
+        let (c, correction) = self.filter.apply(frame, proposed, steering_limit_rad, None);
+        self.correction = correction.map(|k| self.cfg.common.action_of(k, steering_limit_rad));
+        c
     }
 
     fn intervention(&self) -> Intervention {
         self.filter.last_intervention()
     }
 
+    fn corrected_action(&self) -> Option<Vec<f32>> {
+        self.correction.clone()
+    }
+
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         self.filter.reset();
+        self.correction = None;
         self.info = RacingInfo::default();
         self.progress_m = 0.0;
         self.lap_start_s = frame.stamp_s;

@@ -22,6 +22,11 @@ use std::collections::HashMap;
 pub struct SafetyFilterConfig {
     /// Filter the policy's controls (off: they pass unchanged).
     pub enabled: bool,
+    /// Advise only: the filter runs and reports its correction (`Info::corrected_action`),
+    /// but the policy's control goes out (a training setting: the policy meets the outcome of
+    /// its own controls, and a learner can imitate the advice on the states the policy
+    /// reaches).
+    pub advisory: bool,
     /// Smallest distance from the LiDAR to an obstacle point inside its field of view that the
     /// predicted path may reach, metres (the search task ends an episode under 0.6 m).
     pub clearance_m: f32,
@@ -64,6 +69,7 @@ impl Default for SafetyFilterConfig {
     fn default() -> Self {
         Self {
             enabled: false,
+            advisory: false,
             clearance_m: 0.75,
             body_margin_m: 0.08,
             decel_mps2: 0.0,
@@ -251,6 +257,20 @@ impl SafetyFilter {
         self.stuck = 0;
         self.backout = None;
         self.backable_m = 0.0;
+    }
+
+    /// [`SafetyFilter::filter`], and what goes out: the filtered control, or with `advisory`
+    /// the proposed one; second, the filter's control when it changed the proposed one.
+    pub fn apply(
+        &mut self,
+        frame: &SensorFrame,
+        proposed: Control,
+        steering_limit_rad: f64,
+        fan_half_rad: Option<f32>,
+    ) -> (Control, Option<Control>) {
+        let c = self.filter(frame, proposed, steering_limit_rad, fan_half_rad);
+        let correction = (self.last != Intervention::None).then_some(c);
+        (if self.cfg.advisory { proposed } else { c }, correction)
     }
 
     /// Take in a frame (odometry and scan points) and return the control to send instead of
@@ -899,6 +919,32 @@ mod tests {
         assert_eq!(c.throttle, 0.0);
         let mut f = on();
         assert_eq!(f.filter(&wall_frame(1.7, 0.0, 1.5), go, 0.36, FAN), go);
+    }
+
+    #[test]
+    fn an_advisory_filter_sends_the_proposed_control_and_reports_its_correction() {
+        let go = Control {
+            throttle: 1.0,
+            steering_rad: 0.0,
+        };
+        let mut acting = on();
+        let (sent, correction) = acting.apply(&wall_frame(1.2, 0.0, 1.5), go, 0.36, FAN);
+        assert_eq!(correction, Some(sent));
+        assert_eq!(sent.throttle, 0.0);
+        let mut advising = SafetyFilter::new(
+            SafetyFilterConfig {
+                advisory: true,
+                ..acting.cfg
+            },
+            false,
+        );
+        let (sent_advising, advice) = advising.apply(&wall_frame(1.2, 0.0, 1.5), go, 0.36, FAN);
+        assert_eq!(sent_advising, go);
+        assert_eq!(advice, correction);
+        assert_eq!(advising.last_intervention(), Intervention::Braked);
+        // A clear path: nothing to correct.
+        let mut clear = on();
+        assert_eq!(clear.apply(&wall_frame(5.0, 0.0, 1.5), go, 0.36, FAN), (go, None));
     }
 
     #[test]

@@ -63,7 +63,11 @@ pub struct Search {
     found: Vec<(u32, f64)>,
     n_subjects: usize,
     filter: SafetyFilter,
+    correction: Option<Vec<f32>>,
     interventions: u64,
+    /// Steered, braked and reversed controls, and back-outs begun, since reset.
+    by_kind: [u64; 4],
+    clearance_m: f64,
     explored: Option<ExploredMemory>,
 }
 
@@ -159,7 +163,10 @@ impl Search {
                 cfg.common.safety_filter,
                 cfg.common.action_mapping == crate::task::ActionMapping::ScaledReverse,
             ),
+            correction: None,
             interventions: 0,
+            by_kind: [0; 4],
+            clearance_m: f64::INFINITY,
             explored: (!cfg.common.observation.explored.is_empty())
                 .then(|| ExploredMemory::new(cfg.common.observation.explored)),
         }
@@ -209,6 +216,11 @@ impl Search {
             subjects_total: self.n_subjects,
             find_times_s: self.found.iter().map(|(_, t)| *t).collect(),
             filter_interventions: self.interventions,
+            filter_steered: self.by_kind[0],
+            filter_braked: self.by_kind[1],
+            filter_reversed: self.by_kind[2],
+            filter_backouts: self.by_kind[3],
+            clearance_m: self.clearance_m,
         }
     }
 }
@@ -225,9 +237,21 @@ impl Task for Search {
     fn control(&mut self, action: &[f32], steering_limit_rad: f64, frame: &SensorFrame) -> Control {
         let proposed = self.cfg.common.control(action, steering_limit_rad);
         let fan = (self.cfg.clearance_fov_deg > 0.0).then(|| 0.5 * self.cfg.clearance_fov_deg.to_radians());
-        let c = self.filter.filter(frame, proposed, steering_limit_rad, fan);
-        if self.filter.last_intervention() != Intervention::None {
+        let before = self.filter.last_intervention();
+        let (c, correction) = self.filter.apply(frame, proposed, steering_limit_rad, fan);
+        self.correction = correction.map(|k| self.cfg.common.action_of(k, steering_limit_rad));
+        let now = self.filter.last_intervention();
+        if now != Intervention::None {
             self.interventions += 1;
+        }
+        match now {
+            Intervention::None => {}
+            Intervention::Steered => self.by_kind[0] += 1,
+            Intervention::Braked => self.by_kind[1] += 1,
+            Intervention::Reversed => {
+                self.by_kind[2] += 1;
+                self.by_kind[3] += (before != Intervention::Reversed) as u64;
+            }
         }
         c
     }
@@ -236,9 +260,16 @@ impl Task for Search {
         self.filter.last_intervention()
     }
 
+    fn corrected_action(&self) -> Option<Vec<f32>> {
+        self.correction.clone()
+    }
+
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         self.filter.reset();
+        self.correction = None;
         self.interventions = 0;
+        self.by_kind = [0; 4];
+        self.clearance_m = min_range_ahead_m(frame, self.cfg.clearance_fov_deg);
         if let Some(m) = &mut self.explored {
             m.clear();
             m.visit(frame);
@@ -266,6 +297,7 @@ impl Task for Search {
 
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
         let d = min_range_ahead_m(frame, self.cfg.clearance_fov_deg);
+        self.clearance_m = d;
         let c = frame.applied;
         let covered_before = self.n_covered;
         if let Some(g) = &frame.gps {
