@@ -28,6 +28,12 @@ pub struct Losses {
     pub std: f64,
     /// PPO: mean global gradient norm before clipping, over the update's minibatches.
     pub grad_norm: f64,
+    /// PPO with `correction_coef`: the correction term (before its coefficient), mean over
+    /// the update's minibatches.
+    pub correction: f64,
+    /// PPO: fraction of the rollout's steps whose action the env corrected
+    /// (`Info::corrected_action`).
+    pub corrected_fraction: f64,
 }
 
 impl Default for Losses {
@@ -42,6 +48,8 @@ impl Default for Losses {
             explained_variance: f64::NAN,
             std: f64::NAN,
             grad_norm: f64::NAN,
+            correction: f64::NAN,
+            corrected_fraction: f64::NAN,
         }
     }
 }

@@ -37,6 +37,10 @@ pub struct RunConfig {
     /// kind and size instead of its built-in map (layout randomisation; evaluation always uses
     /// the map of `env_config`).
     pub procedural_layouts: usize,
+    /// Training envs (by index) whose safety filter only advises (`safety_filter.advisory`):
+    /// the policy's own controls drive there and can end episodes, while the filter's
+    /// corrections still reach the learner (`ppo.correction_coef`). Evaluation never advises.
+    pub advisory_filter_envs: Vec<usize>,
     /// Deterministic episodes evaluated after training.
     pub eval_episodes: usize,
     /// Time limit of evaluation episodes, control steps (default: the training limit).
@@ -60,6 +64,7 @@ impl Default for RunConfig {
             n_envs: 8,
             threads: 2,
             procedural_layouts: 0,
+            advisory_filter_envs: Vec::new(),
             eval_episodes: 3,
             eval_max_steps: None,
             env_config: EnvConfig::default(),
@@ -155,6 +160,17 @@ impl RunConfig {
                 self.procedural_layouts, self.n_envs
             )));
         }
+        if let Some(i) = self.advisory_filter_envs.iter().find(|i| **i >= self.n_envs) {
+            return Err(RlError::RunConfig(format!(
+                "advisory_filter_envs: env {i} does not exist (n_envs = {})",
+                self.n_envs
+            )));
+        }
+        if !self.advisory_filter_envs.is_empty() && !self.env_config.safety_filter.enabled {
+            return Err(RlError::RunConfig(
+                "advisory_filter_envs needs env_config.safety_filter.enabled = true".into(),
+            ));
+        }
         Ok(())
     }
 
@@ -173,6 +189,7 @@ impl RunConfig {
         } else {
             cfg.new_layout_each_episode = false;
         }
+        cfg.safety_filter.advisory |= self.advisory_filter_envs.contains(&i);
         cfg
     }
 
@@ -191,6 +208,10 @@ impl RunConfig {
             layout_seed: None,
             new_layout_each_episode: false,
             held_out: true,
+            safety_filter: agvrl_envs::task::SafetyFilterConfig {
+                advisory: false,
+                ..self.env_config.safety_filter
+            },
             ..self.env_config.clone()
         }
     }

@@ -54,6 +54,17 @@ pub struct PpoConfig {
     /// The last `C*H*W` observation values are an image, encoded by one NatureCNN shared by
     /// actor and critic (SB3's `CnnPolicy` default) and left out of `normalize_obs` (None).
     pub image: Option<crate::cnn::ImageSpec>,
+    /// Weight of a supervised term beside the PPO loss: on the steps where the env replaced the
+    /// policy's action (`Info::corrected_action`, a safety filter's correction), the squared
+    /// distance from the action mean to the action sent, `coef * sum_i |mean_i - target_i|^2 /
+    /// n` over a minibatch of `n`. The policy learns to propose what the filter let through
+    /// (0: off, SB3's loss; not an SB3 setting).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub correction_coef: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl Default for PpoConfig {
@@ -80,6 +91,7 @@ impl Default for PpoConfig {
             sde_sample_freq: -1,
             normalize_obs: false,
             image: None,
+            correction_coef: 0.0,
         }
     }
 }
@@ -120,6 +132,9 @@ impl PpoConfig {
         }
         if self.net_arch.is_empty() || self.net_arch.contains(&0) {
             return bad("net_arch needs at least one non-zero width");
+        }
+        if !(self.correction_coef.is_finite() && self.correction_coef >= 0.0) {
+            return bad("correction_coef must be finite and >= 0");
         }
         if let Some(image) = &self.image {
             image.conv_shapes()?;

@@ -153,6 +153,10 @@ pub(crate) struct Rollout {
     pub(crate) log_probs: Vec<f32>,
     pub(crate) advantages: Vec<f32>,
     pub(crate) returns: Vec<f32>,
+    /// Per step, the action the env sent instead of the policy's (`Info::corrected_action`;
+    /// zeros where it sent the policy's), `a` values each, and 1 where it corrected, else 0.
+    pub(crate) corrected_actions: Vec<f32>,
+    pub(crate) corrected: Vec<f32>,
     /// GAE's inputs (rewards with truncation bootstraps, values, episode starts; the values and
     /// done flags after the last step), kept for checking GAE against another implementation.
     pub(crate) gae_inputs: [Vec<f32>; 5],
@@ -344,6 +348,8 @@ impl<E: Env> Ppo<E> {
             log_probs: Vec::with_capacity(total),
             advantages: vec![0.0; total],
             returns: vec![0.0; total],
+            corrected_actions: Vec::with_capacity(total * a),
+            corrected: Vec::with_capacity(total),
             gae_inputs: Default::default(),
         };
         let mut rewards = Vec::with_capacity(total);
@@ -419,6 +425,18 @@ impl<E: Env> Ppo<E> {
             }
             r.obs.extend_from_slice(&x);
             r.actions.extend_from_slice(&actions);
+            for info in &st.infos {
+                match info.corrected_action.as_deref().filter(|c| c.len() == a) {
+                    Some(c) => {
+                        r.corrected_actions.extend_from_slice(c);
+                        r.corrected.push(1.0);
+                    }
+                    None => {
+                        r.corrected_actions.extend(std::iter::repeat_n(0.0, a));
+                        r.corrected.push(0.0);
+                    }
+                }
+            }
             rewards.extend_from_slice(&rew);
             values.extend_from_slice(&value);
             episode_starts.extend(starts.iter().map(|s| *s as u8 as f32));
@@ -565,6 +583,8 @@ mod tests {
             log_probs: vec![],
             advantages: vec![0.0; 6],
             returns: vec![0.0; 6],
+            corrected_actions: vec![],
+            corrected: vec![],
             gae_inputs: Default::default(),
         };
         let rewards = vec![1.0, 0.0, 2.0, 0.0, 3.0, 1.0];

@@ -65,6 +65,20 @@ pub(crate) struct Head {
     pub(crate) d_value: Vec<f32>,
     /// dL/dlog_std, the shape of `log_std`.
     pub(crate) d_log_std: Vec<f32>,
+    /// The correction term `sum_i c_i |mean_i - target_i|^2 / n` (before its coefficient).
+    pub(crate) correction: f64,
+}
+
+/// The actions an env sent instead of the policy's, for the correction term of
+/// [`loss_head`].
+#[derive(Clone, Copy)]
+pub(crate) struct Correction<'a> {
+    /// `n * a` actions (any value where `mask` is 0).
+    pub(crate) actions: &'a [f32],
+    /// `n` weights: 1 where the env corrected the step, else 0.
+    pub(crate) mask: &'a [f32],
+    /// The term's coefficient.
+    pub(crate) coef: f64,
 }
 
 /// Inputs of the loss head for `n` samples with `a` action elements.
@@ -81,12 +95,15 @@ pub(crate) struct HeadInput<'a> {
     /// Already normalised if configured.
     pub(crate) advantages: &'a [f32],
     pub(crate) returns: &'a [f32],
+    /// The correction term's inputs (`correction_coef > 0`).
+    pub(crate) correction: Option<Correction<'a>>,
 }
 
 /// PPO's loss and its gradient w.r.t. the network outputs and `log_std`:
 /// `L = -mean(min(r A, clip(r, 1-c, 1+c) A)) + vf_coef mean((R - v)^2) - ent_coef mean(H)`,
 /// `r = exp(log_prob - old_log_prob)`, for a diagonal Gaussian with variance `var_ij`:
-/// `exp(2 log_std_j)`, or with gSDE `sum_k latent_ik^2 exp(2 log_std_kj) + 1e-6`.
+/// `exp(2 log_std_j)`, or with gSDE `sum_k latent_ik^2 exp(2 log_std_kj) + 1e-6`; with a
+/// [`Correction`], `+ coef sum_i c_i |mean_i - target_i|^2 / n`.
 pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f64) -> Head {
     let n = x.value.len();
     let a = x.mean.len() / n.max(1);
@@ -102,6 +119,7 @@ pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f6
         d_mean: vec![0.0; n * a],
         d_value: vec![0.0; n],
         d_log_std: vec![],
+        correction: 0.0,
     };
     let mut d_log_std = vec![0.0f64; x.log_std.len()];
     let (mut var, mut diff) = (vec![0.0f64; a], vec![0.0f64; a]);
@@ -144,6 +162,16 @@ pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f6
                 }
                 // var_j = sigma_j^2: d var / d log_std_j = 2 var_j
                 None => d_log_std[j] += d_var * 2.0 * var[j],
+            }
+        }
+        if let Some(c) = &x.correction
+            && c.mask[i] != 0.0
+        {
+            let w = c.mask[i] as f64 * inv_n;
+            for j in 0..a {
+                let e = x.mean[i * a + j] as f64 - c.actions[i * a + j] as f64;
+                h.correction += w * e * e;
+                h.d_mean[i * a + j] += (2.0 * c.coef * w * e) as f32;
             }
         }
         let err = x.returns[i] as f64 - x.value[i] as f64;
@@ -193,6 +221,7 @@ impl<E: Env> Ppo<E> {
         old_lp: &[f32],
         adv: &[f32],
         ret: &[f32],
+        correction: Option<Correction<'_>>,
     ) -> Result<(Head, Vec<Vec<f32>>)> {
         let (o, a, n) = (self.obs_dim, self.act_dim, old_lp.len());
         let l = Layout::of(&self.cfg);
@@ -206,6 +235,7 @@ impl<E: Env> Ppo<E> {
                 old_log_prob: old_lp,
                 advantages: adv,
                 returns: ret,
+                correction,
             };
             loss_head(&x, self.cfg.clip_range, self.cfg.vf_coef, self.cfg.ent_coef)
         };
@@ -259,6 +289,7 @@ impl<E: Env> Ppo<E> {
             &r.log_probs[..n],
             &adv,
             &r.returns[..n],
+            None,
         )?;
         Ok(GradientProbe {
             shapes: self.params.shapes.clone(),
@@ -300,7 +331,7 @@ impl<E: Env> Ppo<E> {
         }
         self.params.data = params;
         let [obs, act, old_lp, adv, ret] = minibatch;
-        let (h, g) = self.minibatch(obs.to_vec(), act.to_vec(), old_lp, adv, ret)?;
+        let (h, g) = self.minibatch(obs.to_vec(), act.to_vec(), old_lp, adv, ret, None)?;
         Ok((h.pg_loss, h.vf_loss, g))
     }
 
@@ -312,6 +343,8 @@ impl<E: Env> Ppo<E> {
         let mut idx: Vec<usize> = (0..total).collect();
         let (mut pg_sum, mut vf_sum, mut clip_sum, mut ent_sum, mut n_mb) = (0.0, 0.0, 0.0, 0.0, 0usize);
         let (mut gn_sum, mut n_steps) = (0.0, 0usize);
+        let correct = self.cfg.correction_coef > 0.0 && r.corrected.len() == total;
+        let mut corr_sum = 0.0;
         // SB3 logs the KL of the last epoch only (its list restarts every epoch).
         let (mut kl_epoch, mut n_epoch) = (0.0, 0usize);
         'epochs: for _ in 0..self.cfg.n_epochs {
@@ -327,7 +360,12 @@ impl<E: Env> Ppo<E> {
                 let mut old_lp = Vec::with_capacity(n);
                 let mut adv = Vec::with_capacity(n);
                 let mut ret = Vec::with_capacity(n);
+                let (mut c_act, mut c_mask) = (Vec::new(), Vec::new());
                 for &k in mb {
+                    if correct {
+                        c_act.extend_from_slice(&r.corrected_actions[k * a..(k + 1) * a]);
+                        c_mask.push(r.corrected[k]);
+                    }
                     obs.extend_from_slice(&r.obs[k * o..(k + 1) * o]);
                     act.extend_from_slice(&r.actions[k * a..(k + 1) * a]);
                     old_lp.push(r.log_probs[k]);
@@ -337,7 +375,12 @@ impl<E: Env> Ppo<E> {
                 if self.cfg.normalize_advantage {
                     normalize_advantages(&mut adv);
                 }
-                let (head, mut grads) = self.minibatch(obs, act, &old_lp, &adv, &ret)?;
+                let correction = correct.then_some(Correction {
+                    actions: &c_act,
+                    mask: &c_mask,
+                    coef: self.cfg.correction_coef,
+                });
+                let (head, mut grads) = self.minibatch(obs, act, &old_lp, &adv, &ret, correction)?;
                 if !head.pg_loss.is_finite() || !head.vf_loss.is_finite() {
                     return Err(RlError::NonFinite("PPO loss"));
                 }
@@ -347,6 +390,7 @@ impl<E: Env> Ppo<E> {
                 n_epoch += 1;
                 clip_sum += head.clip_fraction;
                 ent_sum += head.entropy;
+                corr_sum += head.correction;
                 n_mb += 1;
                 if self.cfg.target_kl.is_some_and(|t| head.approx_kl > 1.5 * t) {
                     break 'epochs;
@@ -364,6 +408,8 @@ impl<E: Env> Ppo<E> {
         self.losses.clip_fraction = clip_sum / m;
         self.losses.entropy = ent_sum / m;
         self.losses.grad_norm = gn_sum / n_steps.max(1) as f64;
+        self.losses.correction = if correct { corr_sum / m } else { f64::NAN };
+        self.losses.corrected_fraction = r.corrected.iter().map(|c| *c as f64).sum::<f64>() / total.max(1) as f64;
         let log_std = &self.params.data[log_std_idx];
         self.losses.std = log_std.iter().map(|l| (*l as f64).exp()).sum::<f64>() / log_std.len() as f64;
         // values = returns - advantages (before normalisation).
@@ -407,7 +453,12 @@ mod tests {
             .neg();
         let vf = (t(x.returns, [1, n, 1]) - value.clone()).powi_scalar(2).mean();
         let ent = gaussian::entropy_of(var).mean();
-        let loss = pg + vf * vf_coef - ent * ent_coef;
+        let mut loss = pg + vf * vf_coef - ent * ent_coef;
+        if let Some(c) = &x.correction {
+            let err = mean.clone() - t(c.actions, [1, n, a]);
+            let per_sample = (err.clone() * err).sum_dim(2);
+            loss = loss + (per_sample * t(c.mask, [1, n, 1])).sum() * (c.coef / n as f64);
+        }
         let g = loss.backward();
         let v = |x: &Tensor<3>| to_vec(x.grad(&g).unwrap()).unwrap();
         (
@@ -418,7 +469,7 @@ mod tests {
         )
     }
 
-    fn check(latent_dim: Option<usize>) {
+    fn check(latent_dim: Option<usize>, correction_coef: f64) {
         let mut rng = Rng::new(9);
         let (n, a) = (64, 2);
         let mean = rng.normals(n * a);
@@ -429,6 +480,9 @@ mod tests {
             .collect();
         // Old log-probs near the current ones, so some ratios fall outside the clip range.
         let old: Vec<f32> = (0..n).map(|_| -2.0 + 0.4 * rng.normal() as f32).collect();
+        // About a third of the samples corrected, to actions in the box.
+        let corrected: Vec<f32> = rng.normals(n * a).iter().map(|v| v.tanh()).collect();
+        let mask: Vec<f32> = (0..n).map(|_| (rng.normal() > 0.43) as u8 as f32).collect();
         let x = HeadInput {
             mean: &mean,
             value: &rng.normals(n),
@@ -438,10 +492,16 @@ mod tests {
             old_log_prob: &old,
             advantages: &rng.normals(n),
             returns: &rng.normals(n),
+            correction: (correction_coef > 0.0).then_some(Correction {
+                actions: &corrected,
+                mask: &mask,
+                coef: correction_coef,
+            }),
         };
         let h = loss_head(&x, 0.2, 0.5, 0.01);
         let (loss, d_mean, d_value, d_log_std) = autodiff_loss(&x, 0.2, 0.5, 0.01);
-        let fused = h.pg_loss + 0.5 * h.vf_loss - 0.01 * h.entropy;
+        let fused = h.pg_loss + 0.5 * h.vf_loss - 0.01 * h.entropy + correction_coef * h.correction;
+        assert_eq!(h.correction > 0.0, correction_coef > 0.0);
         assert!((fused - loss).abs() < 1e-4, "{fused} vs {loss}");
         assert!(h.clip_fraction > 0.0 && h.clip_fraction < 1.0);
         let close = |p: &[f32], q: &[f32]| p.iter().zip(q).all(|(p, q)| (p - q).abs() < 1e-5 + 1e-3 * q.abs());
@@ -508,11 +568,19 @@ mod tests {
 
     #[test]
     fn fused_head_matches_autodiff() {
-        check(None);
+        check(None, 0.0);
     }
 
     #[test]
     fn fused_gsde_head_matches_autodiff() {
-        check(Some(8));
+        check(Some(8), 0.0);
+    }
+
+    /// The correction term (the policy imitates the actions a safety filter sent) and its
+    /// gradient against autodiff, beside the PPO loss and with gSDE.
+    #[test]
+    fn correction_term_and_its_gradient_match_autodiff() {
+        check(None, 2.0);
+        check(Some(8), 0.5);
     }
 }
