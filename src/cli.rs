@@ -22,6 +22,18 @@ enum Cmd {
     View(view::ViewArgs),
     /// List the environment ids with their observation and action spaces.
     Envs,
+    /// Overlay the mean coverage over time of `eval --coverage-csv` files in one PNG.
+    CoveragePlot {
+        /// The PNG to write.
+        #[arg(long, short)]
+        out: std::path::PathBuf,
+        /// Title above the plot.
+        #[arg(long, default_value = "coverage over time")]
+        title: String,
+        /// CSV files, each as LABEL=FILE or FILE (labelled by its name).
+        #[arg(required = true)]
+        files: Vec<String>,
+    },
     /// Print what the car senses at a pose (LiDAR scan, GPS, IMU) as JSON.
     Probe(probe::ProbeArgs),
     /// Measure speed: simulator, envs, learners; prints key=value lines.
@@ -90,6 +102,7 @@ fn run(cli: Cli) -> Result<()> {
         Some(Cmd::View(a)) => view::view(a),
         Some(Cmd::Envs) => envs(),
         Some(Cmd::Probe(a)) => probe::probe(a),
+        Some(Cmd::CoveragePlot { out, title, files }) => coverage_plot(&out, &title, &files),
         Some(Cmd::Bench {
             quick,
             learning,
@@ -97,6 +110,26 @@ fn run(cli: Cli) -> Result<()> {
             backend,
         }) => bench::run(quick, learning, only, backend.into()),
     }
+}
+
+fn coverage_plot(out: &std::path::Path, title: &str, files: &[String]) -> Result<()> {
+    use anyhow::Context;
+    let mut series = Vec::new();
+    for f in files {
+        let (label, path) = match f.split_once('=') {
+            Some((l, p)) => (l.to_string(), std::path::PathBuf::from(p)),
+            None => {
+                let p = std::path::PathBuf::from(f);
+                let stem = p.file_stem().map_or(f.clone(), |s| s.to_string_lossy().into_owned());
+                (stem, p)
+            }
+        };
+        let csv = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+        series.push((label, csv));
+    }
+    crate::plots::coverage_over_time(out, &series, title)?;
+    println!("plot={}", out.display());
+    Ok(())
 }
 
 fn envs() -> Result<()> {

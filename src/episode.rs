@@ -3,7 +3,7 @@
 
 use agvrl_envs::task::Task;
 use agvrl_envs::wrappers::TimeLimit;
-use agvrl_envs::{EnvConfig, SensorFrame, SimCar, Step, TaskEnv, Vehicle, make, make_task, make_vehicle};
+use agvrl_envs::{EnvConfig, Info, SensorFrame, SimCar, Step, TaskEnv, Vehicle, make, make_task, make_vehicle};
 use agvrl_sim::Sim;
 use anyhow::Result;
 use rand_xoshiro::SplitMix64;
@@ -44,32 +44,28 @@ pub struct StepView<'a> {
     pub done: bool,
     /// Whether it ended by termination (a collision).
     pub terminated: bool,
+    /// The step's info (`None` right after reset).
+    pub info: Option<&'a Info>,
 }
 
 /// Called at every step of every episode.
 pub type Observer<'a> = dyn FnMut(&StepView<'_>) -> Result<()> + 'a;
 
 /// Report the current state of `env` to `obs`.
-pub fn observe(
-    env: &SimEnv,
-    obs: &mut Observer<'_>,
-    episode: usize,
-    step: u64,
-    reward: f64,
-    done: bool,
-    terminated: bool,
-) -> Result<()> {
+/// `st` is the step taken (`None` right after reset, `step` 0).
+pub fn observe(env: &SimEnv, obs: &mut Observer<'_>, episode: usize, step: u64, st: Option<&Step>) -> Result<()> {
     let inner = env.inner();
     if let Some(frame) = inner.last_frame() {
         let sim = inner.vehicle().sim();
         obs(&StepView {
             episode,
             step,
-            reward,
+            reward: st.map_or(0.0, |s| s.reward),
             frame,
             sim,
-            done,
-            terminated,
+            done: st.is_some_and(|s| s.done()),
+            terminated: st.is_some_and(|s| s.terminated),
+            info: st.map(|s| &s.info),
         })?;
     }
     Ok(())
@@ -113,8 +109,5 @@ pub fn drive(
     act: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
     obs: &mut Observer<'_>,
 ) -> Result<(f64, Step)> {
-    agvrl_rl::eval::run_episode(env, seed, act, |env, k, st| match st {
-        None => observe(env, obs, episode, 0, 0.0, false, false),
-        Some(st) => observe(env, obs, episode, k, st.reward, st.done(), st.terminated),
-    })
+    agvrl_rl::eval::run_episode(env, seed, act, |env, k, st| observe(env, obs, episode, k, st))
 }

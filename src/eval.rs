@@ -63,10 +63,16 @@ pub struct EvalArgs {
     /// the policy should beat (e.g. its coverage).
     #[arg(long, conflicts_with = "planner")]
     pub random: bool,
-    /// Drive a planner that knows the map and its exact pose instead of the policy, on the same
-    /// episodes and car (search envs): a reference for how much ground there is to cover.
-    #[arg(long)]
-    pub planner: bool,
+    /// Drive a coverage planner instead of the policy, on the same episodes and car (search
+    /// envs): `map` knows the map and its exact pose (how much ground there is to cover),
+    /// `frontier` is a frontier explorer that builds its map from the LiDAR (the classic
+    /// exploration baseline). A bare `--planner` is `map`.
+    #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "map", value_name = "KIND")]
+    pub planner: Option<planner::Knowledge>,
+    /// Write every episode's coverage after each control to this CSV
+    /// (`episode,step,time_s,coverage`; search envs); `agvrl coverage-plot` overlays several.
+    #[arg(long, value_name = "FILE.csv")]
+    pub coverage_csv: Option<PathBuf>,
 }
 
 /// Who drives an evaluation.
@@ -75,8 +81,8 @@ pub enum Driver<'a> {
     Policy(&'a mut Policy),
     /// Uniform random actions, the baseline a policy should beat.
     Random,
-    /// The map-aware coverage planner (`crate::planner`), search envs only.
-    Planner,
+    /// A coverage planner (`crate::planner`), search envs only.
+    Planner(planner::Knowledge),
 }
 
 /// What deterministic evaluation found.
@@ -96,6 +102,88 @@ pub struct Summary {
     pub filter_interventions: Option<u64>,
     /// Path length, summed over episodes (search envs).
     pub distance_m: f64,
+    /// Per-step figures of search envs.
+    pub search: SearchStats,
+}
+
+/// What a search evaluation measures step by step: the filter's corrections by kind, the ride
+/// (clearance, steering changes) and coverage over time.
+#[derive(Default)]
+pub struct SearchStats {
+    /// The filter's steered and braked controls, reversing ticks and back-outs begun, summed
+    /// over episodes.
+    pub filter: [u64; 4],
+    /// r_m after every step of every episode (the finite ones), metres.
+    pub clearance_m: Vec<f64>,
+    /// |change of the steering sent| from one control to the next, summed, rad; and how many
+    /// changes were summed.
+    pub steering_change_rad: f64,
+    pub steering_changes: u64,
+    /// Per episode, the coverage after each control (not after reset).
+    pub coverage: Vec<Vec<f64>>,
+    /// The control period, s.
+    pub dt_s: f64,
+    last_steering: Option<f64>,
+}
+
+impl SearchStats {
+    fn see(&mut self, v: &StepView<'_>) {
+        if v.step == 0 {
+            self.coverage.push(Vec::new());
+            self.last_steering = None;
+            return;
+        }
+        let Some(info) = v.info.and_then(|i| i.search.as_ref()) else {
+            return;
+        };
+        if let Some(c) = self.coverage.last_mut() {
+            c.push(info.coverage);
+        }
+        if info.clearance_m.is_finite() {
+            self.clearance_m.push(info.clearance_m);
+        }
+        let steer = v.frame.applied.steering_rad;
+        if let Some(p) = self.last_steering {
+            self.steering_change_rad += (steer - p).abs();
+            self.steering_changes += 1;
+        }
+        self.last_steering = Some(steer);
+    }
+
+    /// Per level, the mean time to reach it over the episodes that did, and how many did.
+    pub fn time_to(&self, level: f64) -> (Option<f64>, usize) {
+        let times: Vec<f64> = self
+            .coverage
+            .iter()
+            .filter_map(|c| c.iter().position(|v| *v >= level))
+            .map(|k| (k + 1) as f64 * self.dt_s)
+            .collect();
+        let mean = (!times.is_empty()).then(|| times.iter().sum::<f64>() / times.len() as f64);
+        (mean, times.len())
+    }
+
+    /// The coverage curves as CSV: `episode,step,time_s,coverage`.
+    pub fn coverage_csv(&self) -> String {
+        let mut out = String::from("episode,step,time_s,coverage\n");
+        for (e, c) in self.coverage.iter().enumerate() {
+            for (k, v) in c.iter().enumerate() {
+                let step = k + 1;
+                out.push_str(&format!("{e},{step},{:.4},{v:.5}\n", step as f64 * self.dt_s));
+            }
+        }
+        out
+    }
+}
+
+/// The p-quantile (0..=1) of `v` by the nearest rank.
+fn quantile(v: &[f64], p: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let k = ((p * s.len() as f64).ceil() as usize).clamp(1, s.len());
+    s[k - 1]
 }
 
 impl Summary {
@@ -120,11 +208,41 @@ impl Summary {
                 self.distance_m / self.episodes.max(1) as f64
             ));
         }
+        let per_episode = |n: u64| n as f64 / self.episodes.max(1) as f64;
         if let Some(n) = self.filter_interventions {
+            let f = &self.search.filter;
+            v.push(format!("filter_interventions_per_episode={:.1}", per_episode(n)));
             v.push(format!(
-                "filter_interventions_per_episode={:.1}",
-                n as f64 / self.episodes.max(1) as f64
+                "filter_corrections_per_episode={:.1}",
+                per_episode(f[0] + f[1])
             ));
+            v.push(format!("filter_steered_per_episode={:.1}", per_episode(f[0])));
+            v.push(format!("filter_braked_per_episode={:.1}", per_episode(f[1])));
+            v.push(format!("filter_backouts_per_episode={:.2}", per_episode(f[3])));
+            v.push(format!("filter_backout_ticks_per_episode={:.1}", per_episode(f[2])));
+        }
+        if self.coverage.is_some() {
+            let st = &self.search;
+            let c = &st.clearance_m;
+            if !c.is_empty() {
+                v.push(format!(
+                    "clearance_mean_m={:.3}",
+                    c.iter().sum::<f64>() / c.len() as f64
+                ));
+                v.push(format!("clearance_p5_m={:.3}", quantile(c, 0.05)));
+            }
+            v.push(format!(
+                "steering_change_mean_rad={:.4}",
+                st.steering_change_rad / st.steering_changes.max(1) as f64
+            ));
+            for pct in [25, 50] {
+                let (t, n) = st.time_to(pct as f64 / 100.0);
+                v.push(format!(
+                    "time_to_coverage_{pct}_s={}",
+                    t.map_or("not_reached".to_string(), |t| format!("{t:.1}"))
+                ));
+                v.push(format!("coverage_{pct}_reached={n}/{}", self.episodes));
+            }
         }
         if self.racing {
             v.push(format!("laps={}", self.laps));
@@ -168,6 +286,13 @@ fn account(s: &mut Summary, st: &Step, cov_sum: &mut f64) {
         if let Some(n) = &mut s.filter_interventions {
             *n += c.filter_interventions;
         }
+        let f = &mut s.search.filter;
+        for (k, n) in [c.filter_steered, c.filter_braked, c.filter_reversed, c.filter_backouts]
+            .into_iter()
+            .enumerate()
+        {
+            f[k] += n;
+        }
     }
 }
 
@@ -192,9 +317,10 @@ pub fn evaluate(
         ended: Vec::new(),
         filter_interventions: None,
         distance_m: 0.0,
+        search: SearchStats::default(),
     };
     let search = agvrl_envs::registry::spec(env_id).is_some_and(|s| s.task == agvrl_envs::TaskKind::Search);
-    if matches!(driver, Driver::Planner) && !search {
+    if matches!(driver, Driver::Planner(_)) && !search {
         bail!("the planner covers ground: it needs a search env, not {env_id}");
     }
     if search && env_cfg.safety_filter.enabled {
@@ -216,17 +342,32 @@ pub fn evaluate(
         Some(mut env) => {
             check(&env.observation_space(), &env.action_space(), &driver)?;
             let space = env.action_space();
+            let stats = std::cell::RefCell::new(SearchStats {
+                dt_s: env.dt_s(),
+                ..SearchStats::default()
+            });
+            let mut see = |v: &StepView<'_>| {
+                if search {
+                    stats.borrow_mut().see(v);
+                }
+                obs(v)
+            };
             for k in 0..episodes {
                 let (ret, last) = match driver {
-                    Driver::Planner => planner::drive(&mut env, seed + k as u64, k, obs)?,
+                    Driver::Planner(kind) => planner::drive(&mut env, kind, seed + k as u64, k, &mut see)?,
                     _ => {
                         let mut act = |o: &[f32]| act_of(&mut driver, &space, o);
-                        drive(&mut env, seed + k as u64, k, &mut act, obs)?
+                        drive(&mut env, seed + k as u64, k, &mut act, &mut see)?
                     }
                 };
                 s.mean_return += ret;
                 account(&mut s, &last, &mut cov_sum);
             }
+            let f = s.search.filter;
+            s.search = SearchStats {
+                filter: f,
+                ..stats.into_inner()
+            };
         }
         None => {
             let mut env = make(env_id, env_cfg)?;
@@ -347,7 +488,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         bail!("--episodes must be at least 1");
     }
     let src = eval_source(&a)?;
-    let mut policy = match a.random || a.planner {
+    let mut policy = match a.random || a.planner.is_some() {
         true => None,
         false => {
             Some(Policy::load(&src.policy_path).with_context(|| format!("loading {}", src.policy_path.display()))?)
@@ -375,6 +516,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     }
     if let Some(f) = &a.safety_filter {
         env_cfg.safety_filter.enabled = f == "on";
+        env_cfg.safety_filter.advisory = false;
     }
     if let Some(n) = a.max_steps {
         if n == 0 {
@@ -394,8 +536,8 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     }
     let driver = match (&mut policy, a.planner) {
         (Some(p), _) => Driver::Policy(p),
-        (None, true) => Driver::Planner,
-        (None, false) => Driver::Random,
+        (None, Some(kind)) => Driver::Planner(kind),
+        (None, None) => Driver::Random,
     };
     let s = evaluate(driver, &env_id, &env_cfg, a.episodes, seed, &mut |v| watch.see(v))?;
     println!("env={env_id}");
@@ -403,8 +545,11 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         "policy={}",
         if a.random {
             "random".to_string()
-        } else if a.planner {
-            "planner".to_string()
+        } else if let Some(kind) = a.planner {
+            match kind {
+                planner::Knowledge::Map => "planner".to_string(),
+                planner::Knowledge::Frontier => "frontier".to_string(),
+            }
         } else if a.run.is_some() {
             POLICY_FILE.to_string()
         } else {
@@ -422,6 +567,13 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     for l in s.lines() {
         println!("{l}");
     }
+    if let Some(p) = &a.coverage_csv {
+        if s.coverage.is_none() {
+            bail!("--coverage-csv needs a search env, not {env_id}");
+        }
+        crate::runs::write_atomic(p, s.search.coverage_csv().as_bytes())?;
+        println!("coverage_csv={}", p.display());
+    }
     if let Some(r) = watch.rec.take()
         && let Some(p) = r.finish()?
     {
@@ -430,7 +582,8 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     if let Some(p) = &a.plot {
         let driver = match (a.random, a.planner) {
             (true, _) => "random actions",
-            (_, true) => "map-aware planner",
+            (_, Some(planner::Knowledge::Map)) => "map-aware planner",
+            (_, Some(planner::Knowledge::Frontier)) => "frontier explorer",
             _ => src.algo.as_str(),
         };
         if !watch.plot(p, &format!("{env_id} {driver}: deterministic evaluation"))? {
@@ -439,4 +592,33 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         println!("plot={}", p.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{SearchStats, quantile};
+
+    #[test]
+    fn quantile_takes_the_nearest_rank() {
+        let v: Vec<f64> = (1..=100).rev().map(f64::from).collect();
+        assert_eq!(quantile(&v, 0.05), 5.0);
+        assert_eq!(quantile(&v, 0.0), 1.0);
+        assert_eq!(quantile(&v, 1.0), 100.0);
+        assert_eq!(quantile(&[2.5], 0.05), 2.5);
+        assert!(quantile(&[], 0.05).is_nan());
+    }
+
+    #[test]
+    fn time_to_a_coverage_level_counts_only_the_episodes_that_reach_it() {
+        let s = SearchStats {
+            coverage: vec![vec![0.1, 0.3, 0.6], vec![0.2, 0.2, 0.26], vec![0.1]],
+            dt_s: 0.5,
+            ..SearchStats::default()
+        };
+        // 0.25: after control 2 (1 s) and control 3 (1.5 s); the third episode never.
+        assert_eq!(s.time_to(0.25), (Some(1.25), 2));
+        assert_eq!(s.time_to(0.5), (Some(1.5), 1));
+        assert_eq!(s.time_to(0.9), (None, 0));
+        assert_eq!(s.coverage_csv().lines().nth(3), Some("0,3,1.5000,0.60000"));
+    }
 }

@@ -1,11 +1,18 @@
-//! `agvrl eval --planner`: a coverage reference for the search envs. A planner that knows the
-//! map and its exact pose (what no policy gets) drives the same car, with the same settings,
-//! safety filter and held-out episodes as the policy it is compared with.
+//! `agvrl eval --planner map|frontier`: coverage references for the search envs, driving the
+//! same car, with the same settings, safety filter and held-out episodes as the policy they are
+//! compared with.
 //!
-//! Every few controls it runs Dijkstra over a 0.25 m grid of the positions `INFLATE_M` clear of
-//! every obstacle, heads for the cell with the most uncovered ground within the coverage radius
-//! per metre of cost (path length, a fixed cost, and the turn towards it), and follows that path
-//! by pure pursuit at full throttle.
+//! - `map`: knows the map and its exact pose (what no policy gets). Every few controls it runs
+//!   Dijkstra over a 0.25 m grid of the positions `INFLATE_M` clear of every obstacle, heads for
+//!   the cell with the most uncovered ground within the coverage radius per metre of cost (path
+//!   length, a fixed cost, and the turn towards it), and follows that path by pure pursuit at
+//!   full throttle.
+//! - `frontier`: a frontier explorer (explore_lite's kind, for coverage) that knows no map: the
+//!   same grid, but a position is open unless a LiDAR return (placed by the pose fix) lies
+//!   within `INFLATE_M` of it (unknown ground counts as open, and a path through it is replanned
+//!   once the LiDAR sees what is there); its targets are frontier cells of a 0.5 m coverage grid
+//!   over the arena's bounds (not yet within the coverage radius, not seen occupied, next to a
+//!   covered cell), scored as the map planner scores its targets.
 
 use crate::episode::{Observer, SimEnv, observe};
 use agvrl_envs::api::MapInfo;
@@ -32,8 +39,18 @@ const MIN_GAIN: usize = 3;
 const STUCK_M: f32 = 0.3;
 const STUCK_STEPS: u64 = 45;
 
+/// What a planner knows of the world.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Knowledge {
+    /// The map and the exact pose.
+    Map,
+    /// What the LiDAR has returned so far, placed by the pose fix (a frontier explorer).
+    Frontier,
+}
+
 /// The grid of open positions, the ground each one covers, and what is covered so far.
 struct Planner {
+    knowledge: Knowledge,
     origin: [f32; 2],
     nx: i32,
     ny: i32,
@@ -45,13 +62,33 @@ struct Planner {
     covered: Vec<bool>,
     /// Targets given up after the car got stuck on the way.
     banned: Vec<bool>,
+    /// Frontier: coverage cells a LiDAR return fell in.
+    occupied: Vec<bool>,
+    /// Frontier: the coverage cell under each planning cell's centre.
+    cover_of: Vec<i32>,
 }
 
 impl Planner {
-    fn new(sim: &agvrl_sim::Sim, map: &MapInfo) -> Self {
-        let cover = CoverageGrid::new(map);
-        let cover_m = SearchConfig::default().coverage_radius_m;
+    fn new(sim: &agvrl_sim::Sim, map: &MapInfo, knowledge: Knowledge) -> Self {
         let half = map.half_extent_m;
+        let cover = match knowledge {
+            Knowledge::Map => CoverageGrid::new(map),
+            // Every cell of the arena: which ones are free is what the explorer finds out.
+            Knowledge::Frontier => {
+                let c = map.cell_m.max(1e-3);
+                let (nx, ny) = ((2.0 * half[0] / c).ceil() as i32, (2.0 * half[1] / c).ceil() as i32);
+                let free_cells = (0..nx)
+                    .flat_map(|i| {
+                        (0..ny).map(move |j| [-half[0] + (i as f32 + 0.5) * c, -half[1] + (j as f32 + 0.5) * c])
+                    })
+                    .collect();
+                CoverageGrid::new(&MapInfo {
+                    free_cells,
+                    ..map.clone()
+                })
+            }
+        };
+        let cover_m = SearchConfig::default().coverage_radius_m;
         let origin = [-half[0], -half[1]];
         let nx = (2.0 * half[0] / PLAN_CELL_M) as i32;
         let ny = (2.0 * half[1] / PLAN_CELL_M) as i32;
@@ -61,13 +98,27 @@ impl Planner {
             for j in 0..ny {
                 let (x, y) = Self::centre(origin, i, j);
                 let k = (i * ny + j) as usize;
-                open[k] = sim.free_at(x, y, INFLATE_M);
+                open[k] = knowledge == Knowledge::Frontier || sim.free_at(x, y, INFLATE_M);
                 if open[k] {
                     cover.for_each_within(x, y, cover_m, |c| sees[k].push(c as u32));
                 }
             }
         }
+        let mut cover_of = Vec::new();
+        if knowledge == Knowledge::Frontier {
+            cover_of = (0..nx * ny)
+                .map(|k| {
+                    let (x, y) = Self::centre(origin, k / ny, k % ny);
+                    let mut at = -1;
+                    cover.for_each_within(x, y, 0.5 * map.cell_m, |c| at = c as i32);
+                    at
+                })
+                .collect();
+        }
         Self {
+            knowledge,
+            occupied: vec![false; cover.len()],
+            cover_of,
             origin,
             nx,
             ny,
@@ -97,6 +148,37 @@ impl Planner {
     fn visit(&mut self, x: f32, y: f32) {
         let covered = &mut self.covered;
         self.cover.for_each_within(x, y, self.cover_m, |c| covered[c] = true);
+    }
+
+    /// Frontier: a LiDAR return at (x, y) closes the positions within `INFLATE_M` of it and
+    /// marks its coverage cell occupied.
+    fn hit(&mut self, x: f32, y: f32) {
+        let occupied = &mut self.occupied;
+        self.cover.for_each_within(x, y, 0.3, |c| occupied[c] = true);
+        let (ci, cj) = self.cell_of(x, y);
+        let r = (INFLATE_M / PLAN_CELL_M).ceil() as i32 + 1;
+        for i in (ci - r).max(0)..=(ci + r).min(self.nx - 1) {
+            for j in (cj - r).max(0)..=(cj + r).min(self.ny - 1) {
+                let (px, py) = Self::centre(self.origin, i, j);
+                if (px - x).hypot(py - y) < INFLATE_M {
+                    self.open[(i * self.ny + j) as usize] = false;
+                }
+            }
+        }
+    }
+
+    /// Frontier: whether planning cell `k` lies on a frontier cell (free as far as the LiDAR
+    /// knows, not yet covered, next to a covered cell).
+    fn on_frontier(&self, k: usize) -> bool {
+        let c = self.cover_of[k];
+        if c < 0 || self.covered[c as usize] || self.occupied[c as usize] {
+            return false;
+        }
+        let (x, y) = Self::centre(self.origin, k as i32 / self.ny, k as i32 % self.ny);
+        let mut next_to_covered = false;
+        self.cover
+            .for_each_within(x, y, 0.75, |n| next_to_covered |= self.covered[n]);
+        next_to_covered
     }
 
     /// The path (cell centres, from the car) to the best target, if any.
@@ -156,7 +238,13 @@ impl Planner {
             if !d.is_finite() || self.banned[k] {
                 continue;
             }
-            let gain = self.sees[k].iter().filter(|&&c| !self.covered[c as usize]).count();
+            if self.knowledge == Knowledge::Frontier && !self.on_frontier(k) {
+                continue;
+            }
+            let gain = self.sees[k]
+                .iter()
+                .filter(|&&c| !self.covered[c as usize] && !self.occupied[c as usize])
+                .count();
             if gain < MIN_GAIN {
                 continue;
             }
@@ -194,13 +282,13 @@ pub struct CoveragePlanner {
 
 impl CoveragePlanner {
     /// A planner for the episode `env` has just been reset to.
-    pub fn new(env: &SimEnv) -> Result<Self> {
+    pub fn new(env: &SimEnv, knowledge: Knowledge) -> Result<Self> {
         let car = env.inner().vehicle();
         let map = car.map().context("the planner needs a map: a search env")?;
         let sim = car.sim();
         let p = sim.pose2();
         Ok(Self {
-            grid: Planner::new(sim, map),
+            grid: Planner::new(sim, map, knowledge),
             wheelbase_m: sim.vehicle().wheelbase_m,
             steering_limit_rad: car.steering_limit_rad() as f32,
             path: Vec::new(),
@@ -211,8 +299,23 @@ impl CoveragePlanner {
 
     /// The action for the state `env` is in.
     pub fn act(&mut self, env: &SimEnv) -> Vec<f32> {
-        let p = env.inner().vehicle().sim().pose2();
+        let sim = env.inner().vehicle().sim();
+        let p = sim.pose2();
         self.grid.visit(p.x_m, p.y_m);
+        if self.grid.knowledge == Knowledge::Frontier
+            && let Some(scan) = env.inner().last_frame().and_then(|f| f.scan.as_ref())
+        {
+            let l = sim.lidar_pose();
+            let fwd = l.rotation * rapier3d::prelude::Vector::X;
+            let yaw = fwd.y.atan2(fwd.x);
+            for (i, (r, hit)) in scan.ranges.iter().zip(&scan.hit).enumerate() {
+                if *hit && r.is_finite() {
+                    let b = yaw + scan.angle_min + i as f32 * scan.angle_increment;
+                    self.grid
+                        .hit(l.translation.x + r * b.cos(), l.translation.y + r * b.sin());
+                }
+            }
+        }
         if (p.x_m - self.moved.1).hypot(p.y_m - self.moved.2) > STUCK_M {
             self.moved = (self.step, p.x_m, p.y_m);
         } else if self.step - self.moved.0 > STUCK_STEPS {
@@ -251,7 +354,13 @@ impl CoveragePlanner {
 }
 
 /// Drive one episode of `env` with the planner, reporting every step (as `episode::drive`).
-pub fn drive(env: &mut SimEnv, seed: u64, episode: usize, obs: &mut Observer<'_>) -> Result<(f64, Step)> {
+pub fn drive(
+    env: &mut SimEnv,
+    knowledge: Knowledge,
+    seed: u64,
+    episode: usize,
+    obs: &mut Observer<'_>,
+) -> Result<(f64, Step)> {
     let planner: RefCell<Option<CoveragePlanner>> = RefCell::new(None);
     let next = RefCell::new(vec![0.0f32; 2]);
     agvrl_rl::eval::run_episode(
@@ -259,13 +368,10 @@ pub fn drive(env: &mut SimEnv, seed: u64, episode: usize, obs: &mut Observer<'_>
         seed,
         |_| Ok::<_, anyhow::Error>(next.borrow().clone()),
         |env, k, st| {
-            match st {
-                None => observe(env, obs, episode, 0, 0.0, false, false)?,
-                Some(st) => observe(env, obs, episode, k, st.reward, st.done(), st.terminated)?,
-            }
+            observe(env, obs, episode, k, st)?;
             let mut p = planner.borrow_mut();
             if k == 0 {
-                *p = Some(CoveragePlanner::new(env)?);
+                *p = Some(CoveragePlanner::new(env, knowledge)?);
             }
             if let Some(p) = p.as_mut() {
                 *next.borrow_mut() = p.act(env);

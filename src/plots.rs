@@ -96,6 +96,95 @@ pub fn learning_curve(path: &Path, points: &[(f64, f64)], title: &str) -> Result
     })
 }
 
+/// Mean coverage against time of each `(label, csv)` (`agvrl eval --coverage-csv` output: an
+/// episode that ended early keeps its last coverage to the end).
+pub fn coverage_over_time(path: &Path, series: &[(String, String)], title: &str) -> Result<()> {
+    let mut lines = Vec::new();
+    for (label, csv) in series {
+        let mut episodes: Vec<Vec<(f64, f64)>> = Vec::new();
+        for (n, l) in csv.lines().enumerate().skip(1) {
+            let f: Vec<&str> = l.split(',').collect();
+            let bad = || anyhow!("{label}: line {} is not episode,step,time_s,coverage", n + 1);
+            let [e, _, t, c] = f[..] else { return Err(bad()) };
+            let (e, t, c): (usize, f64, f64) = (
+                e.parse().map_err(|_| bad())?,
+                t.parse().map_err(|_| bad())?,
+                c.parse().map_err(|_| bad())?,
+            );
+            if e >= episodes.len() {
+                episodes.resize(e + 1, Vec::new());
+            }
+            episodes[e].push((t, c));
+        }
+        let longest = episodes.iter().map(Vec::len).max().unwrap_or(0);
+        let Some(times) = episodes
+            .iter()
+            .find(|e| e.len() == longest)
+            .map(|e| e.iter().map(|p| p.0).collect::<Vec<_>>())
+        else {
+            return Err(anyhow!("{label}: no coverage rows"));
+        };
+        let mean: Vec<(f64, f64)> = times
+            .iter()
+            .enumerate()
+            .map(|(k, t)| {
+                let sum: f64 = episodes
+                    .iter()
+                    .map(|e| e.get(k).or(e.last()).map_or(0.0, |p| p.1))
+                    .sum();
+                (*t, sum / episodes.len().max(1) as f64)
+            })
+            .collect();
+        lines.push((label.clone(), mean));
+    }
+    render_png(path, (900, 560), |root| {
+        let e = |e: DrawingAreaErrorKind<_>| anyhow!("plot: {e}");
+        let t1 = lines
+            .iter()
+            .flat_map(|l| l.1.last())
+            .map(|p| p.0)
+            .fold(1.0f64, f64::max);
+        let c1 = lines
+            .iter()
+            .flat_map(|l| l.1.iter())
+            .map(|p| p.1)
+            .fold(0.1f64, f64::max);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 22))
+            .margin(16)
+            .x_label_area_size(44)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..t1, 0.0..(c1 * 1.05).min(1.0))
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("time, s")
+            .y_desc("mean coverage")
+            .label_style(("sans-serif", 15))
+            .draw()
+            .map_err(e)?;
+        for (k, (label, pts)) in lines.iter().enumerate() {
+            let color = Palette99::pick(k).to_rgba();
+            // A driver whose episodes all ended early keeps its coverage to the plot's end.
+            let hold = pts.last().filter(|p| p.0 < t1).map(|p| (t1, p.1));
+            chart
+                .draw_series(LineSeries::new(pts.iter().copied().chain(hold), color.stroke_width(2)))
+                .map_err(e)?
+                .label(label.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 15))
+            .draw()
+            .map_err(e)?;
+        Ok(())
+    })
+}
+
 /// An evaluated path: world (x, y) points and whether it ended in a collision.
 pub struct Path2 {
     pub xy: Vec<(f32, f32)>,

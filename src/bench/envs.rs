@@ -97,9 +97,10 @@ pub(super) fn run(quick: bool) -> Vec<String> {
 }
 
 /// The shipped search policy driving its own car (270 degree LiDAR, reverse, the safety filter
-/// and its back-out), deterministic actions, one thread, policy inference included: what the
-/// search evaluation steps. The filter checks paths against the points it remembers, so these
-/// steps cost more than the bare task's, most where walls stand close.
+/// and its back-out; and the bare policy, filter off), deterministic actions, one thread, policy
+/// inference included: what the search evaluation steps. The filter checks paths against the
+/// points it remembers, so these steps cost more than the bare task's, most where walls stand
+/// close.
 fn shipped_search(steps: usize, reps: usize) -> Vec<String> {
     let path = std::path::Path::new(SHIPPED_SEARCH);
     let loaded = (|| -> anyhow::Result<_> {
@@ -115,8 +116,14 @@ fn shipped_search(steps: usize, reps: usize) -> Vec<String> {
         Err(e) => return vec![format!("settings=shipped_search error=\"{e}\"")],
     };
     let mut out = Vec::new();
-    for id in ["search-urban-20", "search-outdoor-50"] {
-        let Ok(mut env) = make(id, &cfg.eval_env_config()) else {
+    for (id, filter) in [
+        ("search-urban-20", true),
+        ("search-outdoor-50", true),
+        ("search-urban-20", false),
+    ] {
+        let mut env_cfg = cfg.eval_env_config();
+        env_cfg.safety_filter.enabled = filter;
+        let Ok(mut env) = make(id, &env_cfg) else {
             continue;
         };
         let Ok((mut obs, _)) = env.reset(Some(0)) else { continue };
@@ -132,7 +139,8 @@ fn shipped_search(steps: usize, reps: usize) -> Vec<String> {
         run(steps / 5);
         let t = (0..reps).map(|_| timed_s(|| run(steps))).collect();
         out.push(format!(
-            "env={id} settings=shipped_search policy=shipped steps_per_s={:.0} reps={reps}",
+            "env={id} settings=shipped_search filter={} policy=shipped steps_per_s={:.0} reps={reps}",
+            if filter { "on" } else { "off" },
             steps as f64 / median(t)
         ));
     }
