@@ -131,6 +131,8 @@ fn policy_and_env(a: &Args) -> Result<(Option<PathBuf>, String, EnvConfig)> {
     if cfg.layout_seed.is_none() {
         cfg.new_layout_each_episode = false;
     }
+    // An advising filter is a training setting: on the car the filter acts.
+    cfg.safety_filter.advisory = false;
     Ok((policy, env, cfg))
 }
 
