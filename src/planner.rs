@@ -23,7 +23,7 @@ use anyhow::{Context, Result};
 use std::cell::RefCell;
 use std::collections::BinaryHeap;
 
-// Tuned on validation episodes (seed base 1,000,000) of the 20 m scenes, not on the README's.
+// Tuned on validation episodes (seed base 1,000,000) of the 20 m scenes, not on docs/search.md's.
 const PLAN_CELL_M: f32 = 0.25;
 const INFLATE_M: f32 = 0.4;
 /// The frontier explorer's clearance from LiDAR returns, metres: its paths cross ground it has

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The held-out search table of the bare policy (README: Search): a policy with its safety filter
+# The held-out search table of the bare policy (docs/search.md): a policy with its safety filter
 # off (the bare network) and on, on the same 100 held-out episodes (1,000 steps) of every search scene, on
 # the built-in maps and on new procedural layouts, without and with sim2real noise and
 # randomisation; beside it the frontier explorer and the map-aware planner on the same car and

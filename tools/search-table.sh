@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The held-out search table of the README: a policy and the uniform random policy on the same
+# The held-out search table of docs/search.md: a policy and the uniform random policy on the same
 # 100 held-out episodes (1,000 steps) of every search scene, on the built-in maps and on new
 # procedural layouts, without and with sim2real noise and randomisation.
 #   tools/search-table.sh [POLICY] [EPISODES] [SEED] [FILTER]

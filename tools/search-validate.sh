@@ -2,7 +2,7 @@
 # The validation score that picks which training of a search config ships (and the safety
 # filter's settings): terminations over 50 held-out episodes per search scene, on the built-in
 # maps and on new procedural layouts, without and with sim2real noise, with evaluation seeds from
-# 1,000,000 (the README's table uses seed base 0, so the choice never sees the table's
+# 1,000,000 (docs/search.md's table uses seed base 0, so the choice never sees the table's
 # episodes). The rule: among the trainings within 2 terminations of the fewest, the one with the
 # highest mean coverage ships (terminations first, since every target bounds them; coverage
 # next, since the coverage targets are the ones a fresh training misses).
