@@ -88,7 +88,7 @@ where
     match run(cli) {
         Ok(()) => 0,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", agvrl_run::error_line(e.as_ref()));
             1
         }
     }

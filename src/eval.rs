@@ -490,9 +490,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     let src = eval_source(&a)?;
     let mut policy = match a.random || a.planner.is_some() {
         true => None,
-        false => {
-            Some(Policy::load(&src.policy_path).with_context(|| format!("loading {}", src.policy_path.display()))?)
-        }
+        false => Some(Policy::load(&src.policy_path)?),
     };
     let env_id = a
         .env

@@ -64,7 +64,7 @@ pub fn view(a: ViewArgs) -> Result<()> {
     let mut env = make_sim_env(&env_id, &env_cfg)?.with_context(|| format!("{env_id} has no vehicle to view"))?;
     let mut policy = match &policy_path {
         Some(p) => {
-            let pol = Policy::load(p).with_context(|| format!("loading {}", p.display()))?;
+            let pol = Policy::load(p)?;
             pol.check_spaces(&env.observation_space(), &env.action_space())
                 .context("the policy does not fit this env")?;
             Some(pol)

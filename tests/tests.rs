@@ -176,6 +176,30 @@ mod cli {
     }
 
     #[test]
+    fn an_error_is_one_line_naming_the_file_and_the_reason_once() {
+        let d = tmp("errors");
+        let missing = d.path().join("missing.agvrl");
+        let m = missing.to_str().unwrap();
+        let no_run = d.path().join("no-run");
+        let cases: [(Vec<&str>, &str); 3] = [
+            (vec!["eval", "--policy", m, "--env", "racing-oval"], m),
+            (vec!["eval", "--run", no_run.to_str().unwrap()], "config.toml"),
+            (
+                vec!["view", "--policy", m, "--env", "racing-oval", "--rerun", "x.rrd"],
+                m,
+            ),
+        ];
+        for (args, file) in cases {
+            let o = agvrl(&args);
+            assert!(!o.status.success(), "{args:?}");
+            let err = stderr(&o);
+            assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
+            assert_eq!(err.matches(file).count(), 1, "{args:?}: {err}");
+            assert_eq!(err.matches("os error 2").count(), 1, "{args:?}: {err}");
+        }
+    }
+
+    #[test]
     fn ctrl_c_leaves_a_complete_run_that_resume_continues() {
         let d = tmp("ctrlc");
         let run = d.path().join("run");

@@ -119,12 +119,12 @@ pub fn run_config(config: &Bound<'_, PyAny>, overrides: Option<&Bound<'_, PyDict
         merge(&mut t, to_table(o, "overrides")?);
     }
     let text = toml::to_string(&t).map_err(value_err)?;
-    RunConfig::from_toml(&text, &origin).map_err(|e| PyValueError::new_err(format!("{e:#}")))
+    RunConfig::from_toml(&text, &origin).map_err(|e| PyValueError::new_err(agvrl_run::error_line(&e)))
 }
 
 /// `env` and `[env_config]` of a run TOML (a policy's settings file), read as `agvrl eval` reads it.
 pub fn run_file_env(path: &Path) -> PyResult<(String, EnvConfig)> {
-    let cfg = RunConfig::load(path).map_err(|e| PyValueError::new_err(format!("{e:#}")))?;
+    let cfg = RunConfig::load(path).map_err(|e| PyValueError::new_err(agvrl_run::error_line(&e)))?;
     Ok((cfg.env, cfg.env_config))
 }
 

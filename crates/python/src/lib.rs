@@ -93,7 +93,7 @@ fn build(env_id: &str, cfg: &EnvConfig) -> Result<Inner, EnvError> {
         Ok(None) => Ok(Inner::Other(make(env_id, cfg)?)),
         Err(e) => Err(match e.downcast::<EnvError>() {
             Ok(e) => e,
-            Err(e) => EnvError::Config(format!("{e:#}")),
+            Err(e) => EnvError::Config(agvrl_run::error_line(e.as_ref())),
         }),
     }
 }
@@ -243,7 +243,7 @@ impl Env {
                     let scan = frame.and_then(|f| f.scan.as_ref());
                     agvrl::plots::top_view(sim, scan, size.clamp(32, 4096))
                         .map(Some)
-                        .map_err(|e| PyRuntimeError::new_err(format!("render: {e:#}")))
+                        .map_err(|e| PyRuntimeError::new_err(format!("render: {}", agvrl_run::error_line(e.as_ref()))))
                 })
             })?;
             image
@@ -566,7 +566,7 @@ fn train(
             .name("agvrl-train".into())
             .spawn(move || {
                 agvrl::train::train_run(cfg, out, &device, &flag, agvrl::train::ProgressMode::Bar)
-                    .map_err(|e| format!("{e:#}"))
+                    .map_err(|e| agvrl_run::error_line(e.as_ref()))
             })
             .map_err(|e| PyRuntimeError::new_err(format!("starting the trainer: {e}")))?;
         // The trainer runs without the GIL; this thread wakes to let Python see Ctrl-C.

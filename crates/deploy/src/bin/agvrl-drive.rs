@@ -94,7 +94,7 @@ struct TraceRow {
 
 fn main() {
     if let Err(e) = run() {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", agvrl_run::error_line(e.as_ref()));
         std::process::exit(1);
     }
 }
@@ -161,7 +161,7 @@ fn run() -> Result<()> {
     let Some(policy_path) = policy_path else {
         bail!("give --run DIR or --policy FILE (e.g. assets/policies/racing-oval-ppo.agvrl)");
     };
-    let mut policy = Policy::load(&policy_path).with_context(|| format!("loading {}", policy_path.display()))?;
+    let mut policy = Policy::load(&policy_path)?;
     if let Some(trace) = &a.check_trace {
         return check_trace(&mut policy, trace, a.tolerance);
     }
