@@ -1,7 +1,7 @@
 //! The `agvrl` command line (the `agvrl` binary, and the `agvrl` script of the Python wheel).
 
 use crate::bench::{self, BenchPart};
-use crate::{eval, probe, train, view};
+use crate::{eval, policy_file, probe, train, view};
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
@@ -20,6 +20,9 @@ enum Cmd {
     Eval(eval::EvalArgs),
     /// Drive one episode (a policy, or random actions) into the rerun viewer or an .rrd file.
     View(view::ViewArgs),
+    /// Print the settings a policy file drives with (env id, env settings), or write a copy
+    /// with other settings embedded (--settings, --set, --out).
+    Policy(policy_file::PolicyArgs),
     /// List the environment ids with their observation and action spaces.
     Envs,
     /// Overlay the mean coverage over time of `eval --coverage-csv` files in one PNG.
@@ -100,6 +103,7 @@ fn run(cli: Cli) -> Result<()> {
         Some(Cmd::Train(a)) => train::train(a),
         Some(Cmd::Eval(a)) => eval::eval(a),
         Some(Cmd::View(a)) => view::view(a),
+        Some(Cmd::Policy(a)) => policy_file::policy(a),
         Some(Cmd::Envs) => envs(),
         Some(Cmd::Probe(a)) => probe::probe(a),
         Some(Cmd::CoveragePlot { out, title, files }) => coverage_plot(&out, &title, &files),

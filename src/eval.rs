@@ -1,28 +1,62 @@
 //! `agvrl eval`: deterministic evaluation of a policy on held-out episodes, its summary lines,
 //! trajectory plot and recording (training runs it at the end too).
 
-use crate::config::RunConfig;
 use crate::episode::{Observer, RandomActions, StepView, drive, make_sim_env};
 use crate::planner;
 use crate::plots::{self, Path2};
-use crate::train::POLICY_FILE;
 use crate::viz::{self, Recorder};
 use agvrl_envs::{Env, EnvConfig, Step, make};
 use agvrl_rl::Policy;
+use agvrl_run::{PolicySettings, files};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use std::path::PathBuf;
+
+/// `eval --layouts`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Layouts {
+    /// The env's own map.
+    Builtin,
+    /// A new held-out procedural layout of the env's kind and size every episode.
+    Procedural,
+}
+
+/// `eval --preset`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Preset {
+    /// Sensor noise, latency and domain randomisation (`EnvConfig::sim2real`).
+    Sim2real,
+}
+
+/// `eval --safety-filter`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Switch {
+    /// On.
+    On,
+    /// Off.
+    Off,
+}
+
+/// The name a value enum has on the command line (and in eval's output).
+fn arg_name(v: impl clap::ValueEnum) -> String {
+    v.to_possible_value()
+        .map_or_else(String::new, |p| p.get_name().to_string())
+}
 
 #[derive(Args)]
 pub struct EvalArgs {
     /// A run directory written by `agvrl train` (its policy, env and env settings).
     #[arg(long, required_unless_present = "policy", conflicts_with = "policy")]
     pub run: Option<PathBuf>,
-    /// A policy file; env and env settings come from FILE.toml beside it when present (a run's
-    /// config.toml, as shipped in assets/policies), else from the config.toml of the run
-    /// directory holding it (runs/<dir>/policy.agvrl), else --env with the default settings.
+    /// A policy file; env and env settings are the ones embedded in it (`agvrl policy FILE`
+    /// prints them), or for files written before settings were embedded, FILE.toml beside it,
+    /// else the config.toml of the run directory holding it, else --env with the defaults.
     #[arg(long)]
     pub policy: Option<PathBuf>,
+    /// Override one of the policy's settings, KEY=VALUE as `agvrl train --set`
+    /// (`--set env_config.safety_filter.clearance_m=0.7`).
+    #[arg(long, value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
     /// Base of the evaluation episodes' seeds: episode k resets with seed S + k, drawn from the
     /// held-out half of the seed space that training never uses (default: the run's seed +
     /// 2,000,000, or 0 for --policy).
@@ -30,16 +64,16 @@ pub struct EvalArgs {
     pub seed: Option<u64>,
     /// Maps: builtin (the env's own map) or procedural (a new held-out layout of the env's kind
     /// and size every episode, never one a training run drew).
-    #[arg(long, default_value = "builtin", value_parser = ["builtin", "procedural"])]
-    pub layouts: String,
+    #[arg(long, value_enum, default_value_t = Layouts::Builtin)]
+    pub layouts: Layouts,
     /// Env preset applied on top of the policy's env settings: sim2real adds sensor noise,
     /// latency and domain randomisation.
-    #[arg(long, value_parser = ["sim2real"])]
-    pub preset: Option<String>,
+    #[arg(long, value_enum)]
+    pub preset: Option<Preset>,
     /// Turn the LiDAR safety filter between policy and drive on or off, whatever the policy's
     /// settings say (`off`: the network's own actions reach the drive).
-    #[arg(long, value_parser = ["on", "off"])]
-    pub safety_filter: Option<String>,
+    #[arg(long, value_enum)]
+    pub safety_filter: Option<Switch>,
     /// Episode length limit, control steps (default: the run's evaluation limit).
     #[arg(long)]
     pub max_steps: Option<u64>,
@@ -434,86 +468,33 @@ impl Watch {
     }
 }
 
-/// Where `agvrl eval` takes its policy and settings from.
-struct EvalSource {
-    policy_path: PathBuf,
-    env: Option<String>,
-    env_config: EnvConfig,
-    algo: String,
-    seed: u64,
-    /// Where the env settings came from (a TOML path, or `default`).
-    settings: String,
-}
-
-fn eval_source(a: &EvalArgs) -> Result<EvalSource> {
-    if let Some(dir) = &a.run {
-        let cfg = RunConfig::load(&dir.join("config.toml"))
-            .with_context(|| format!("{} is not a run directory", dir.display()))?;
-        return Ok(EvalSource {
-            policy_path: dir.join(POLICY_FILE),
-            env: Some(cfg.env.clone()),
-            env_config: cfg.eval_env_config(),
-            algo: cfg.algo.to_string(),
-            seed: cfg.seed + 2_000_000,
-            settings: dir.join("config.toml").display().to_string(),
-        });
-    }
-    let Some(path) = &a.policy else {
-        bail!("give --run DIR or --policy FILE");
-    };
-    let (env, env_config, algo, settings) = match agvrl_deploy::settings_beside(path) {
-        Some(side) => {
-            let cfg = RunConfig::load(&side).with_context(|| format!("reading {}", side.display()))?;
-            (
-                Some(cfg.env.clone()),
-                cfg.eval_env_config(),
-                cfg.algo.to_string(),
-                side.display().to_string(),
-            )
-        }
-        None => (None, EnvConfig::default(), "policy".to_string(), "default".to_string()),
-    };
-    Ok(EvalSource {
-        policy_path: path.clone(),
-        env,
-        env_config,
-        algo,
-        seed: 0,
-        settings,
-    })
-}
-
 pub fn eval(a: EvalArgs) -> Result<()> {
     if a.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
-    let src = eval_source(&a)?;
+    let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
     let mut policy = match a.random || a.planner.is_some() {
         true => None,
-        false => Some(Policy::load(&src.policy_path)?),
+        false => Some(Policy::load(&src.policy)?),
     };
-    let env_id = a
-        .env
-        .clone()
-        .or(src.env.clone())
-        .context("--env is needed: the policy has no FILE.toml beside it naming its env")?;
-    let mut env_cfg = src.env_config.clone();
+    let env_id = src.env_id(a.env.as_deref())?;
+    let mut env_cfg = src.eval_env_config();
     // Every evaluation draws held-out episodes, whatever the settings came from.
     env_cfg.held_out = true;
-    if a.layouts == "procedural" {
+    if a.layouts == Layouts::Procedural {
         if agvrl_envs::registry::spec(&env_id).is_none_or(|s| s.procedural.is_none()) {
             bail!("--layouts procedural needs a search env (outdoor or urban)");
         }
         env_cfg.layout_seed = Some(0);
         env_cfg.new_layout_each_episode = true;
     }
-    if a.preset.as_deref() == Some("sim2real") {
+    if a.preset == Some(Preset::Sim2real) {
         let s2r = EnvConfig::sim2real();
         env_cfg.noise = s2r.noise;
         env_cfg.randomisation = s2r.randomisation;
     }
     if let Some(f) = &a.safety_filter {
-        env_cfg.safety_filter.enabled = f == "on";
+        env_cfg.safety_filter.enabled = *f == Switch::On;
         env_cfg.safety_filter.advisory = false;
     }
     if let Some(n) = a.max_steps {
@@ -522,15 +503,23 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         }
         env_cfg.max_steps = n;
     }
-    let seed = a.seed.unwrap_or(src.seed);
+    // A run evaluates on its own held-out seeds (training's + 2,000,000), a policy file from 0.
+    let seed = a.seed.unwrap_or_else(|| match (&a.run, &src.run) {
+        (Some(_), Some(run)) => run.seed + 2_000_000,
+        _ => 0,
+    });
     let mut watch = Watch {
         rec_episodes: a.episodes,
         // Every episode of procedural layouts drives another map: draw the first one only.
-        plot_episodes: if a.layouts == "procedural" { 1 } else { usize::MAX },
+        plot_episodes: if a.layouts == Layouts::Procedural {
+            1
+        } else {
+            usize::MAX
+        },
         ..Watch::default()
     };
     if let Some(sink) = viz::sink_of(a.rerun.as_deref(), a.spawn_viewer) {
-        watch.rec = Some(Recorder::new(sink, &format!("{} eval", src.policy_path.display()))?);
+        watch.rec = Some(Recorder::new(sink, &format!("{} eval", src.policy.display()))?);
     }
     let driver = match (&mut policy, a.planner) {
         (Some(p), _) => Driver::Policy(p),
@@ -549,15 +538,15 @@ pub fn eval(a: EvalArgs) -> Result<()> {
                 planner::Knowledge::Frontier => "frontier".to_string(),
             }
         } else if a.run.is_some() {
-            POLICY_FILE.to_string()
+            files::POLICY.to_string()
         } else {
-            src.policy_path.display().to_string()
+            src.policy.display().to_string()
         }
     );
-    println!("settings={}", src.settings);
+    println!("settings={}", src.source);
     println!("seed={seed}");
-    println!("layouts={}", a.layouts);
-    println!("preset={}", a.preset.as_deref().unwrap_or("none"));
+    println!("layouts={}", arg_name(a.layouts));
+    println!("preset={}", a.preset.map_or_else(|| "none".to_string(), arg_name));
     println!(
         "safety_filter={}",
         if env_cfg.safety_filter.enabled { "on" } else { "off" }
@@ -578,11 +567,15 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         println!("rrd={}", p.display());
     }
     if let Some(p) = &a.plot {
+        let algo = src
+            .run
+            .as_ref()
+            .map_or_else(|| "policy".to_string(), |r| r.algo.to_string());
         let driver = match (a.random, a.planner) {
             (true, _) => "random actions",
             (_, Some(planner::Knowledge::Map)) => "map-aware planner",
             (_, Some(planner::Knowledge::Frontier)) => "frontier explorer",
-            _ => src.algo.as_str(),
+            _ => algo.as_str(),
         };
         if !watch.plot(p, &format!("{env_id} {driver}: deterministic evaluation"))? {
             bail!("{env_id} has no map to draw");

@@ -10,6 +10,7 @@ pub mod episode;
 pub mod eval;
 pub mod planner;
 pub mod plots;
+pub mod policy_file;
 pub mod probe;
 pub mod runs;
 #[cfg_attr(not(feature = "rerun"), allow(dead_code))]

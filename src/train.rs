@@ -4,10 +4,11 @@
 use crate::config::{DEFAULT_TOML, RunConfig};
 use crate::eval::{Driver, Watch, evaluate};
 use crate::plots::{self};
-use crate::runs::{RunDir, stamp, write_atomic};
+use crate::runs::write_atomic;
 use crate::viz::{self, Recorder, Sink};
 use agvrl_envs::{Env, VecEnv, make};
-use agvrl_rl::{Algorithm, Control, Policy, Ppo, Progress, Sac};
+use agvrl_rl::{Algorithm, Control, Learner, Policy, Ppo, Progress, Sac};
+use agvrl_run::{RunDir, files, stamp};
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -15,9 +16,6 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
-
-/// Name of the policy file in a run directory.
-pub const POLICY_FILE: &str = "policy.agvrl";
 
 /// `--device`: the Burn device learners train on.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -105,35 +103,6 @@ pub enum ProgressMode {
 /// Set by Ctrl-C: the CLI's training finishes the current update and writes its run directory.
 static STOP: AtomicBool = AtomicBool::new(false);
 
-/// The two learners, as the training loop sees them.
-trait Learner {
-    fn learn(&mut self, steps: u64, cb: &mut dyn FnMut(&Progress<'_>) -> Control) -> agvrl_rl::Result<()>;
-    fn num_timesteps(&self) -> u64;
-    fn save_checkpoint(&self, p: &std::path::Path) -> agvrl_rl::Result<()>;
-    fn save_policy(&self, p: &std::path::Path) -> agvrl_rl::Result<()>;
-}
-
-macro_rules! learner {
-    ($t:ty) => {
-        impl Learner for $t {
-            fn learn(&mut self, steps: u64, cb: &mut dyn FnMut(&Progress<'_>) -> Control) -> agvrl_rl::Result<()> {
-                <$t>::learn(self, steps, cb)
-            }
-            fn num_timesteps(&self) -> u64 {
-                <$t>::num_timesteps(self)
-            }
-            fn save_checkpoint(&self, p: &std::path::Path) -> agvrl_rl::Result<()> {
-                <$t>::save_checkpoint(self, p)
-            }
-            fn save_policy(&self, p: &std::path::Path) -> agvrl_rl::Result<()> {
-                <$t>::save_policy(self, p)
-            }
-        }
-    };
-}
-learner!(Ppo<Box<dyn Env>>);
-learner!(Sac<Box<dyn Env>>);
-
 struct Row {
     step: u64,
     episodes: u64,
@@ -209,9 +178,9 @@ pub fn train(a: TrainArgs) -> Result<()> {
     }
     if let Some(dir) = &a.resume {
         let device = agvrl_rl::device_by_name(a.device.name())?;
-        let cfg = RunConfig::load(&dir.join("config.toml"))
+        let cfg = RunConfig::load(&dir.join(files::CONFIG))
             .with_context(|| format!("{} is not a run directory", dir.display()))?;
-        let ckpt = dir.join("checkpoint.ckpt");
+        let ckpt = dir.join(files::CHECKPOINT);
         let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
             Box::new(Ppo::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?)
         } else {
@@ -226,7 +195,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
         };
         // A run stopped before its first chunk has no metrics yet; any other failure keeps the
         // history from being overwritten.
-        let previous = match std::fs::read_to_string(dir.join("metrics.csv")) {
+        let previous = match std::fs::read_to_string(dir.join(files::METRICS)) {
             Ok(text) => text,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
             Err(e) => return Err(anyhow::Error::new(e).context(format!("reading {}/metrics.csv", dir.display()))),
@@ -319,7 +288,7 @@ pub fn train_run(
         Some(out) => RunDir::create(out)?,
         None => RunDir::create_unique(PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)))?,
     };
-    write_atomic(&run.file("config.toml"), cfg.to_toml()?.as_bytes())?;
+    write_atomic(&run.file(files::CONFIG), cfg.to_toml()?.as_bytes())?;
     eprintln!(
         "training {} on {} for {} steps (seed {}, {} envs)",
         cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs
@@ -409,11 +378,14 @@ fn run_learner(
     let per_chunk = cfg.steps.div_ceil(10).clamp(1, 50_000);
     while learner.num_timesteps() < target && !stop.load(Ordering::SeqCst) {
         learner.learn(per_chunk.min(target - learner.num_timesteps()), &mut on_progress)?;
-        learner.save_checkpoint(&file("checkpoint.ckpt"))?;
+        learner.save_checkpoint(&file(files::CHECKPOINT))?;
     }
-    learner.save_checkpoint(&file("checkpoint.ckpt"))?;
-    let policy_path = file(POLICY_FILE);
-    learner.save_policy(&policy_path)?;
+    learner.save_checkpoint(&file(files::CHECKPOINT))?;
+    let policy_path = file(files::POLICY);
+    // The policy file carries the settings it drives with: the run config.
+    let mut policy_data = learner.policy_data();
+    policy_data.settings_toml = Some(cfg.to_toml()?);
+    policy_data.save(&policy_path)?;
     bar.finish_and_clear();
     let interrupted = learner.num_timesteps() < target;
     let train_s = t0.elapsed().as_secs_f64();
@@ -430,7 +402,7 @@ fn run_learner(
             r.step, r.episodes, r.policy_loss, r.value_loss, r.entropy, r.steps_per_s
         );
     }
-    write_atomic(&file("metrics.csv"), csv.as_bytes())?;
+    write_atomic(&file(files::METRICS), csv.as_bytes())?;
     let mut policy = Policy::load(&policy_path)?;
     let mut watch = Watch {
         rec_episodes: 1,
@@ -439,7 +411,7 @@ fn run_learner(
     };
     if viz::ENABLED && agvrl_envs::registry::scene_of(&cfg.env).is_some() {
         watch.rec = Some(Recorder::new(
-            Sink::File(file("eval.rrd")),
+            Sink::File(file(files::RECORDING)),
             &format!("{} {} eval", cfg.env, cfg.algo),
         )?);
     }
@@ -455,8 +427,8 @@ fn run_learner(
         r.finish()?;
     }
     let title = format!("{} {} seed {}", cfg.env, cfg.algo, cfg.seed);
-    watch.plot(&file("trajectory.png"), &format!("{title}: deterministic evaluation"))?;
-    plots::learning_curve(&file("learning_curve.png"), &plots::curve_of_csv(&csv), &title)?;
+    watch.plot(&file(files::TRAJECTORY), &format!("{title}: deterministic evaluation"))?;
+    plots::learning_curve(&file(files::LEARNING_CURVE), &plots::curve_of_csv(&csv), &title)?;
     let mut text = format!(
         "train_s={:.1}\neval_s={:.1}\nsteps={}\n",
         train_s,
@@ -469,7 +441,7 @@ fn run_learner(
     for l in summary.lines() {
         let _ = writeln!(text, "{l}");
     }
-    write_atomic(&file("eval.txt"), text.as_bytes())?;
+    write_atomic(&file(files::EVAL), text.as_bytes())?;
     Ok(text)
 }
 

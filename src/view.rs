@@ -1,24 +1,27 @@
 //! `agvrl view`: drive one episode (a policy or random actions) into the rerun viewer or an
 //! .rrd file.
 
-use crate::config::RunConfig;
 use crate::episode::{RandomActions, drive, make_sim_env};
-use crate::train::POLICY_FILE;
 use crate::viz::{self, Recorder, Sink};
 use agvrl_envs::{Env, EnvConfig};
 use agvrl_rl::Policy;
-use anyhow::{Context, Result};
+use agvrl_run::PolicySettings;
+use anyhow::{Context, Result, bail};
 use clap::Args;
 use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct ViewArgs {
-    /// Environment id (see `agvrl envs`).
-    #[arg(long, required_unless_present = "run")]
+    /// Environment id (see `agvrl envs`; default: the policy's).
+    #[arg(long, required_unless_present_any = ["run", "policy"])]
     pub env: Option<String>,
-    /// Drive with this policy file (default: uniform random actions).
+    /// Drive with this policy file (default: uniform random actions), with its own settings
+    /// (see `agvrl eval --policy`).
     #[arg(long)]
     pub policy: Option<PathBuf>,
+    /// Override one of the policy's settings, KEY=VALUE as `agvrl train --set`.
+    #[arg(long, value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
     /// Take env, env settings and policy from a run directory.
     #[arg(long, conflicts_with_all = ["env"])]
     pub run: Option<PathBuf>,
@@ -42,18 +45,14 @@ pub struct ViewArgs {
 
 /// Drive one episode (policy or random actions) into rerun.
 pub fn view(a: ViewArgs) -> Result<()> {
-    let (env_id, mut env_cfg, policy_path) = match &a.run {
-        Some(dir) => {
-            let cfg = RunConfig::load(&dir.join("config.toml"))
-                .with_context(|| format!("{} is not a run directory", dir.display()))?;
-            let p = a.policy.clone().unwrap_or_else(|| dir.join(POLICY_FILE));
-            (cfg.env.clone(), cfg.eval_env_config(), Some(p))
+    let (env_id, mut env_cfg, policy_path) = if a.run.is_some() || a.policy.is_some() {
+        let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
+        (src.env_id(a.env.as_deref())?, src.eval_env_config(), Some(src.policy))
+    } else {
+        if let Some(s) = a.set.first() {
+            bail!("--set {s}: random actions have no settings to override; give --policy or --run");
         }
-        None => (
-            a.env.clone().unwrap_or_default(),
-            EnvConfig::default(),
-            a.policy.clone(),
-        ),
+        (a.env.clone().unwrap_or_default(), EnvConfig::default(), None)
     };
     if let Some(n) = a.steps {
         env_cfg.max_steps = n;

@@ -160,7 +160,8 @@ mod cli {
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
         let by_file = stdout(&o);
-        assert_eq!(key(&by_file, "settings"), run.join("config.toml").display().to_string());
+        // A policy file carries its run's settings.
+        assert_eq!(key(&by_file, "settings"), format!("{} (embedded)", pf.display()));
         for k in ["env", "mean_return", "ended"] {
             assert_eq!(key(&by_file, k), key(&out, k), "{k}: --policy\n{by_file}\n--run\n{out}");
         }
@@ -585,7 +586,7 @@ mod cli {
         assert!(o.status.success(), "{}", stderr(&o));
         let out = stdout(&o);
         assert_eq!(key(&out, "episodes"), "3");
-        // Its settings file turns the safety filter on.
+        // Its embedded settings turn the safety filter on.
         assert_eq!(key(&out, "safety_filter"), "on");
         assert_eq!(key(&out, "ended"), "time_limit,time_limit,time_limit", "{out}");
         assert_eq!(key(&out, "collisions"), "0");
@@ -736,10 +737,9 @@ mod cli {
             run.to_str().unwrap(),
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
-        // A policy with its run config beside it, as the shipped ones are.
+        // A policy file on its own: it carries its run's settings.
         let policy = d.path().join("p.agvrl");
         std::fs::copy(run.join("policy.agvrl"), &policy).unwrap();
-        std::fs::copy(run.join("config.toml"), d.path().join("p.toml")).unwrap();
         let ev = |extra: &[&str]| {
             let mut args = vec!["eval", "--policy", policy.to_str().unwrap(), "--episodes", "3"];
             args.extend_from_slice(extra);
@@ -748,7 +748,7 @@ mod cli {
             stdout(&o)
         };
         let a = ev(&["--seed", "11"]);
-        assert_eq!(key(&a, "env"), "search-urban-20", "the env comes from p.toml");
+        assert_eq!(key(&a, "env"), "search-urban-20", "the env comes from the file");
         assert_eq!(key(&a, "seed"), "11");
         assert_eq!(a, ev(&["--seed", "11"]), "same seed, same episodes");
         assert_ne!(key(&a, "mean_return"), key(&ev(&["--seed", "12"]), "mean_return"));
@@ -764,21 +764,28 @@ mod cli {
         assert_ne!(key(&a, "mean_return"), key(&n, "mean_return"));
         let r = ev(&["--seed", "11", "--random"]);
         assert_eq!(key(&r, "policy"), "random");
-        // Without a FILE.toml the env must be named.
-        std::fs::remove_file(d.path().join("p.toml")).unwrap();
-        let o = agvrl(&["eval", "--policy", policy.to_str().unwrap()]);
+        // A file of format 1 without the TOML beside it carries no settings: the env must be
+        // named.
+        let old = d.path().join("old.agvrl");
+        std::fs::copy(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/run/tests/fixtures/racing-v1.agvrl"),
+            &old,
+        )
+        .unwrap();
+        let o = agvrl(&["eval", "--policy", old.to_str().unwrap()]);
         assert!(!o.status.success());
         assert!(stderr(&o).contains("--env"), "{}", stderr(&o));
         let o = agvrl(&[
             "eval",
             "--policy",
-            policy.to_str().unwrap(),
+            old.to_str().unwrap(),
             "--env",
-            "search-outdoor-50",
+            "racing-oval",
             "--episodes",
             "1",
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
+        assert_eq!(key(&stdout(&o), "settings"), "default");
     }
 }
 

@@ -7,6 +7,7 @@ use super::sim::wander;
 use agvrl_envs::registry::scene_of;
 use agvrl_envs::{ENV_IDS, Env, VecEnv, make};
 use agvrl_sim::{SceneSource, Sim, SimConfig};
+use anyhow::Context as _;
 use std::hint::black_box;
 use std::ops::Range;
 use std::time::Instant;
@@ -105,11 +106,11 @@ fn shipped_search(steps: usize, reps: usize) -> Vec<String> {
     let path = std::path::Path::new(SHIPPED_SEARCH);
     let loaded = (|| -> anyhow::Result<_> {
         let policy = agvrl_rl::Policy::load(path)?;
-        let toml = std::fs::read_to_string(path.with_extension("toml"))?;
-        Ok((
-            policy,
-            agvrl_rl::RunConfig::from_toml(&toml, "assets/policies/search.toml")?,
-        ))
+        let src = agvrl_run::PolicySettings::of_policy(path, policy.data(), &[])?;
+        let cfg = src
+            .run
+            .with_context(|| format!("{} carries no settings", path.display()))?;
+        Ok((policy, cfg))
     })();
     let (mut policy, cfg) = match loaded {
         Ok(x) => x,

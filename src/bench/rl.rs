@@ -243,6 +243,7 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         head: ActionHead::SquashedGaussian,
         normalizer: Some(agvrl_rl::ObsNormalizer::new(o)),
         config_toml: String::new(),
+        settings_toml: None,
         encoder: None,
     };
     let mut policy = Policy::new(data, &device);

@@ -18,14 +18,3 @@ pub mod run_loop;
 pub mod stats;
 
 pub use run_loop::{DeployError, DriveConfig, DriveLoop, Event, Tick};
-
-/// The run settings that belong to a policy file: `FILE.toml` beside it (as shipped in
-/// `assets/policies`), else the `config.toml` of the run directory it was written into.
-pub fn settings_beside(policy: &std::path::Path) -> Option<std::path::PathBuf> {
-    let side = policy.with_extension("toml");
-    if side.is_file() {
-        return Some(side);
-    }
-    let run = policy.parent()?.join("config.toml");
-    (policy.file_name()? == "policy.agvrl" && run.is_file()).then_some(run)
-}

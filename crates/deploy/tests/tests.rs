@@ -518,36 +518,27 @@ fn the_shipped_search_policy_drives_every_search_scene_in_agvrl_drive() {
     }
 }
 
-/// agvrl-drive reads the settings beside a policy with the run config type `agvrl train`
-/// writes: a key `agvrl train` would refuse (a typo) stops the drive with the key named,
-/// instead of driving on defaults.
+/// agvrl-drive reads a policy's settings with the run config type `agvrl train` writes: a
+/// `--set` key `agvrl train` would refuse (a typo) stops the drive with the key named, instead
+/// of driving on defaults; spelt right, it drives. A file of format 1 drives with the TOML
+/// beside it.
 #[test]
-fn agvrl_drive_refuses_a_settings_file_that_agvrl_train_would_refuse() {
-    let dir = scratch("sidecar");
-    let policy = dir.path().join("racing.agvrl");
-    std::fs::copy(shipped_policy("racing-oval-ppo"), &policy).unwrap();
-    let drive = || {
-        std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
-            .arg("--policy")
-            .arg(&policy)
-            .args(["--steps", "5", "--quiet"])
-            .output()
-            .unwrap()
+fn agvrl_drive_refuses_a_setting_that_agvrl_train_would_refuse() {
+    let drive = |policy: &std::path::Path, set: &[&str]| {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"));
+        c.arg("--policy").arg(policy).args(["--steps", "5", "--quiet"]);
+        for s in set {
+            c.args(["--set", s]);
+        }
+        c.output().unwrap()
     };
-    std::fs::write(
-        dir.path().join("racing.toml"),
-        "env = \"racing-oval\"\n[env_config]\nsubstepz = 8\n",
-    )
-    .unwrap();
-    let o = drive();
+    let policy = shipped_policy("racing-oval-ppo");
+    let o = drive(&policy, &["env_config.substepz=8"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("substepz"), "{err}");
-    // The same file with the key spelt right drives.
-    std::fs::write(
-        dir.path().join("racing.toml"),
-        "env = \"racing-oval\"\n[env_config]\nsubsteps = 8\n",
-    )
-    .unwrap();
-    let o = drive();
+    let o = drive(&policy, &["env_config.substeps=8"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let old = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../run/tests/fixtures/racing-v1.agvrl");
+    let o = drive(&old, &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }

@@ -6,7 +6,7 @@ use agvrl_envs::EnvConfig;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use toml::{Table, Value};
 
 /// A Python value as TOML; `where_` names it in errors. `None` means "absent" to the caller.
@@ -120,12 +120,6 @@ pub fn run_config(config: &Bound<'_, PyAny>, overrides: Option<&Bound<'_, PyDict
     }
     let text = toml::to_string(&t).map_err(value_err)?;
     RunConfig::from_toml(&text, &origin).map_err(|e| PyValueError::new_err(agvrl_run::error_line(&e)))
-}
-
-/// `env` and `[env_config]` of a run TOML (a policy's settings file), read as `agvrl eval` reads it.
-pub fn run_file_env(path: &Path) -> PyResult<(String, EnvConfig)> {
-    let cfg = RunConfig::load(path).map_err(|e| PyValueError::new_err(agvrl_run::error_line(&e)))?;
-    Ok((cfg.env, cfg.env_config))
 }
 
 fn to_py<'py>(py: Python<'py>, v: &Value) -> PyResult<Bound<'py, PyAny>> {

@@ -472,20 +472,20 @@ impl Policy {
         Ok(bounds(py, lock(&self.inner)?.action_space()))
     }
 
-    /// The env id and `[env_config]` of the run that made the policy (its `.toml` beside it,
-    /// or the run directory's config.toml), or `None` when there is none.
+    /// The env id and `[env_config]` the policy drives with (embedded in the file; for older
+    /// files the `.toml` beside it, or the run directory's config.toml), as agvrl-drive builds
+    /// them, or `None` when it carries none.
     fn settings<'py>(&self, py: Python<'py>) -> PyResult<Option<(String, Bound<'py, PyDict>)>> {
         guard(|| {
-            let Some(file) = agvrl_deploy::settings_beside(&self.path) else {
-                return Ok(None);
+            let src = {
+                let inner = lock(&self.inner)?;
+                agvrl_run::PolicySettings::of_policy(&self.path, inner.data(), &[])
+                    .map_err(|e| PyValueError::new_err(agvrl_run::error_line(&e)))?
             };
-            let (id, mut cfg) = config::run_file_env(&file)?;
-            // Per-episode layouts belong to a run's procedural training envs; the env a policy
-            // drives is its own map (as agvrl-drive and agvrl eval build it).
-            if cfg.layout_seed.is_none() {
-                cfg.new_layout_each_episode = false;
+            match &src.run {
+                None => Ok(None),
+                Some(run) => Ok(Some((run.env.clone(), config::to_dict(py, &src.drive_env_config())?))),
             }
-            Ok(Some((id, config::to_dict(py, &cfg)?)))
         })
     }
 

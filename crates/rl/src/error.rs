@@ -39,9 +39,6 @@ pub enum RlError {
     /// A configuration value is invalid or the TOML could not be parsed.
     #[error("config: {0}")]
     Config(String),
-    /// A run TOML is invalid; the message names the file (or `--set`) and the key.
-    #[error("{0}")]
-    RunConfig(String),
     /// An observation or action has the wrong length.
     #[error("{what} has {got} elements, expected a multiple of {dim}")]
     Shape {

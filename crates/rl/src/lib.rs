@@ -65,6 +65,8 @@ mod gaussian;
 #[cfg(feature = "train")]
 mod host_gemm;
 #[cfg(feature = "train")]
+mod learner;
+#[cfg(feature = "train")]
 pub mod learning;
 pub mod nets;
 pub mod normalize;
@@ -84,11 +86,13 @@ pub use buffer::ReplayBuffer;
 #[cfg(feature = "train")]
 pub use checkpoint::CHECKPOINT_FORMAT_VERSION;
 pub use cnn::ImageSpec;
-pub use config::{EntCoef, PpoConfig, RunConfig, SacConfig};
+pub use config::{EntCoef, PpoConfig, SacConfig};
 pub use device::{CpuBackend, default_device, device_by_name};
 pub use error::{Result, RlError};
 pub use eval::evaluate;
 pub use file::write_atomic;
+#[cfg(feature = "train")]
+pub use learner::Learner;
 pub use normalize::ObsNormalizer;
 pub use policy::{Algorithm, EncoderData, POLICY_FORMAT_VERSION, Policy, PolicyData};
 #[cfg(feature = "train")]

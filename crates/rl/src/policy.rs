@@ -4,7 +4,8 @@
 //! algorithm and a format version.
 //!
 //! Format versions: 1 (MLP only) still loads; 2 adds an optional `encoder` (image spec in the
-//! header, its 8 arrays after the MLP's).
+//! header, its 8 arrays after the MLP's); 3 adds the settings the policy drives with (a run
+//! TOML in the header), so a policy file is self-contained.
 
 use crate::cnn::{ImageSpec, encode};
 use crate::error::{Result, RlError};
@@ -18,9 +19,9 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Version of the policy file layout this build writes and reads.
-pub const POLICY_FORMAT_VERSION: u32 = 2;
+pub const POLICY_FORMAT_VERSION: u32 = 3;
 /// Older versions this build still reads.
-const POLICY_READS: [u32; 2] = [1, 2];
+const POLICY_READS: [u32; 3] = [1, 2, 3];
 const POLICY_MAGIC: &[u8; 8] = b"AGVRLPOL";
 
 /// Which algorithm trained a policy.
@@ -100,10 +101,14 @@ pub struct PolicyData {
     pub head: ActionHead,
     /// Observation normaliser of the vector part, if training used one.
     pub normalizer: Option<ObsNormalizer>,
-    /// The training configuration, as resolved TOML (provenance only).
+    /// The learner's configuration, as resolved TOML (provenance only).
     pub config_toml: String,
     /// The actor's image encoder, when the observation ends with an image.
     pub encoder: Option<EncoderData>,
+    /// The run TOML the policy drives with: its env id and env settings (agvrl-run's
+    /// `RunConfig`; opaque here). `None` in files of formats 1 and 2, whose settings sit in a
+    /// TOML beside them.
+    pub settings_toml: Option<String>,
 }
 
 /// An image encoder's spec and weights (see [`crate::cnn`]).
@@ -127,6 +132,8 @@ struct Header {
     config_toml: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     image: Option<ImageSpec>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    settings: Option<String>,
 }
 
 impl PolicyData {
@@ -142,6 +149,7 @@ impl PolicyData {
             normalizer: self.normalizer.clone(),
             config_toml: self.config_toml.clone(),
             image: self.encoder.as_ref().map(|e| e.spec),
+            settings: self.settings_toml.clone(),
         };
         let mut arrays: Vec<&[f32]> = self.params.data.iter().map(Vec::as_slice).collect();
         if let Some(e) = &self.encoder {
@@ -238,6 +246,7 @@ impl PolicyData {
             normalizer: h.normalizer,
             config_toml: h.config_toml,
             encoder,
+            settings_toml: h.settings,
         })
     }
 

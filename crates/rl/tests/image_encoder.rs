@@ -274,12 +274,12 @@ fn format_1_policy_files_still_load_and_act_the_same() {
     // The action that build computed for this observation, bit for bit.
     let a = p.act(&[0.5, -0.5, 1.0], true).unwrap();
     assert_eq!(a[0].to_bits(), 0x3ca3_5915, "{a:?}");
-    // Saved again it is a format-2 file with the same contents.
+    // Saved again it is a file of today's format with the same contents.
     let again = tmp("v1-resaved.policy");
     p.save(&again).unwrap();
     assert_eq!(
         u32::from_le_bytes(std::fs::read(&again).unwrap()[8..12].try_into().unwrap()),
-        2
+        agvrl_rl::POLICY_FORMAT_VERSION
     );
     assert_eq!(&PolicyData::load(&again).unwrap(), p.data());
 }

@@ -1,5 +1,18 @@
-//! What the `agvrl` command line, `agvrl-drive` and the Python wheel share above the learners.
+//! agvrl-run: what the `agvrl` command line, `agvrl-drive` and the Python wheel share above the
+//! learners: the run TOML ([`RunConfig`]), run directories ([`Run`], [`RunDir`], [`files`]),
+//! what a `--policy` or `--run` argument means ([`PolicySettings`]), and how an error reads
+//! ([`error_line`]).
 
+#![warn(missing_docs)]
+
+mod config;
+mod dir;
+mod error;
 mod error_line;
+mod settings;
 
+pub use config::RunConfig;
+pub use dir::{Run, RunDir, files, stamp};
+pub use error::{Result, RunError};
 pub use error_line::error_line;
+pub use settings::{PolicySettings, SettingsSource};

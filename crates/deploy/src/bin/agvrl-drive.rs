@@ -1,7 +1,7 @@
 //! agvrl-drive: run a trained policy on a vehicle at a fixed rate, with a watchdog.
 //!
 //! `agvrl-drive --policy assets/policies/racing-oval-ppo.agvrl` drives the simulated car with
-//! the shipped policy (env settings from the `.toml` beside it); `--vehicle ros2 --config
+//! the shipped policy (with the settings embedded in it); `--vehicle ros2 --config
 //! car.toml` drives a ROS 2 car; `--serve-sim racing-oval` is the simulated car behind ROS 2
 //! topics. Each tick prints one `key=value` line, the run ends with a summary line.
 
@@ -10,7 +10,8 @@ use agvrl_deploy::{DriveConfig, DriveLoop};
 use agvrl_envs::api::Vehicle;
 use agvrl_envs::task::{Intervention, Task};
 use agvrl_envs::{EnvConfig, make_task, make_vehicle};
-use agvrl_rl::{Policy, RunConfig};
+use agvrl_rl::Policy;
+use agvrl_run::PolicySettings;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use serde::Deserialize;
@@ -36,10 +37,17 @@ struct Args {
     /// A run directory from `agvrl train` (its policy.agvrl and config.toml).
     #[arg(long, conflicts_with = "policy")]
     run: Option<PathBuf>,
-    /// A policy file; env settings come from FILE.toml beside it when present (else defaults).
+    /// A policy file, driven with the settings embedded in it (`agvrl policy FILE` prints
+    /// them; files written before settings were embedded: FILE.toml beside it, or the
+    /// config.toml of the run directory holding it).
     #[arg(long)]
     policy: Option<PathBuf>,
-    /// Environment id whose task to run (default: the run's, else racing-oval).
+    /// Override one of the policy's settings, KEY=VALUE as `agvrl train --set`
+    /// (`--set env_config.safety_filter.clearance_m=0.9`).
+    #[arg(long, value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Environment id whose task to run (default: the policy's; racing-oval for --serve-sim
+    /// without a policy).
     #[arg(long)]
     env: Option<String>,
     /// Which vehicle: the simulated car, or a ROS 2 car (needs --config, or uses the default
@@ -99,41 +107,22 @@ fn main() {
     }
 }
 
-/// The run config `agvrl train` wrote (the same type, so the same keys and checks).
-fn read_run_file(path: &Path) -> Result<RunConfig> {
-    Ok(RunConfig::load(path)?)
-}
-
-/// Policy path, env id and env settings from --run / --policy (+ its .toml) / --env.
+/// Policy path, env id and env settings from --run / --policy (agvrl-run's one resolver), --set
+/// and --env. Without a policy (`--serve-sim` alone) the env is --env or racing-oval.
 fn policy_and_env(a: &Args) -> Result<(Option<PathBuf>, String, EnvConfig)> {
-    let (policy, mut env, cfg) = match (&a.run, &a.policy) {
-        (Some(dir), _) => {
-            let r = read_run_file(&dir.join("config.toml"))
-                .with_context(|| format!("{} is not a run directory", dir.display()))?;
-            (Some(dir.join("policy.agvrl")), r.env, r.env_config)
+    if a.run.is_none() && a.policy.is_none() {
+        if let Some(s) = a.set.first() {
+            bail!("--set {s}: there is no policy whose settings it could override");
         }
-        (None, Some(p)) => {
-            if let Some(side) = agvrl_deploy::settings_beside(p) {
-                let r = read_run_file(&side)?;
-                (Some(p.clone()), r.env, r.env_config)
-            } else {
-                (Some(p.clone()), "racing-oval".to_string(), EnvConfig::default())
-            }
-        }
-        (None, None) => (None, "racing-oval".to_string(), EnvConfig::default()),
-    };
-    if let Some(e) = &a.env {
-        env = e.clone();
+        let env = a.env.clone().unwrap_or_else(|| "racing-oval".to_string());
+        return Ok((None, env, EnvConfig::default()));
     }
-    // A run config's per-episode layouts belong to its procedural training envs; the car
-    // drives the env's own map.
-    let mut cfg = cfg;
-    if cfg.layout_seed.is_none() {
-        cfg.new_layout_each_episode = false;
-    }
-    // An advising filter is a training setting: on the car the filter acts.
-    cfg.safety_filter.advisory = false;
-    Ok((policy, env, cfg))
+    let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
+    Ok((
+        Some(src.policy.clone()),
+        src.env_id(a.env.as_deref())?,
+        src.drive_env_config(),
+    ))
 }
 
 #[cfg(feature = "ros2")]

@@ -511,6 +511,7 @@ impl<E: Env> Ppo<E> {
             normalizer: self.normalizer.clone(),
             config_toml: self.cfg_toml.clone(),
             encoder,
+            settings_toml: None,
         }
     }
 

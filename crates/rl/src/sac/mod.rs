@@ -386,6 +386,7 @@ impl<E: Env> Sac<E> {
                 spec,
                 params: encoder(),
             }),
+            settings_toml: None,
         }
     }
 

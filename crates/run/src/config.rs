@@ -1,0 +1,223 @@
+//! The run TOML: which env, which algorithm, which settings. `agvrl train` writes it into every
+//! run directory and every policy file; eval, view, agvrl-drive and Python read the same type,
+//! so one file format serves them all. The learners' own settings (`PpoConfig`, `SacConfig`)
+//! stay in agvrl-rl.
+
+use crate::error::{Result, RunError};
+use agvrl_envs::EnvConfig;
+use agvrl_rl::{Algorithm, PpoConfig, SacConfig};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A training run.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunConfig {
+    /// Env id (evaluation; training too unless `train_envs` is set).
+    pub env: String,
+    /// Env ids the training envs cycle through (env `i` drives `train_envs[i % len]`); all
+    /// must share `env`'s spaces. Empty: every training env is `env`.
+    pub train_envs: Vec<String>,
+    /// `ppo` or `sac`.
+    pub algo: Algorithm,
+    /// Environment steps to train.
+    pub steps: u64,
+    /// Seed of everything.
+    pub seed: u64,
+    /// Parallel envs.
+    pub n_envs: usize,
+    /// Threads stepping the envs; SAC's gradient steps split their minibatch over as many.
+    pub threads: usize,
+    /// How many of the `n_envs` training envs drive on seeded procedural layouts of the env's
+    /// kind and size instead of its built-in map (layout randomisation; evaluation always uses
+    /// the map of `env_config`).
+    pub procedural_layouts: usize,
+    /// Training envs (by index) whose safety filter only advises (`safety_filter.advisory`):
+    /// the policy's own controls drive there and can end episodes, while the filter's
+    /// corrections still reach the learner (`ppo.correction_coef`). Evaluation never advises.
+    pub advisory_filter_envs: Vec<usize>,
+    /// Deterministic episodes evaluated after training.
+    pub eval_episodes: usize,
+    /// Time limit of evaluation episodes, control steps (default: the training limit).
+    pub eval_max_steps: Option<u64>,
+    /// Env settings.
+    pub env_config: EnvConfig,
+    /// PPO settings (used when algo = "ppo").
+    pub ppo: PpoConfig,
+    /// SAC settings (used when algo = "sac").
+    pub sac: SacConfig,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            env: "racing-oval".into(),
+            train_envs: Vec::new(),
+            algo: Algorithm::Ppo,
+            steps: 100_000,
+            seed: 0,
+            n_envs: 8,
+            threads: 2,
+            procedural_layouts: 0,
+            advisory_filter_envs: Vec::new(),
+            eval_episodes: 3,
+            eval_max_steps: None,
+            env_config: EnvConfig::default(),
+            ppo: PpoConfig::default(),
+            sac: SacConfig::default(),
+        }
+    }
+}
+
+impl RunConfig {
+    /// Parse a run TOML; `origin` names it in errors.
+    pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
+        let cfg: RunConfig =
+            toml::from_str(text).map_err(|e| RunError::Config(format!("{origin}: {}", e.message().trim())))?;
+        cfg.validate().map_err(|e| match e {
+            RunError::Config(m) => RunError::Config(format!("{origin}: {m}")),
+            other => other,
+        })?;
+        Ok(cfg)
+    }
+
+    /// Parse a run TOML with `sets` (`KEY=VALUE`, dotted keys, TOML values; a value that is
+    /// not TOML is taken as a string) applied on top.
+    pub fn from_toml_with(text: &str, origin: &str, sets: &[String]) -> Result<Self> {
+        if sets.is_empty() {
+            return Self::from_toml(text, origin);
+        }
+        let mut table: toml::Table =
+            toml::from_str(text).map_err(|e| RunError::Config(format!("{origin}: {}", e.message().trim())))?;
+        for s in sets {
+            let (key, value) = s
+                .split_once('=')
+                .ok_or_else(|| RunError::Config(format!("--set {s}: expected KEY=VALUE")))?;
+            let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+                .ok()
+                .and_then(|mut t| t.remove("v"))
+                .unwrap_or_else(|| toml::Value::String(value.to_string()));
+            let path: Vec<&str> = key.trim().split('.').collect();
+            let mut t = &mut table;
+            for part in &path[..path.len() - 1] {
+                let next = t
+                    .entry(part.to_string())
+                    .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+                t = next
+                    .as_table_mut()
+                    .ok_or_else(|| RunError::Config(format!("--set {s}: '{part}' is not a table")))?;
+            }
+            t.insert(path[path.len() - 1].to_string(), value);
+        }
+        let text = toml::to_string(&table).map_err(|e| RunError::Config(format!("{origin} with --set: {e}")))?;
+        Self::from_toml(&text, &format!("{origin} with --set"))
+    }
+
+    /// Load a run TOML file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| RunError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml(&text, &path.display().to_string())
+    }
+
+    /// Check values a typo would break.
+    pub fn validate(&self) -> Result<()> {
+        if !agvrl_envs::ENV_IDS.contains(&self.env.as_str()) {
+            return Err(RunError::Config(format!(
+                "unknown env id '{}'; valid ids: {}",
+                self.env,
+                agvrl_envs::ENV_IDS.join(", ")
+            )));
+        }
+        for id in &self.train_envs {
+            if !agvrl_envs::ENV_IDS.contains(&id.as_str()) {
+                return Err(RunError::Config(format!(
+                    "unknown env id '{id}' in train_envs; valid ids: {}",
+                    agvrl_envs::ENV_IDS.join(", ")
+                )));
+            }
+        }
+        if self.env_config.held_out {
+            return Err(RunError::Config(
+                "env_config.held_out is for evaluation only: training never draws held-out episodes".into(),
+            ));
+        }
+        if self.n_envs == 0 || self.threads == 0 || self.steps == 0 {
+            return Err(RunError::Config("steps, n_envs and threads must be at least 1".into()));
+        }
+        if self.procedural_layouts > self.n_envs {
+            return Err(RunError::Config(format!(
+                "procedural_layouts ({}) cannot exceed n_envs ({})",
+                self.procedural_layouts, self.n_envs
+            )));
+        }
+        if let Some(i) = self.advisory_filter_envs.iter().find(|i| **i >= self.n_envs) {
+            return Err(RunError::Config(format!(
+                "advisory_filter_envs: env {i} does not exist (n_envs = {})",
+                self.n_envs
+            )));
+        }
+        if !self.advisory_filter_envs.is_empty() && !self.env_config.safety_filter.enabled {
+            return Err(RunError::Config(
+                "advisory_filter_envs needs env_config.safety_filter.enabled = true".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The fully resolved TOML (every default written out).
+    pub fn to_toml(&self) -> Result<String> {
+        toml::to_string_pretty(self).map_err(|e| RunError::Config(format!("writing the run config: {e}")))
+    }
+
+    /// Env settings of training env `i`: the last `procedural_layouts` envs get a layout seed
+    /// drawn from the run's seed and their index (redrawn every episode with
+    /// `env_config.new_layout_each_episode`); the others drive the built-in map.
+    pub fn train_env_config(&self, i: usize) -> EnvConfig {
+        let mut cfg = self.env_config.clone();
+        if i + self.procedural_layouts >= self.n_envs {
+            cfg.layout_seed = Some(self.seed.wrapping_mul(1_000_003).wrapping_add(i as u64));
+        } else {
+            cfg.new_layout_each_episode = false;
+        }
+        cfg.safety_filter.advisory |= self.advisory_filter_envs.contains(&i);
+        cfg
+    }
+
+    /// Env id of training env `i`.
+    pub fn train_env_id(&self, i: usize) -> &str {
+        match self.train_envs.len() {
+            0 => &self.env,
+            n => &self.train_envs[i % n],
+        }
+    }
+
+    /// Env settings for evaluation episodes: the built-in map, held-out seeds.
+    pub fn eval_env_config(&self) -> EnvConfig {
+        EnvConfig {
+            max_steps: self.eval_max_steps.unwrap_or(self.env_config.max_steps),
+            layout_seed: None,
+            new_layout_each_episode: false,
+            held_out: true,
+            safety_filter: agvrl_envs::task::SafetyFilterConfig {
+                advisory: false,
+                ..self.env_config.safety_filter
+            },
+            ..self.env_config.clone()
+        }
+    }
+
+    /// Env settings for driving a car (agvrl-drive, Python's `Policy.settings()`): the env's
+    /// own map unless the settings name a layout, and a filter that acts (advising is for
+    /// training only).
+    pub fn drive_env_config(&self) -> EnvConfig {
+        let mut cfg = self.env_config.clone();
+        if cfg.layout_seed.is_none() {
+            cfg.new_layout_each_episode = false;
+        }
+        cfg.safety_filter.advisory = false;
+        cfg
+    }
+}

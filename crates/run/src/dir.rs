@@ -1,0 +1,207 @@
+//! Run directories: their file names, building one (under a `.partial` name, renamed when
+//! complete, so a run directory is never half-written), and reading one back.
+
+use crate::config::RunConfig;
+use crate::error::{Result, RunError};
+use std::path::{Path, PathBuf};
+
+/// The files of a run directory.
+pub mod files {
+    /// The fully resolved run configuration.
+    pub const CONFIG: &str = "config.toml";
+    /// The trained policy.
+    pub const POLICY: &str = "policy.agvrl";
+    /// The learner's checkpoint (`train --resume`).
+    pub const CHECKPOINT: &str = "checkpoint.ckpt";
+    /// Training metrics, one line per update.
+    pub const METRICS: &str = "metrics.csv";
+    /// The evaluation's `key=value` lines, with `train_s` and `eval_s`.
+    pub const EVAL: &str = "eval.txt";
+    /// Moving average of the episode return against steps.
+    pub const LEARNING_CURVE: &str = "learning_curve.png";
+    /// Top view of every evaluated path.
+    pub const TRAJECTORY: &str = "trajectory.png";
+    /// The first evaluation episode, for the rerun viewer.
+    pub const RECORDING: &str = "eval.rrd";
+}
+
+/// `YYYYMMDD-HHMMSS` in UTC: the start of a run directory's default name.
+pub fn stamp() -> String {
+    jiff::Timestamp::now().strftime("%Y%m%d-%H%M%S").to_string()
+}
+
+/// A finished (or interrupted) run directory, read back.
+#[derive(Clone, Debug)]
+pub struct Run {
+    dir: PathBuf,
+    config: RunConfig,
+}
+
+impl Run {
+    /// Open `dir`: its `config.toml` must be a valid run config.
+    pub fn open(dir: &Path) -> Result<Self> {
+        let config = RunConfig::load(&dir.join(files::CONFIG)).map_err(|e| {
+            RunError::Config(format!(
+                "{} is not a run directory: {}",
+                dir.display(),
+                crate::error_line(&e)
+            ))
+        })?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            config,
+        })
+    }
+
+    /// The directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Its run configuration.
+    pub fn config(&self) -> &RunConfig {
+        &self.config
+    }
+
+    /// Path of one of its files (see [`files`]).
+    pub fn file(&self, name: &str) -> PathBuf {
+        self.dir.join(name)
+    }
+
+    /// Whether `policy` is the policy file of a run directory: then that run's config is its
+    /// settings.
+    pub fn of_policy(policy: &Path) -> Option<PathBuf> {
+        let dir = policy.parent()?;
+        (policy.file_name()? == files::POLICY && dir.join(files::CONFIG).is_file()).then(|| dir.to_path_buf())
+    }
+}
+
+/// A run directory being filled.
+pub struct RunDir {
+    final_path: PathBuf,
+    partial: PathBuf,
+}
+
+fn io(path: &Path) -> impl Fn(std::io::Error) -> RunError + '_ {
+    move |source| RunError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+impl RunDir {
+    /// Start `path` (created as `<path>.partial`). Refuses to overwrite an existing run, or one
+    /// another process is writing.
+    pub fn create(path: PathBuf) -> Result<Self> {
+        Self::claim(&path)?
+            .ok_or_else(|| RunError::RunDir(format!("{} exists already; choose another --out", path.display())))
+    }
+
+    /// Start `base`, or `base-2`, `base-3`, ... : the first name no other run holds, so any
+    /// number of runs started in the same second get directories of their own.
+    pub fn create_unique(base: PathBuf) -> Result<Self> {
+        for k in 1..10_000 {
+            let path = if k == 1 {
+                base.clone()
+            } else {
+                PathBuf::from(format!("{}-{k}", base.display()))
+            };
+            if let Some(run) = Self::claim(&path)? {
+                return Ok(run);
+            }
+        }
+        Err(RunError::RunDir(format!(
+            "no free run directory name beside {}",
+            base.display()
+        )))
+    }
+
+    /// Claim `path` atomically: `<path>.partial` is created with `create_dir` (which fails if
+    /// another process made it first), and the claim is given up if a finished run holds `path`.
+    /// `None` when the name is taken.
+    fn claim(path: &Path) -> Result<Option<Self>> {
+        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent).map_err(io(parent))?;
+        }
+        let partial = PathBuf::from(format!("{}.partial", path.display()));
+        match std::fs::create_dir(&partial) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => return Ok(None),
+            Err(e) => return Err(io(&partial)(e)),
+        }
+        // A run that finished before our claim renamed its .partial away; its name stays taken.
+        if path.exists() {
+            let _ = std::fs::remove_dir(&partial);
+            return Ok(None);
+        }
+        Ok(Some(Self {
+            final_path: path.to_path_buf(),
+            partial,
+        }))
+    }
+
+    /// Path of a file inside the run (see [`files`]).
+    pub fn file(&self, name: &str) -> PathBuf {
+        self.partial.join(name)
+    }
+
+    /// Publish the run under its final name.
+    pub fn finish(self) -> Result<PathBuf> {
+        std::fs::rename(&self.partial, &self.final_path).map_err(|source| {
+            RunError::RunDir(format!(
+                "renaming {} to {}: {source}",
+                self.partial.display(),
+                self.final_path.display()
+            ))
+        })?;
+        Ok(self.final_path)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_run_directory_name_is_claimed_once() {
+        let dir = std::env::temp_dir().join(format!("agvrl-claim-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let base = dir.join("runs").join("x");
+        let a = RunDir::create_unique(base.clone()).unwrap();
+        let b = RunDir::create_unique(base.clone()).unwrap();
+        assert!(RunDir::create(base.clone()).is_err(), "x is being written");
+        let a = a.finish().unwrap();
+        let c = RunDir::create_unique(base.clone()).unwrap();
+        assert_eq!(a, base);
+        assert_eq!(b.finish().unwrap(), dir.join("runs").join("x-2"));
+        // x is finished and x-2 too: the next claim skips both.
+        assert_eq!(c.finish().unwrap(), dir.join("runs").join("x-3"));
+        assert!(RunDir::create(base).is_err(), "a finished run is never overwritten");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn stamp_is_a_plausible_utc_time() {
+        let s = stamp();
+        assert_eq!(s.len(), 15);
+        let year: i32 = s[..4].parse().unwrap();
+        assert!((2024..2200).contains(&year), "{s}");
+        assert!((1..=12).contains(&s[4..6].parse::<u32>().unwrap()));
+    }
+
+    #[test]
+    fn a_directory_without_a_run_config_is_not_a_run() {
+        let dir = std::env::temp_dir().join(format!("agvrl-notrun-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let e = Run::open(&dir).unwrap_err().to_string();
+        assert!(e.contains("is not a run directory"), "{e}");
+        assert!(e.contains(files::CONFIG), "{e}");
+        assert!(Run::of_policy(&dir.join(files::POLICY)).is_none());
+        std::fs::write(dir.join(files::CONFIG), "env = \"racing-oval\"\n").unwrap();
+        let run = Run::open(&dir).unwrap();
+        assert_eq!(run.config().env, "racing-oval");
+        assert_eq!(Run::of_policy(&dir.join(files::POLICY)), Some(dir.clone()));
+        assert!(Run::of_policy(&dir.join("other.agvrl")).is_none());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,4 @@
+//! agvrl-run integration tests (one binary).
+
+mod policy_settings;
+mod run_config;
