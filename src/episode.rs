@@ -3,7 +3,7 @@
 
 use agvrl_envs::task::Task;
 use agvrl_envs::wrappers::TimeLimit;
-use agvrl_envs::{EnvConfig, Info, SensorFrame, SimCar, Step, TaskEnv, Vehicle, make, make_task, make_vehicle};
+use agvrl_envs::{EnvConfig, Info, SensorFrame, SimCar, Step, TaskEnv, Vehicle, make, make_sim_car, make_task};
 use agvrl_sim::Sim;
 use anyhow::Result;
 use rand_xoshiro::SplitMix64;
@@ -20,7 +20,7 @@ pub fn make_sim_env(id: &str, cfg: &EnvConfig) -> Result<Option<SimEnv>> {
         make(id, cfg)?;
         return Ok(None);
     }
-    let vehicle = make_vehicle(id, cfg)?;
+    let vehicle = make_sim_car(id, cfg)?;
     let task = make_task(id, cfg, vehicle.steering_limit_rad())?;
     Ok(Some(TimeLimit::new(
         TaskEnv::new(vehicle, task).with_held_out(cfg.held_out),

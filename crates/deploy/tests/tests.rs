@@ -29,7 +29,7 @@ fn policy_for(id: &str) -> Policy {
 
 /// A vehicle whose sensors freeze (stale frames) between two tick counts, or report NaN ranges.
 struct Faulty {
-    inner: agvrl_envs::SimCar,
+    inner: Box<dyn Vehicle>,
     ticks: u64,
     freeze: std::ops::Range<u64>,
     nan: std::ops::Range<u64>,

@@ -8,8 +8,8 @@
 //!   -> TimeLimit (truncation) -> VecEnv (auto-reset, final_obs) -> learner
 //! ```
 //!
-//! Invariants: `api` sees agvrl-sim only through its plain `msg` types (and the track geometry
-//! `scene::OvalTrack`); rewards live only in
+//! Invariants: `api` sees agvrl-sim only through its plain `msg` types (the oval's geometry,
+//! `api::OvalTrack`, is the task's own); rewards live only in
 //! `task::reward`; every random draw comes from a RNG seeded through `reset`; a NaN or
 //! wrong-length action is an error and never reaches the vehicle.
 #![warn(missing_docs)]
@@ -29,7 +29,7 @@ pub mod wrappers;
 pub use agvrl_sim::stats;
 pub use api::{BoxSpace, Control, Env, EnvError, Info, SensorFrame, Step, Vehicle};
 pub use check::{CheckError, check_env};
-pub use registry::{ENV_IDS, ENVS, EnvConfig, EnvSpec, TaskKind, make, make_task, make_vehicle};
+pub use registry::{ENV_IDS, ENVS, EnvConfig, EnvSpec, TaskKind, make, make_sim_car, make_task, make_vehicle};
 pub use sim_vehicle::{Randomisation, SimCar, SimVehicle, SpawnMode};
 pub use task::ActionMapping;
 pub use task_env::TaskEnv;

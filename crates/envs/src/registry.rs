@@ -205,8 +205,16 @@ fn unknown(id: &str) -> EnvError {
     }
 }
 
-/// The vehicle of env `id` (no task), for tools that drive a vehicle directly.
-pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<SimCar, EnvError> {
+/// The vehicle of env `id` (no task), for tools that drive a vehicle directly: what the
+/// [`Vehicle`](crate::Vehicle) seam promises, and nothing of the simulator behind it.
+pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn crate::Vehicle>, EnvError> {
+    Ok(Box::new(make_sim_car(id, cfg)?))
+}
+
+/// The simulated car of env `id` (no task), for the code that looks behind the seam at the
+/// simulator ([`SimCar::sim`]: viewers, plots, the planner, Python's render, the sim-backed
+/// ROS 2 robot). Everything else takes [`make_vehicle`].
+pub fn make_sim_car(id: &str, cfg: &EnvConfig) -> Result<SimCar, EnvError> {
     let spec = spec(id).filter(|s| s.scene.is_some()).ok_or_else(|| unknown(id))?;
     let scene = spec.scene.unwrap_or_default();
     let source = match cfg.layout_seed {
@@ -309,7 +317,7 @@ pub fn make(id: &str, cfg: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
     if spec(id).is_some_and(|s| s.task == TaskKind::Pendulum) {
         return Ok(Box::new(TimeLimit::new(Pendulum::new(), 200)));
     }
-    let vehicle = make_vehicle(id, cfg)?;
+    let vehicle = make_sim_car(id, cfg)?;
     let task = make_task(id, cfg, vehicle.steering_limit_rad())?;
     Ok(Box::new(TimeLimit::new(
         TaskEnv::new(vehicle, task).with_held_out(cfg.held_out),

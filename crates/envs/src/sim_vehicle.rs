@@ -98,7 +98,11 @@ pub struct SimVehicle {
 /// Free cells, track and subjects of a built world.
 fn map_of(sim: &Sim) -> MapInfo {
     let half = sim.scene().half_extent_m();
-    let track = sim.scene().file.track.as_ref().map(|t| t.oval());
+    let track = sim.scene().file.track.as_ref().map(|t| crate::api::OvalTrack {
+        straight_m: t.straight_m,
+        inner_radius_m: t.inner_radius_m,
+        outer_radius_m: t.outer_radius_m,
+    });
     let mut free_cells = Vec::new();
     let (nx, ny) = ((2.0 * half[0] / CELL_M) as i32, (2.0 * half[1] / CELL_M) as i32);
     for i in 0..nx {

@@ -136,7 +136,7 @@ mod env_config_file {
                     [lidar]\nn_rays = 50\n";
         let cfg: EnvConfig = toml::from_str(text).unwrap();
         assert_eq!((cfg.sim.substeps, cfg.sim.lidar.n_rays, cfg.max_steps), (6, 50, 7));
-        let car = make_vehicle("racing-oval", &cfg).unwrap();
+        let car = agvrl_envs::make_sim_car("racing-oval", &cfg).unwrap();
         assert_eq!(car.sim().config().settings, cfg.sim);
         assert_eq!(car.control_period_s(), 0.025);
         let back: EnvConfig = toml::from_str(&toml::to_string(&cfg).unwrap()).unwrap();
@@ -231,7 +231,7 @@ mod episodes {
     #[test]
     fn a_new_layout_each_episode_comes_from_the_episode_seed_and_its_half() {
         // The map a reset builds, seen as the free cells of the coverage grid.
-        let free = |v: &mut agvrl_envs::SimCar, seed: u64| {
+        let free = |v: &mut Box<dyn agvrl_envs::Vehicle>, seed: u64| {
             v.reset(seed).unwrap();
             v.map().unwrap().free_cells.clone()
         };
@@ -341,6 +341,47 @@ mod episodes {
         }
         let s = last.unwrap();
         assert!(s.distance_m > 1.0 && s.coverage > 0.01 && s.coverage < 0.5, "{s:?}");
+    }
+
+    #[test]
+    fn oval_progress_runs_clockwise_along_the_centre_line() {
+        // The built-in oval's numbers (assets/scenes/oval.toml).
+        let t = agvrl_envs::api::OvalTrack {
+            straight_m: 14.0,
+            inner_radius_m: 3.0,
+            outer_radius_m: 5.0,
+        };
+        assert!((t.lap_length_m() - (28.0 + 8.0 * std::f32::consts::PI)).abs() < 1e-3);
+        // Clockwise progress: start of the +x straight, then down it, round the bottom.
+        assert!(t.centreline_s(4.0, 7.0).abs() < 1e-4);
+        assert!((t.centreline_s(4.0, -7.0) - 14.0).abs() < 1e-4);
+        assert!((t.centreline_s(0.0, -11.0) - (14.0 + 2.0 * std::f32::consts::PI)).abs() < 1e-3);
+        assert!((t.centreline_s(-4.0, 0.0) - (21.0 + 4.0 * std::f32::consts::PI)).abs() < 1e-3);
+        for k in 0..100 {
+            let s = k as f32 * t.lap_length_m() / 100.0;
+            let ([x, y], [dx, dy]) = t.centreline_at(s);
+            assert!((t.centreline_s(x, y) - s).abs() < 1e-3, "s {s}");
+            assert!(t.lateral_offset_m(x, y).abs() < 1e-4);
+            // The direction points along increasing s.
+            let ahead = t.centreline_s(x + 0.01 * dx, y + 0.01 * dy);
+            assert!(
+                (ahead - s - 0.01).abs() < 1e-3 || s > t.lap_length_m() - 0.02,
+                "s {s}: ahead {ahead}"
+            );
+        }
+    }
+
+    /// The oval the racing task reads is the scene's track.
+    #[test]
+    fn the_racing_map_carries_the_scene_s_oval() {
+        let car = agvrl_envs::make_sim_car("racing-oval", &EnvConfig::default()).unwrap();
+        let spec = car.sim().scene().file.track.clone().unwrap();
+        let t = car.map().unwrap().track.unwrap();
+        assert_eq!(
+            (t.straight_m, t.inner_radius_m, t.outer_radius_m),
+            (spec.straight_m, spec.inner_radius_m, spec.outer_radius_m)
+        );
+        assert_eq!((t.straight_m, t.inner_radius_m, t.outer_radius_m), (14.0, 3.0, 5.0));
     }
 
     /// Pure pursuit along the oval's centre line, from the GPS: a known-good driver.

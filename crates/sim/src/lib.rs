@@ -26,5 +26,5 @@ pub mod world;
 
 pub use error::SimError;
 pub use scene::{SCENE_IDS, Scene, SceneKind};
-pub use sim::{PlanarPose, SceneSource, Sim, SimConfig, SimSettings, VehicleParams};
+pub use sim::{PlanarPose, SceneSource, Sim, SimConfig, SimSettings, VehicleParams, VehicleSource};
 pub use vehicle::{Control, DriveModel, DynamicsMode};

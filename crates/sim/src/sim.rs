@@ -42,6 +42,37 @@ pub struct SimConfig {
     pub settings: SimSettings,
 }
 
+/// Which vehicle [`SimSettings::vehicle`] names.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum VehicleSource {
+    /// A built-in vehicle (`assets/vehicles/<name>.toml`).
+    Builtin(String),
+    /// A vehicle TOML (and the URDF it names) on disk.
+    File(PathBuf),
+}
+
+impl VehicleSource {
+    /// A setting ending in `.toml` is a file; anything else a built-in name.
+    pub fn of(setting: &str) -> Self {
+        if setting.ends_with(".toml") {
+            Self::File(PathBuf::from(setting))
+        } else {
+            Self::Builtin(setting.to_string())
+        }
+    }
+
+    /// Load the vehicle (its TOML and URDF), without building a simulator.
+    pub fn load(&self) -> Result<VehicleModel, SimError> {
+        match self {
+            Self::File(path) => {
+                let (src, name) = AssetSource::for_file(path);
+                VehicleModel::load(&src, &name)
+            }
+            Self::Builtin(name) => VehicleModel::builtin(&AssetSource::builtin(), name),
+        }
+    }
+}
+
 /// The simulator's settings besides the scene. agvrl-envs' `EnvConfig` embeds them (its env id
 /// picks the scene), so an env TOML and the simulator read the same keys.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -102,6 +133,14 @@ impl Default for SimSettings {
             camera: None,
             free_flight: true,
         }
+    }
+}
+
+impl SimSettings {
+    /// The vehicle these settings name, loaded without building a simulator (its top speed,
+    /// geometry).
+    pub fn vehicle_model(&self) -> Result<VehicleModel, SimError> {
+        VehicleSource::of(&self.vehicle).load()
     }
 }
 
@@ -192,12 +231,7 @@ impl Sim {
             let file = scene.file.clone().with_subjects(set.subjects, set.subject_seed, 3.0);
             scene = Scene::build(file, &assets, "scene with subjects")?;
         }
-        let model = if set.vehicle.ends_with(".toml") {
-            let (src, name) = AssetSource::for_file(std::path::Path::new(&set.vehicle));
-            VehicleModel::load(&src, &name)?
-        } else {
-            VehicleModel::builtin(&assets, &set.vehicle)?
-        };
+        let model = set.vehicle_model()?;
         let substep_s = (set.control_period_s / set.substeps as f64) as f32;
         let mut world = World::new(&scene, substep_s);
         // Swept collision checks cost a fifth of a step; they are needed only where one substep's

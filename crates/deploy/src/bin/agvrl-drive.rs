@@ -174,7 +174,7 @@ fn drive_ros2(a: &Args, env: &str, env_cfg: &EnvConfig, policy: Policy, drive: D
     let mut cfg = ros2_config(a)?;
     cfg.check_lidar(&env_cfg.sim.lidar)?;
     // Full throttle is the trained car's top speed unless the car's TOML says otherwise.
-    let top = make_vehicle(env, env_cfg)?.sim().vehicle().top_speed_mps();
+    let top = env_cfg.sim.vehicle_model()?.top_speed_mps();
     if let Some(w) = cfg.drive.for_trained_top_speed(top) {
         eprintln!("warning: {w}");
     }

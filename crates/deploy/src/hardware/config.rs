@@ -353,8 +353,11 @@ mod tests {
         assert!(w.contains("2.2x"), "{w}");
         assert!(Ros2Config::from_toml("[drive]\nmax_speed_mps = -1.0\n").is_err());
         // The fallback is xtenth_car's model top speed.
-        let v = agvrl_envs::make_vehicle("racing-oval", &agvrl_envs::EnvConfig::default()).unwrap();
-        let top = v.sim().vehicle().top_speed_mps();
+        let top = agvrl_envs::EnvConfig::default()
+            .sim
+            .vehicle_model()
+            .unwrap()
+            .top_speed_mps();
         assert!((top - XTENTH_TOP_SPEED_MPS).abs() < 0.01, "{top}");
     }
 }

@@ -13,7 +13,7 @@ use super::ros2::{
 use crate::DeployError;
 use agvrl_envs::api::{Control, SensorFrame, TerminationCause, Vehicle};
 use agvrl_envs::task::Task;
-use agvrl_envs::{EnvConfig, make_task, make_vehicle};
+use agvrl_envs::{EnvConfig, make_sim_car, make_task};
 use ros2_client::Node;
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
 use std::ops::Range;
@@ -136,7 +136,7 @@ impl SimRobot {
         faults: Faults,
     ) -> Result<Self, DeployError> {
         cfg.validate().map_err(DeployError::Config)?;
-        let mut vehicle = make_vehicle(env, env_cfg)?;
+        let mut vehicle = make_sim_car(env, env_cfg)?;
         let mut cfg = cfg;
         // The robot serves its own car: an explicit max_speed_mps is honoured as set.
         let _ = cfg.drive.for_trained_top_speed(vehicle.sim().vehicle().top_speed_mps());

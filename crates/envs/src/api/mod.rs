@@ -3,8 +3,10 @@
 
 mod env;
 mod space;
+mod track;
 mod vehicle;
 
 pub use env::*;
 pub use space::BoxSpace;
+pub use track::OvalTrack;
 pub use vehicle::*;

@@ -1,7 +1,7 @@
 use super::env::EnvError;
+use super::track::OvalTrack;
 pub use agvrl_sim::msg::Control;
 use agvrl_sim::msg::{CameraFrame, GpsReading, ImuReading, LaserScan};
-use agvrl_sim::scene::OvalTrack;
 
 /// Everything a vehicle's sensors delivered for one control tick. Sensors a real car may lack
 /// are optional; a task says which it needs.

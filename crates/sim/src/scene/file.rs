@@ -102,15 +102,6 @@ pub struct TrackSpec {
 }
 
 impl TrackSpec {
-    /// The track's plain geometry (progress along the centre line).
-    pub fn oval(&self) -> super::OvalTrack {
-        super::OvalTrack {
-            straight_m: self.straight_m,
-            inner_radius_m: self.inner_radius_m,
-            outer_radius_m: self.outer_radius_m,
-        }
-    }
-
     /// Walls as boxes: (half extents, pose).
     pub fn wall_boxes(&self) -> Vec<(Vector, Pose)> {
         let t = self.wall_thickness_m;

@@ -4,10 +4,8 @@
 
 mod file;
 mod procedural;
-mod track;
 
 pub use file::{BoundarySpec, Decal, GroundSpec, Placement, SceneFile, SceneKind, SpawnSpec, TrackSpec};
-pub use track::OvalTrack;
 
 use crate::SimError;
 use crate::assets::AssetSource;

@@ -1,4 +1,6 @@
-//! The oval race track's geometry: progress along the centre line and the lateral offset.
+//! The oval race track's geometry as the racing task reads it: progress along the centre line
+//! and the lateral offset. Plain numbers: the simulator's scene file describes the walls, and
+//! `SimVehicle` hands the task this from it.
 
 use serde::{Deserialize, Serialize};
 
