@@ -7,7 +7,7 @@ use crate::plots::{self};
 use crate::runs::write_atomic;
 use crate::viz::{self, Recorder, Sink};
 use agvrl_envs::{Env, VecEnv, make};
-use agvrl_rl::{Algorithm, Control, Learner, Policy, Ppo, Progress, Sac};
+use agvrl_rl::{Algorithm, Control, DeviceChoice, Learner, Policy, Ppo, Progress, Sac};
 use agvrl_run::{RunDir, files, stamp};
 use anyhow::{Context, Result};
 use clap::Args;
@@ -31,14 +31,13 @@ pub enum DeviceArg {
     Wgpu,
 }
 
-impl DeviceArg {
-    /// The name `agvrl_rl::device_by_name` takes.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Flex => "flex",
-            Self::Ndarray => "ndarray",
-            Self::Cuda => "cuda",
-            Self::Wgpu => "wgpu",
+impl From<DeviceArg> for DeviceChoice {
+    fn from(d: DeviceArg) -> Self {
+        match d {
+            DeviceArg::Flex => Self::Flex,
+            DeviceArg::Ndarray => Self::NdArray,
+            DeviceArg::Cuda => Self::Cuda,
+            DeviceArg::Wgpu => Self::Wgpu,
         }
     }
 }
@@ -177,7 +176,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
         });
     }
     if let Some(dir) = &a.resume {
-        let device = agvrl_rl::device_by_name(a.device.name())?;
+        let device = DeviceChoice::from(a.device).device()?;
         let cfg = RunConfig::load(&dir.join(files::CONFIG))
             .with_context(|| format!("{} is not a run directory", dir.display()))?;
         let ckpt = dir.join(files::CHECKPOINT);
@@ -215,7 +214,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
     if a.progress == ProgressMode::Json {
         stop_with_parent(&STOP);
     }
-    let (dir, text) = train_run(cfg, a.out.clone(), a.device.name(), &STOP, a.progress)?;
+    let (dir, text) = train_run(cfg, a.out.clone(), a.device.into(), &STOP, a.progress)?;
     if a.progress == ProgressMode::Json {
         println!("{}", done_json(&dir, &text));
     } else {
@@ -270,16 +269,16 @@ fn done_json(dir: &std::path::Path, eval_text: &str) -> String {
 }
 
 /// Train `cfg` into a new run directory (`out`, or runs/<date-time>-<env>-<algo>), stopping
-/// early, with a complete run directory, once `stop` is set. `device` as `--device` (empty:
-/// flex). Returns the directory and the text of its eval.txt.
+/// early, with a complete run directory, once `stop` is set. Returns the directory and the text
+/// of its eval.txt.
 pub fn train_run(
     cfg: RunConfig,
     out: Option<PathBuf>,
-    device: &str,
+    device: DeviceChoice,
     stop: &AtomicBool,
     progress: ProgressMode,
 ) -> Result<(PathBuf, String)> {
-    let device = agvrl_rl::device_by_name(if device.is_empty() { "flex" } else { device })?;
+    let device = device.device()?;
     let device = &device;
     let mut cfg = cfg;
     image_spec_from_env(&mut cfg);

@@ -560,12 +560,14 @@ fn train(
         // Parsed and validated here, so a bad config is a ValueError before anything starts.
         let cfg = config::run_config(config, overrides)?;
         let stop = Arc::new(AtomicBool::new(false));
-        let device = device.to_string();
+        let device: agvrl_rl::DeviceChoice = device
+            .parse()
+            .map_err(|e: agvrl_rl::RlError| PyValueError::new_err(e.to_string()))?;
         let flag = stop.clone();
         let worker = std::thread::Builder::new()
             .name("agvrl-train".into())
             .spawn(move || {
-                agvrl::train::train_run(cfg, out, &device, &flag, agvrl::train::ProgressMode::Bar)
+                agvrl::train::train_run(cfg, out, device, &flag, agvrl::train::ProgressMode::Bar)
                     .map_err(|e| agvrl_run::error_line(e.as_ref()))
             })
             .map_err(|e| PyRuntimeError::new_err(format!("starting the trainer: {e}")))?;

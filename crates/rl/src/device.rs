@@ -55,17 +55,52 @@ pub fn default_device() -> Device {
     CpuBackend::default().device()
 }
 
+/// The devices a learner can train on; which of them this build carries decides
+/// [`DeviceChoice::device`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DeviceChoice {
+    /// burn-flex on the CPU.
+    #[default]
+    Flex,
+    /// burn-ndarray on the CPU (the `ndarray` feature).
+    NdArray,
+    /// A CUDA GPU (the `cuda` feature).
+    Cuda,
+    /// A wgpu GPU (the `wgpu` feature).
+    Wgpu,
+}
+
+impl std::str::FromStr for DeviceChoice {
+    type Err = RlError;
+    fn from_str(name: &str) -> Result<Self> {
+        match name {
+            "flex" => Ok(Self::Flex),
+            "ndarray" => Ok(Self::NdArray),
+            "cuda" => Ok(Self::Cuda),
+            "wgpu" => Ok(Self::Wgpu),
+            _ => Err(RlError::Config(format!(
+                "unknown device '{name}' (flex, ndarray, cuda, wgpu)"
+            ))),
+        }
+    }
+}
+
+impl DeviceChoice {
+    /// The device, or why this build has none of this kind.
+    pub fn device(self) -> Result<Device> {
+        match self {
+            Self::Flex => Ok(CpuBackend::Flex.device()),
+            Self::NdArray => Ok(CpuBackend::parse("ndarray")?.device()),
+            Self::Cuda => cuda(),
+            Self::Wgpu => wgpu(),
+        }
+    }
+}
+
 /// A device by name: `flex` or `ndarray` (CPU, always built), `cuda` or `wgpu` (GPU, with the
 /// cargo feature of the same name).
 pub fn device_by_name(name: &str) -> Result<Device> {
-    match name {
-        "flex" | "ndarray" => Ok(CpuBackend::parse(name)?.device()),
-        "cuda" => cuda(),
-        "wgpu" => wgpu(),
-        _ => Err(RlError::Config(format!(
-            "unknown device '{name}' (flex, ndarray, cuda, wgpu)"
-        ))),
-    }
+    name.parse::<DeviceChoice>()?.device()
 }
 
 #[cfg(not(all(feature = "cuda", feature = "wgpu")))]

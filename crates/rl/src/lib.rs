@@ -87,7 +87,7 @@ pub use buffer::ReplayBuffer;
 pub use checkpoint::CHECKPOINT_FORMAT_VERSION;
 pub use cnn::ImageSpec;
 pub use config::{EntCoef, PpoConfig, SacConfig};
-pub use device::{CpuBackend, default_device, device_by_name};
+pub use device::{CpuBackend, DeviceChoice, default_device, device_by_name};
 pub use error::{Result, RlError};
 pub use eval::evaluate;
 pub use file::write_atomic;
