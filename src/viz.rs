@@ -38,10 +38,36 @@ fn y_up_to_z_up(pose: &Pose) -> rerun::Quaternion {
     q_of(pose.rotation * Rotation::from_rotation_x(-std::f32::consts::FRAC_PI_2))
 }
 
+/// How a recording opens in the viewer: the scene and the car large, the LiDAR and the camera
+/// beside them, the time series below.
+fn layout() -> rerun::blueprint::Blueprint {
+    use rerun::blueprint::{Blueprint, Horizontal, Spatial2DView, Spatial3DView, Tabs, TimeSeriesView, Vertical};
+    let scene = Spatial3DView::new("scene").with_origin("world");
+    let lidar = Spatial3DView::new("LiDAR")
+        .with_origin("world")
+        .with_contents(["world/lidar/**", "world/vehicle/**"]);
+    let camera = Tabs::new([
+        Spatial2DView::new("camera").with_origin("camera/rgb").into(),
+        Spatial2DView::new("depth").with_origin("camera/depth").into(),
+        Spatial2DView::new("segmentation")
+            .with_origin("camera/segmentation")
+            .into(),
+    ]);
+    let side = Vertical::new([lidar.into(), camera.into()]);
+    let plots = Horizontal::new(
+        ["reward", "speed_mps", "steering_rad", "throttle", "min_range_m"]
+            .map(|p| TimeSeriesView::new(p).with_origin(format!("plots/{p}")).into()),
+    );
+    let top = Horizontal::new([scene.into(), side.into()]).with_column_shares([3.0, 1.0]);
+    Blueprint::new(Vertical::new([top.into(), plots.into()]).with_row_shares([3.0, 1.0]))
+}
+
 impl Recorder {
     /// Open a recording named `name`.
     pub fn new(sink: Sink, name: &str) -> Result<Self> {
-        let builder = rerun::RecordingStreamBuilder::new("agvrl").recording_name(name);
+        let builder = rerun::RecordingStreamBuilder::new("agvrl")
+            .recording_name(name)
+            .with_blueprint(layout());
         let (rec, file) = match sink {
             Sink::File(path) => {
                 let tmp = path.with_extension("rrd.tmp");

@@ -85,6 +85,10 @@ fn rrd_check(p: &Path, entities: &[&str]) {
             &text[..text.len().min(3000)]
         );
     }
+    // The recording carries the layout it opens with (src/viz.rs `layout`).
+    for b in ["ViewBlueprint", "ContainerBlueprint"] {
+        assert!(text.contains(b), "no {b} in the recording");
+    }
 }
 
 fn tiny_config(dir: &Path) -> PathBuf {
