@@ -503,9 +503,9 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         }
         env_cfg.max_steps = n;
     }
-    // A run evaluates on its own held-out seeds (training's + 2,000,000), a policy file from 0.
+    // `--run` takes the run's evaluation seeds (`Seeds::eval_command`), a policy file 0.
     let seed = a.seed.unwrap_or_else(|| match (&a.run, &src.run) {
-        (Some(_), Some(run)) => run.seed + 2_000_000,
+        (Some(_), Some(run)) => run.seeds().eval_command(),
         _ => 0,
     });
     let mut watch = Watch {

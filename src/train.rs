@@ -419,7 +419,7 @@ fn run_learner(
         &cfg.env,
         &cfg.eval_env_config(),
         cfg.eval_episodes,
-        cfg.seed + 1_000_000,
+        cfg.seeds().run_evaluation(),
         &mut |v| watch.see(v),
     )?;
     if let Some(r) = watch.rec.take() {

@@ -178,7 +178,7 @@ impl RunConfig {
     pub fn train_env_config(&self, i: usize) -> EnvConfig {
         let mut cfg = self.env_config.clone();
         if i + self.procedural_layouts >= self.n_envs {
-            cfg.layout_seed = Some(self.seed.wrapping_mul(1_000_003).wrapping_add(i as u64));
+            cfg.layout_seed = Some(self.seeds().training_layout(i));
         } else {
             cfg.new_layout_each_episode = false;
         }
@@ -192,6 +192,11 @@ impl RunConfig {
             0 => &self.env,
             n => &self.train_envs[i % n],
         }
+    }
+
+    /// Which seed each use of this run's `seed` gets.
+    pub fn seeds(&self) -> crate::Seeds {
+        crate::Seeds::of(self.seed)
     }
 
     /// Env settings for evaluation episodes: the built-in map, held-out seeds.

@@ -9,10 +9,12 @@ mod config;
 mod dir;
 mod error;
 mod error_line;
+mod seeds;
 mod settings;
 
 pub use config::RunConfig;
 pub use dir::{Run, RunDir, files, stamp};
 pub use error::{Result, RunError};
 pub use error_line::error_line;
+pub use seeds::Seeds;
 pub use settings::{PolicySettings, SettingsSource};
