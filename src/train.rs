@@ -2,7 +2,7 @@
 //! checkpoints, progress, and the evaluation at the end (`crate::eval`).
 
 use crate::config::{DEFAULT_TOML, RunConfig};
-use crate::eval::{Driver, Watch, evaluate};
+use crate::eval::{Driver, Summary, Watch, evaluate};
 use crate::plots::{self};
 use crate::runs::write_atomic;
 use crate::viz::{self, Recorder, Sink};
@@ -316,7 +316,8 @@ fn sac_with_threads<E: Env>(mut sac: Sac<E>, cfg: &RunConfig) -> Result<Sac<E>> 
 static STOP_HANDLER: std::sync::OnceLock<()> = std::sync::OnceLock::new();
 
 /// Train `learner` up to `target` steps (or a Ctrl-C), checkpointing every tenth; write
-/// checkpoint, policy, metrics (after `previous_csv`) and the evaluation. Returns eval.txt.
+/// checkpoint.ckpt, policy.agvrl, metrics.csv (after `previous_csv`), the deterministic
+/// evaluation (plots, recording) and eval.txt, whose text it returns.
 fn run_learner(
     learner: &mut dyn Learner,
     cfg: &RunConfig,
@@ -326,6 +327,47 @@ fn run_learner(
     stop: &AtomicBool,
     progress: ProgressMode,
 ) -> Result<String> {
+    let t0 = Instant::now();
+    let rows = learn_in_chunks(learner, cfg, target, file, stop, progress)?;
+    let policy_path = file(files::POLICY);
+    // The policy file carries the settings it drives with: the run config.
+    let mut policy_data = learner.policy_data();
+    policy_data.settings_toml = Some(cfg.to_toml()?);
+    policy_data.save(&policy_path)?;
+    let interrupted = learner.num_timesteps() < target;
+    let train_s = t0.elapsed().as_secs_f64();
+    let csv = metrics_csv(previous_csv, &rows);
+    write_atomic(&file(files::METRICS), csv.as_bytes())?;
+    let summary = evaluate_run(cfg, &policy_path, file)?;
+    let title = format!("{} {} seed {}", cfg.env, cfg.algo, cfg.seed);
+    plots::learning_curve(&file(files::LEARNING_CURVE), &plots::curve_of_csv(&csv), &title)?;
+    let mut text = format!(
+        "train_s={:.1}\neval_s={:.1}\nsteps={}\n",
+        train_s,
+        t0.elapsed().as_secs_f64() - train_s,
+        learner.num_timesteps()
+    );
+    if interrupted {
+        text.push_str("interrupted=true\n");
+    }
+    for l in summary.lines() {
+        let _ = writeln!(text, "{l}");
+    }
+    write_atomic(&file(files::EVAL), text.as_bytes())?;
+    Ok(text)
+}
+
+/// `learn` in chunks up to `target` (at least every tenth of the run and every 50,000 steps a
+/// checkpoint), reporting progress as `progress` asks; stops early once `stop` is set. Returns
+/// a metrics row per update.
+fn learn_in_chunks(
+    learner: &mut dyn Learner,
+    cfg: &RunConfig,
+    target: u64,
+    file: &dyn Fn(&str) -> PathBuf,
+    stop: &AtomicBool,
+    progress: ProgressMode,
+) -> Result<Vec<Row>> {
     let start = learner.num_timesteps();
     let bar = match progress {
         ProgressMode::Bar => ProgressBar::new(target),
@@ -373,27 +415,25 @@ fn run_learner(
             Control::Continue
         }
     };
-    // Checkpoint at least every tenth of the run and every 50,000 steps.
     let per_chunk = cfg.steps.div_ceil(10).clamp(1, 50_000);
     while learner.num_timesteps() < target && !stop.load(Ordering::SeqCst) {
         learner.learn(per_chunk.min(target - learner.num_timesteps()), &mut on_progress)?;
         learner.save_checkpoint(&file(files::CHECKPOINT))?;
     }
     learner.save_checkpoint(&file(files::CHECKPOINT))?;
-    let policy_path = file(files::POLICY);
-    // The policy file carries the settings it drives with: the run config.
-    let mut policy_data = learner.policy_data();
-    policy_data.settings_toml = Some(cfg.to_toml()?);
-    policy_data.save(&policy_path)?;
     bar.finish_and_clear();
-    let interrupted = learner.num_timesteps() < target;
-    let train_s = t0.elapsed().as_secs_f64();
-    let mut csv = if previous_csv.is_empty() {
+    Ok(rows)
+}
+
+/// metrics.csv: the rows of earlier sessions of the run (`previous`, header included), then
+/// these.
+fn metrics_csv(previous: &str, rows: &[Row]) -> String {
+    let mut csv = if previous.is_empty() {
         String::from("step,episodes,mean_return,policy_loss,value_loss,entropy,steps_per_s\n")
     } else {
-        previous_csv.to_string()
+        previous.to_string()
     };
-    for r in &rows {
+    for r in rows {
         let mean = r.mean_return.map(|m| format!("{m:.4}")).unwrap_or_default();
         let _ = writeln!(
             csv,
@@ -401,8 +441,13 @@ fn run_learner(
             r.step, r.episodes, r.policy_loss, r.value_loss, r.entropy, r.steps_per_s
         );
     }
-    write_atomic(&file(files::METRICS), csv.as_bytes())?;
-    let mut policy = Policy::load(&policy_path)?;
+    csv
+}
+
+/// The run's own deterministic evaluation of the policy at `policy_path`: eval.rrd (first
+/// episode) and trajectory.png; returns the evaluation's key=value lines.
+fn evaluate_run(cfg: &RunConfig, policy_path: &std::path::Path, file: &dyn Fn(&str) -> PathBuf) -> Result<Summary> {
+    let mut policy = Policy::load(policy_path)?;
     let mut watch = Watch {
         rec_episodes: 1,
         plot_episodes: usize::MAX,
@@ -427,21 +472,7 @@ fn run_learner(
     }
     let title = format!("{} {} seed {}", cfg.env, cfg.algo, cfg.seed);
     watch.plot(&file(files::TRAJECTORY), &format!("{title}: deterministic evaluation"))?;
-    plots::learning_curve(&file(files::LEARNING_CURVE), &plots::curve_of_csv(&csv), &title)?;
-    let mut text = format!(
-        "train_s={:.1}\neval_s={:.1}\nsteps={}\n",
-        train_s,
-        t0.elapsed().as_secs_f64() - train_s,
-        learner.num_timesteps()
-    );
-    if interrupted {
-        text.push_str("interrupted=true\n");
-    }
-    for l in summary.lines() {
-        let _ = writeln!(text, "{l}");
-    }
-    write_atomic(&file(files::EVAL), text.as_bytes())?;
-    Ok(text)
+    Ok(summary)
 }
 
 #[cfg(test)]
