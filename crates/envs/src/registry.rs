@@ -253,14 +253,14 @@ pub fn make_sim_car(id: &str, cfg: &EnvConfig) -> Result<SimCar, EnvError> {
 /// `steering_limit_rad` (the deploy loop pairs it with any `Vehicle`).
 pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<Box<dyn crate::task::Task>, EnvError> {
     let spec = spec(id).filter(|s| s.scene.is_some()).ok_or_else(|| unknown(id))?;
-    cfg.safe_reward.validate().map_err(EnvError::Config)?;
+    cfg.safe_reward.validate()?;
     if !(cfg.clearance_fov_deg.is_finite() && (0.0..=360.0).contains(&cfg.clearance_fov_deg)) {
         return Err(EnvError::Config(format!(
             "clearance_fov_deg must be in [0, 360], got {}",
             cfg.clearance_fov_deg
         )));
     }
-    cfg.observation.explored.validate().map_err(EnvError::Config)?;
+    cfg.observation.explored.validate()?;
     if spec.task == TaskKind::Racing && !cfg.observation.explored.is_empty() {
         return Err(EnvError::Config(format!(
             "observation.explored is a search observation; {id} is a racing env"
@@ -270,7 +270,7 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
     if safety_filter.decel_mps2 == 0.0 {
         safety_filter.decel_mps2 = cfg.sim.brake_mps2 as f32;
     }
-    safety_filter.validate().map_err(EnvError::Config)?;
+    safety_filter.validate()?;
     let ends_below_m = match spec.task {
         TaskKind::Racing => RacingConfig::default().terminate_below_m,
         _ => SearchConfig::default().terminate_below_m,

@@ -48,3 +48,25 @@ pub enum SimError {
     #[error("simulation state is not finite: {0}")]
     NotFinite(String),
 }
+
+/// A setting outside the values it may take. Every settings table's `validate` returns it, so a
+/// caller can tell a bad setting from a failed read and knows which table to point at.
+#[derive(Clone, Debug, PartialEq, Eq, Error)]
+#[error("{message}")]
+pub struct InvalidSetting {
+    /// The settings table: `lidar`, `camera`, `safety_filter`, `safe_reward`,
+    /// `observation.explored`, `car config`.
+    pub table: &'static str,
+    /// What is wrong, naming the key and the value.
+    pub message: String,
+}
+
+impl InvalidSetting {
+    /// A bad setting of `table`.
+    pub fn new(table: &'static str, message: impl Into<String>) -> Self {
+        Self {
+            table,
+            message: message.into(),
+        }
+    }
+}

@@ -24,7 +24,7 @@ pub mod urdf;
 pub mod vehicle;
 pub mod world;
 
-pub use error::SimError;
+pub use error::{InvalidSetting, SimError};
 pub use scene::{SCENE_IDS, Scene, SceneKind};
 pub use sim::{PlanarPose, SceneSource, Sim, SimConfig, SimSettings, VehicleParams, VehicleSource};
 pub use vehicle::{Control, DriveModel, DynamicsMode};

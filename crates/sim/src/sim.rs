@@ -214,9 +214,9 @@ impl Sim {
                 set.brake_mps2
             )));
         }
-        set.lidar.validate().map_err(invalid)?;
+        set.lidar.validate().map_err(|e| invalid(e.message))?;
         if let Some(c) = &set.camera {
-            c.validate().map_err(invalid)?;
+            c.validate().map_err(|e| invalid(e.message))?;
         }
         let assets = AssetSource::builtin();
         let mut scene = match &cfg.scene {

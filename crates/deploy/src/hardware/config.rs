@@ -230,12 +230,12 @@ impl Ros2Config {
     /// Parse and check TOML text; the error is one line.
     pub fn from_toml(text: &str) -> Result<Self, String> {
         let c: Self = toml::from_str(text).map_err(|e| e.message().trim().replace('\n', " "))?;
-        c.validate()?;
+        c.validate().map_err(|e| e.message)?;
         Ok(c)
     }
 
     /// Check the values, naming the first bad one.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
         let s = &self.scan;
         let checks: [(bool, &str); 10] = [
             (self.domain_id <= 232, "domain_id must be in 0..=232"),
@@ -277,7 +277,7 @@ impl Ros2Config {
             ),
         ];
         match checks.iter().find(|(ok, _)| !ok) {
-            Some((_, why)) => Err(why.to_string()),
+            Some((_, why)) => Err(agvrl_sim::InvalidSetting::new("car config", *why)),
             None => Ok(()),
         }
     }

@@ -166,7 +166,7 @@ pub struct Ros2Vehicle {
 impl Ros2Vehicle {
     /// Join domain `cfg.domain_id` and create the subscriptions and the drive publisher.
     pub fn new(cfg: Ros2Config, lockstep: bool) -> Result<Self, DeployError> {
-        cfg.validate().map_err(DeployError::Config)?;
+        cfg.validate().map_err(|e| DeployError::Config(e.message))?;
         let (ctx, mut node) = node_in_context(&cfg, &cfg.node_name)?;
         let (t, q) = (&cfg.topics, cfg.qos.sensors);
         let mut scan = subscribe(&mut node, &t.scan, SCAN_TYPE, q)?;

@@ -135,7 +135,7 @@ impl SimRobot {
         seed: u64,
         faults: Faults,
     ) -> Result<Self, DeployError> {
-        cfg.validate().map_err(DeployError::Config)?;
+        cfg.validate().map_err(|e| DeployError::Config(e.message))?;
         let mut vehicle = make_sim_car(env, env_cfg)?;
         let mut cfg = cfg;
         // The robot serves its own car: an explicit max_speed_mps is honoured as set.

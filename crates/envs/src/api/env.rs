@@ -40,6 +40,9 @@ pub enum EnvError {
     /// A configuration value is invalid.
     #[error("config: {0}")]
     Config(String),
+    /// A setting outside the values it may take (a settings table's `validate`).
+    #[error("config: {0}")]
+    Setting(#[from] agvrl_sim::InvalidSetting),
     /// Env `env` of a vector env failed.
     #[error("env {env}: {source}")]
     InEnv {

@@ -55,7 +55,7 @@ impl ExploredObs {
     }
 
     /// An error for settings that cannot work.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
         if self.is_empty() {
             return Ok(());
         }
@@ -73,10 +73,13 @@ impl ExploredObs {
         if ok {
             Ok(())
         } else {
-            Err(format!(
-                "observation.explored needs sectors <= 64, cell_m >= 0.05, 0 <= radii_m[0] < radii_m[1] < \
-                 radii_m[2] and radii_m[2], visited_m < {} cells; got {self:?}",
-                GRID / 4
+            Err(agvrl_sim::InvalidSetting::new(
+                "observation.explored",
+                format!(
+                    "observation.explored needs sectors <= 64, cell_m >= 0.05, 0 <= radii_m[0] < radii_m[1] < \
+                     radii_m[2] and radii_m[2], visited_m < {} cells; got {self:?}",
+                    GRID / 4
+                ),
             ))
         }
     }

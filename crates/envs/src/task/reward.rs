@@ -72,33 +72,42 @@ impl Default for SafeShaping {
 
 impl SafeShaping {
     /// Why these constants cannot shape a reward, if they cannot.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
         if !(self.near_m.is_finite() && self.near_m > SAFE_FULL_M) {
-            return Err(format!(
-                "safe_reward.near_m must be above {SAFE_FULL_M} m, got {}",
-                self.near_m
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safe_reward",
+                format!("safe_reward.near_m must be above {SAFE_FULL_M} m, got {}", self.near_m),
             ));
         }
         if !(self.near_weight.is_finite() && self.near_weight >= 0.0) {
-            return Err(format!(
-                "safe_reward.near_weight must be >= 0, got {}",
-                self.near_weight
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safe_reward",
+                format!("safe_reward.near_weight must be >= 0, got {}", self.near_weight),
             ));
         }
         if !(self.near_speed_mps.is_finite() && self.near_speed_mps >= 0.0) {
-            return Err(format!(
-                "safe_reward.near_speed_mps must be >= 0, got {}",
-                self.near_speed_mps
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safe_reward",
+                format!("safe_reward.near_speed_mps must be >= 0, got {}", self.near_speed_mps),
             ));
         }
         if !(self.collision.is_finite() && self.collision <= 0.0) {
-            return Err(format!("safe_reward.collision must be <= 0, got {}", self.collision));
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safe_reward",
+                format!("safe_reward.collision must be <= 0, got {}", self.collision),
+            ));
         }
         if !(self.filter.is_finite() && self.filter <= 0.0) {
-            return Err(format!("safe_reward.filter must be <= 0, got {}", self.filter));
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safe_reward",
+                format!("safe_reward.filter must be <= 0, got {}", self.filter),
+            ));
         }
         if !(self.new_cell.is_finite() && self.new_cell >= 0.0) {
-            return Err(format!("safe_reward.new_cell must be >= 0, got {}", self.new_cell));
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safe_reward",
+                format!("safe_reward.new_cell must be >= 0, got {}", self.new_cell),
+            ));
         }
         Ok(())
     }
@@ -335,28 +344,28 @@ mod tests {
             weight_proximity_by_speed(&mut r, &moving, v);
             assert_eq!(r.proximity, expect, "v = {v}");
         }
-        assert!(
-            SafeShaping { near_m: 0.5, ..wide }
-                .validate()
-                .unwrap_err()
-                .contains("near_m")
-        );
+        let e = SafeShaping { near_m: 0.5, ..wide }.validate().unwrap_err();
+        assert_eq!(e.table, "safe_reward");
+        assert!(e.message.contains("near_m"), "{e}");
         assert!(
             SafeShaping { collision: 1.0, ..wide }
                 .validate()
                 .unwrap_err()
+                .message
                 .contains("collision")
         );
         assert!(
             SafeShaping { filter: 0.5, ..wide }
                 .validate()
                 .unwrap_err()
+                .message
                 .contains("filter")
         );
         assert!(
             SafeShaping { new_cell: -0.1, ..wide }
                 .validate()
                 .unwrap_err()
+                .message
                 .contains("new_cell")
         );
     }

@@ -92,7 +92,7 @@ impl Default for SafetyFilterConfig {
 
 impl SafetyFilterConfig {
     /// Check the settings.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
         if !self.enabled {
             return Ok(());
         }
@@ -110,7 +110,10 @@ impl SafetyFilterConfig {
         ];
         for (name, v) in lengths {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("safety_filter.{name} must be finite and >= 0, got {v}"));
+                return Err(agvrl_sim::InvalidSetting::new(
+                    "safety_filter",
+                    format!("safety_filter.{name} must be finite and >= 0, got {v}"),
+                ));
             }
         }
         for (name, v) in [
@@ -119,27 +122,33 @@ impl SafetyFilterConfig {
             ("half_width_m", self.half_width_m),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("safety_filter.{name} must be finite and > 0, got {v}"));
+                return Err(agvrl_sim::InvalidSetting::new(
+                    "safety_filter",
+                    format!("safety_filter.{name} must be finite and > 0, got {v}"),
+                ));
             }
         }
         if self.backout_m > 0.0 && !(self.backout_throttle > 0.0 && self.backout_throttle <= 1.0) {
-            return Err(format!(
-                "safety_filter.backout_throttle must be in (0, 1], got {}",
-                self.backout_throttle
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safety_filter",
+                format!(
+                    "safety_filter.backout_throttle must be in (0, 1], got {}",
+                    self.backout_throttle
+                ),
             ));
         }
         if self.n_steering < 2 {
-            return Err(format!(
-                "safety_filter.n_steering must be >= 2, got {}",
-                self.n_steering
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safety_filter",
+                format!("safety_filter.n_steering must be >= 2, got {}", self.n_steering),
             ));
         }
         if !(self.decel_mps2.is_finite() && self.decel_mps2 > 0.0) {
-            return Err(
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safety_filter",
                 "safety_filter needs a braking drive: set brake_mps2 (or safety_filter.decel_mps2) > 0; \
-                 a coasting car cannot stop where the filter plans"
-                    .into(),
-            );
+                 a coasting car cannot stop where the filter plans",
+            ));
         }
         Ok(())
     }

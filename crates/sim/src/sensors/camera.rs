@@ -46,18 +46,24 @@ impl Default for CameraConfig {
 
 impl CameraConfig {
     /// Check the settings.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), crate::InvalidSetting> {
         if self.width == 0 || self.height == 0 || self.width > 8192 || self.height > 8192 {
-            return Err(format!(
-                "camera size {}x{} must be in 1..=8192",
-                self.width, self.height
+            return Err(crate::InvalidSetting::new(
+                "camera",
+                format!("camera size {}x{} must be in 1..=8192", self.width, self.height),
             ));
         }
         if !(self.fov_deg > 0.0 && self.fov_deg < 179.0) {
-            return Err(format!("camera fov_deg must be in (0, 179), got {}", self.fov_deg));
+            return Err(crate::InvalidSetting::new(
+                "camera",
+                format!("camera fov_deg must be in (0, 179), got {}", self.fov_deg),
+            ));
         }
         if !(self.near_m > 0.0 && self.far_m > self.near_m && self.far_m.is_finite()) {
-            return Err("camera needs 0 < near_m < far_m < inf".into());
+            return Err(crate::InvalidSetting::new(
+                "camera",
+                "camera needs 0 < near_m < far_m < inf",
+            ));
         }
         Ok(())
     }

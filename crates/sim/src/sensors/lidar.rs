@@ -54,15 +54,24 @@ impl LidarConfig {
     }
 
     /// Check the settings, naming what is wrong.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), crate::InvalidSetting> {
         if self.n_rays == 0 || self.n_rays > 100_000 {
-            return Err(format!("lidar n_rays must be in 1..=100000, got {}", self.n_rays));
+            return Err(crate::InvalidSetting::new(
+                "lidar",
+                format!("lidar n_rays must be in 1..=100000, got {}", self.n_rays),
+            ));
         }
         if !(self.fov_deg > 0.0 && self.fov_deg <= 360.0) {
-            return Err(format!("lidar fov_deg must be in (0, 360], got {}", self.fov_deg));
+            return Err(crate::InvalidSetting::new(
+                "lidar",
+                format!("lidar fov_deg must be in (0, 360], got {}", self.fov_deg),
+            ));
         }
         if !(self.range_min_m >= 0.0 && self.range_max_m > self.range_min_m && self.range_max_m.is_finite()) {
-            return Err("lidar needs 0 <= range_min_m < range_max_m < inf".into());
+            return Err(crate::InvalidSetting::new(
+                "lidar",
+                "lidar needs 0 <= range_min_m < range_max_m < inf",
+            ));
         }
         Ok(())
     }
