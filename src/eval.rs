@@ -7,6 +7,7 @@ use crate::plots::{self, Path2};
 use crate::viz::{self, Recorder};
 use agvrl_envs::{Env, EnvConfig, Step, make};
 use agvrl_rl::Policy;
+use agvrl_run::stats::quantile;
 use agvrl_run::{PolicySettings, files};
 use anyhow::{Context, Result, bail};
 use clap::Args;
@@ -207,17 +208,6 @@ impl SearchStats {
         }
         out
     }
-}
-
-/// The p-quantile (0..=1) of `v` by the nearest rank.
-fn quantile(v: &[f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let k = ((p * s.len() as f64).ceil() as usize).clamp(1, s.len());
-    s[k - 1]
 }
 
 impl Summary {

@@ -11,7 +11,7 @@ use anyhow::Result;
 
 /// The upper median of timings (the order statistic every figure reports).
 fn median(v: Vec<f64>) -> f64 {
-    agvrl_sim::stats::median(&v)
+    agvrl_run::stats::median(&v)
 }
 
 /// A part of `agvrl bench`.

@@ -14,7 +14,7 @@ pub(super) fn median_s(reps: usize, mut f: impl FnMut()) -> f64 {
             t0.elapsed().as_secs_f64()
         })
         .collect();
-    agvrl_sim::stats::median(&t)
+    agvrl_run::stats::median(&t)
 }
 
 /// A deterministic pseudo-random control sequence (logistic map), so every run drives the same.

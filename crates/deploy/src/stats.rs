@@ -1,7 +1,7 @@
 //! What `agvrl-drive` reports about its own process (Linux /proc), and the quantiles of its
 //! latencies.
 
-pub use agvrl_sim::stats::quantile;
+pub use agvrl_run::stats::quantile;
 
 /// CPU time (user + system) of this process, seconds (/proc/self/stat).
 pub fn cpu_time_s() -> Option<f64> {

@@ -26,7 +26,6 @@ pub mod vec_env;
 pub mod wrappers;
 
 /// Order statistics (agvrl-sim's), for the crates above.
-pub use agvrl_sim::stats;
 pub use api::{BoxSpace, Control, Env, EnvError, Info, SensorFrame, Step, Vehicle};
 pub use check::{CheckError, check_env};
 pub use registry::{ENV_IDS, ENVS, EnvConfig, EnvSpec, TaskKind, make, make_sim_car, make_task, make_vehicle};

@@ -43,7 +43,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "check={name} seeds={} mean_return={:.2} median_return={:.2}",
             rets.len(),
             rets.iter().sum::<f64>() / rets.len() as f64,
-            agvrl_envs::stats::median(&rets)
+            {
+                let mut s = rets.clone();
+                s.sort_by(f64::total_cmp);
+                s[s.len() / 2]
+            }
         );
     }
     Ok(())

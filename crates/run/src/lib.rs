@@ -11,6 +11,7 @@ mod error;
 mod error_line;
 mod seeds;
 mod settings;
+pub mod stats;
 
 pub use config::RunConfig;
 pub use dir::{Run, RunDir, files, stamp};

@@ -19,7 +19,6 @@ pub mod msg;
 pub mod scene;
 pub mod sensors;
 mod sim;
-pub mod stats;
 pub mod urdf;
 pub mod vehicle;
 pub mod world;

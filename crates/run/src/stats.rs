@@ -1,4 +1,4 @@
-//! Order statistics shared by the benchmarks and run summaries of every crate.
+//! Order statistics of the run summaries, evaluations and benchmarks (agvrl, agvrl-drive).
 
 /// The upper median of `v` (the middle element for an odd count, the upper of the two middle
 /// ones for an even count; NaN for none).
