@@ -8,7 +8,7 @@
 # filter setting for both the policy and the random policy (`agvrl eval --safety-filter`).
 # RANDOM_POLICY=off skips the random policy (its columns print "-"), for comparing trainings.
 # A policy with a reverse gear (action_mapping = "scaled_reverse") is also compared with the
-# random policy of the forward-only car (the same settings with "scaled"): a random policy that
+# random policy of the forward-only car (the same settings with `--set env_config.action_mapping=scaled`): a random policy that
 # reverses half the time covers less, and the ratio is taken against the better of the two.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -20,13 +20,8 @@ bin="${AGVRL:-${CARGO_TARGET_DIR:-target}/release/agvrl}"
 [ -x "$bin" ] || cargo build --release -q
 key() { sed -n "s/^$1=//p" <<<"$2"; }
 forward=""
-settings="${policy%.agvrl}.toml"
-if [ -f "$settings" ] && grep -q '^action_mapping = "scaled_reverse"' "$settings"; then
-  dir=$(mktemp -d)
-  trap 'rm -rf "$dir"' EXIT
-  forward="$dir/$(basename "$policy")"
-  cp "$policy" "$forward"
-  sed 's/^action_mapping = "scaled_reverse"/action_mapping = "scaled"/' "$settings" >"${forward%.agvrl}.toml"
+if "$bin" policy "$policy" | grep -q '^action_mapping = "scaled_reverse"'; then
+  forward=1
 fi
 random="random"
 [ -z "$forward" ] || random="random (same car / forward only)"
@@ -45,7 +40,7 @@ for preset in none sim2real; do
         r=$("$bin" "${args[@]}" --random)
         rt=$(key collisions "$r"); rc=$(key coverage "$r"); best=$rc
         if [ -n "$forward" ]; then
-          f=$("$bin" "${args[@]/#$policy/$forward}" --random)
+          f=$("$bin" "${args[@]}" --random --set env_config.action_mapping=scaled)
           fc=$(key coverage "$f")
           rt="$rt / $(key collisions "$f")"; rc="$rc / $fc"
           best=$(python3 -c "print(max($best, $fc))")
