@@ -462,10 +462,10 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     if a.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
-    let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
+    let mut src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
     let mut policy = match a.random || a.planner.is_some() {
         true => None,
-        false => Some(Policy::load(&src.policy)?),
+        false => Some(src.load_policy()?),
     };
     let env_id = src.env_id(a.env.as_deref())?;
     let mut env_cfg = src.eval_env_config();

@@ -4,7 +4,6 @@
 use crate::episode::{RandomActions, drive, make_sim_env};
 use crate::viz::{self, Recorder, Sink};
 use agvrl_envs::{Env, EnvConfig};
-use agvrl_rl::Policy;
 use agvrl_run::PolicySettings;
 use anyhow::{Context, Result, bail};
 use clap::Args;
@@ -45,9 +44,9 @@ pub struct ViewArgs {
 
 /// Drive one episode (policy or random actions) into rerun.
 pub fn view(a: ViewArgs) -> Result<()> {
-    let (env_id, mut env_cfg, policy_path) = if a.run.is_some() || a.policy.is_some() {
+    let (env_id, mut env_cfg, src) = if a.run.is_some() || a.policy.is_some() {
         let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
-        (src.env_id(a.env.as_deref())?, src.eval_env_config(), Some(src.policy))
+        (src.env_id(a.env.as_deref())?, src.eval_env_config(), Some(src))
     } else {
         if let Some(s) = a.set.first() {
             bail!("--set {s}: random actions have no settings to override; give --policy or --run");
@@ -61,9 +60,10 @@ pub fn view(a: ViewArgs) -> Result<()> {
         env_cfg.sim.camera = Some(Default::default());
     }
     let mut env = make_sim_env(&env_id, &env_cfg)?.with_context(|| format!("{env_id} has no vehicle to view"))?;
-    let mut policy = match &policy_path {
-        Some(p) => {
-            let pol = Policy::load(p)?;
+    let policy_path = src.as_ref().map(|s| s.policy.clone());
+    let mut policy = match src {
+        Some(mut s) => {
+            let pol = s.load_policy()?;
             pol.check_spaces(&env.observation_space(), &env.action_space())
                 .context("the policy does not fit this env")?;
             Some(pol)

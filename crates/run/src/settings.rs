@@ -10,7 +10,7 @@ use crate::config::RunConfig;
 use crate::dir::{Run, files};
 use crate::error::{Result, RunError};
 use agvrl_envs::EnvConfig;
-use agvrl_rl::PolicyData;
+use agvrl_rl::{Policy, PolicyData};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -46,6 +46,9 @@ pub struct PolicySettings {
     pub run: Option<RunConfig>,
     /// Where `run` came from.
     pub source: SettingsSource,
+    /// The policy file's contents when resolving read them (`--policy`), so the policy is not
+    /// read twice.
+    data: Option<PolicyData>,
 }
 
 impl PolicySettings {
@@ -59,13 +62,25 @@ impl PolicySettings {
                 policy: policy.map_or_else(|| opened.file(files::POLICY), Path::to_path_buf),
                 run: Some(load_with(&path, sets)?),
                 source: SettingsSource::RunDir(path),
+                data: None,
             });
         }
         let Some(policy) = policy else {
             return Err(RunError::Config("give --run DIR or --policy FILE".into()));
         };
         let data = PolicyData::load(policy)?;
-        Self::of_policy(policy, &data, sets)
+        let mut settings = Self::of_policy(policy, &data, sets)?;
+        settings.data = Some(data);
+        Ok(settings)
+    }
+
+    /// The policy on the default CPU device (from the contents resolving read, else the file).
+    pub fn load_policy(&mut self) -> Result<Policy> {
+        let data = match self.data.take() {
+            Some(d) => d,
+            None => PolicyData::load(&self.policy)?,
+        };
+        Ok(Policy::new(data, &agvrl_rl::default_device()))
     }
 
     /// The settings of `data`, read from `policy` (see the module's rules).
@@ -95,6 +110,7 @@ impl PolicySettings {
             policy: policy.to_path_buf(),
             run,
             source,
+            data: None,
         })
     }
 

@@ -107,9 +107,10 @@ fn main() {
     }
 }
 
-/// Policy path, env id and env settings from --run / --policy (agvrl-run's one resolver), --set
-/// and --env. Without a policy (`--serve-sim` alone) the env is --env or racing-oval.
-fn policy_and_env(a: &Args) -> Result<(Option<PathBuf>, String, EnvConfig)> {
+/// The policy's settings, env id and env settings from --run / --policy (agvrl-run's one
+/// resolver), --set and --env. Without a policy (`--serve-sim` alone) the env is --env or
+/// racing-oval.
+fn policy_and_env(a: &Args) -> Result<(Option<PolicySettings>, String, EnvConfig)> {
     if a.run.is_none() && a.policy.is_none() {
         if let Some(s) = a.set.first() {
             bail!("--set {s}: there is no policy whose settings it could override");
@@ -118,11 +119,8 @@ fn policy_and_env(a: &Args) -> Result<(Option<PathBuf>, String, EnvConfig)> {
         return Ok((None, env, EnvConfig::default()));
     }
     let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
-    Ok((
-        Some(src.policy.clone()),
-        src.env_id(a.env.as_deref())?,
-        src.drive_env_config(),
-    ))
+    let (env, cfg) = (src.env_id(a.env.as_deref())?, src.drive_env_config());
+    Ok((Some(src), env, cfg))
 }
 
 #[cfg(feature = "ros2")]
@@ -143,14 +141,14 @@ fn run() -> Result<()> {
     if !(a.rate_hz > 0.0 && a.rate_hz.is_finite()) {
         bail!("--rate-hz must be positive");
     }
-    let (policy_path, env, env_cfg) = policy_and_env(&a)?;
+    let (src, env, env_cfg) = policy_and_env(&a)?;
     if let Some(sim_env) = &a.serve_sim {
         return serve_sim(&a, sim_env, &env_cfg);
     }
-    let Some(policy_path) = policy_path else {
+    let Some(mut src) = src else {
         bail!("give --run DIR or --policy FILE (e.g. assets/policies/racing-oval-ppo.agvrl)");
     };
-    let mut policy = Policy::load(&policy_path)?;
+    let mut policy = src.load_policy()?;
     if let Some(trace) = &a.check_trace {
         return check_trace(&mut policy, trace, a.tolerance);
     }
