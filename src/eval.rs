@@ -8,7 +8,7 @@ use crate::viz::{self, Recorder};
 use agvrl_envs::{Env, EnvConfig, Step, make};
 use agvrl_rl::Policy;
 use agvrl_run::stats::quantile;
-use agvrl_run::{PolicySettings, files};
+use agvrl_run::{EvalReport, FilterReport, PolicySettings, RacingReport, SearchReport, SubjectsReport, files};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use std::path::PathBuf;
@@ -211,73 +211,55 @@ impl SearchStats {
 }
 
 impl Summary {
-    pub fn lines(&self) -> Vec<String> {
-        let mut v = vec![
-            format!("mean_return={:.2}", self.mean_return),
-            format!("episodes={}", self.episodes),
-            format!("collisions={}", self.collisions),
-            format!("ended={}", self.ended.join(",")),
-        ];
-        if self.subjects.1 > 0 {
-            v.push(format!("subjects_found={}/{}", self.subjects.0, self.subjects.1));
-            let t = &self.subjects.2;
-            if !t.is_empty() {
-                v.push(format!("mean_find_s={:.2}", t.iter().sum::<f64>() / t.len() as f64));
-            }
-        }
-        if let Some(c) = self.coverage {
-            v.push(format!("coverage={c:.3}"));
-            v.push(format!(
-                "distance_m_per_episode={:.1}",
-                self.distance_m / self.episodes.max(1) as f64
-            ));
-        }
+    /// The figures: per-episode means, clearance quantiles, coverage milestones.
+    pub fn report(&self) -> EvalReport {
         let per_episode = |n: u64| n as f64 / self.episodes.max(1) as f64;
-        if let Some(n) = self.filter_interventions {
-            let f = &self.search.filter;
-            v.push(format!("filter_interventions_per_episode={:.1}", per_episode(n)));
-            v.push(format!(
-                "filter_corrections_per_episode={:.1}",
-                per_episode(f[0] + f[1])
-            ));
-            v.push(format!("filter_steered_per_episode={:.1}", per_episode(f[0])));
-            v.push(format!("filter_braked_per_episode={:.1}", per_episode(f[1])));
-            v.push(format!("filter_backouts_per_episode={:.2}", per_episode(f[3])));
-            v.push(format!("filter_backout_ticks_per_episode={:.1}", per_episode(f[2])));
+        let st = &self.search;
+        let c = &st.clearance_m;
+        EvalReport {
+            mean_return: self.mean_return,
+            episodes: self.episodes,
+            collisions: self.collisions,
+            ended: self.ended.iter().map(|e| e.to_string()).collect(),
+            subjects: (self.subjects.1 > 0).then(|| {
+                let t = &self.subjects.2;
+                SubjectsReport {
+                    subjects_found: self.subjects.0,
+                    subjects_placed: self.subjects.1,
+                    mean_find_s: (!t.is_empty()).then(|| t.iter().sum::<f64>() / t.len() as f64),
+                }
+            }),
+            search: self.coverage.map(|coverage| {
+                let (t25, n25) = st.time_to(0.25);
+                let (t50, n50) = st.time_to(0.5);
+                SearchReport {
+                    coverage,
+                    distance_m_per_episode: self.distance_m / self.episodes.max(1) as f64,
+                    clearance_mean_m: (!c.is_empty()).then(|| c.iter().sum::<f64>() / c.len() as f64),
+                    clearance_p5_m: (!c.is_empty()).then(|| quantile(c, 0.05)),
+                    steering_change_mean_rad: st.steering_change_rad / st.steering_changes.max(1) as f64,
+                    time_to_coverage_25_s: t25,
+                    coverage_25_reached: n25,
+                    time_to_coverage_50_s: t50,
+                    coverage_50_reached: n50,
+                }
+            }),
+            filter: self.filter_interventions.map(|n| {
+                let f = &st.filter;
+                FilterReport {
+                    filter_interventions_per_episode: per_episode(n),
+                    filter_corrections_per_episode: per_episode(f[0] + f[1]),
+                    filter_steered_per_episode: per_episode(f[0]),
+                    filter_braked_per_episode: per_episode(f[1]),
+                    filter_backouts_per_episode: per_episode(f[3]),
+                    filter_backout_ticks_per_episode: per_episode(f[2]),
+                }
+            }),
+            racing: self.racing.then_some(RacingReport {
+                laps: self.laps,
+                best_lap_s: self.best_lap_s,
+            }),
         }
-        if self.coverage.is_some() {
-            let st = &self.search;
-            let c = &st.clearance_m;
-            if !c.is_empty() {
-                v.push(format!(
-                    "clearance_mean_m={:.3}",
-                    c.iter().sum::<f64>() / c.len() as f64
-                ));
-                v.push(format!("clearance_p5_m={:.3}", quantile(c, 0.05)));
-            }
-            v.push(format!(
-                "steering_change_mean_rad={:.4}",
-                st.steering_change_rad / st.steering_changes.max(1) as f64
-            ));
-            for pct in [25, 50] {
-                let (t, n) = st.time_to(pct as f64 / 100.0);
-                v.push(format!(
-                    "time_to_coverage_{pct}_s={}",
-                    t.map_or("not_reached".to_string(), |t| format!("{t:.1}"))
-                ));
-                v.push(format!("coverage_{pct}_reached={n}/{}", self.episodes));
-            }
-        }
-        if self.racing {
-            v.push(format!("laps={}", self.laps));
-            v.push(format!(
-                "best_lap_s={}",
-                self.best_lap_s
-                    .map(|b| format!("{b:.2}"))
-                    .unwrap_or_else(|| "none".into())
-            ));
-        }
-        v
     }
 }
 
@@ -541,14 +523,14 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         "safety_filter={}",
         if env_cfg.safety_filter.enabled { "on" } else { "off" }
     );
-    for l in s.lines() {
+    for l in s.report().lines() {
         println!("{l}");
     }
     if let Some(p) = &a.coverage_csv {
         if s.coverage.is_none() {
             bail!("--coverage-csv needs a search env, not {env_id}");
         }
-        crate::runs::write_atomic(p, s.search.coverage_csv().as_bytes())?;
+        agvrl_run::write_atomic(p, s.search.coverage_csv().as_bytes())?;
         println!("coverage_csv={}", p.display());
     }
     if let Some(r) = watch.rec.take()

@@ -12,7 +12,6 @@ pub mod planner;
 pub mod plots;
 pub mod policy_file;
 pub mod probe;
-pub mod runs;
 #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
 pub mod sink;
 pub mod train;

@@ -38,7 +38,7 @@ fn render_png(
         let mut wr = enc.write_header().context("png header")?;
         wr.write_image_data(&buf).context("png data")?;
     }
-    crate::runs::write_atomic(path, &bytes)
+    Ok(agvrl_run::write_atomic(path, &bytes)?)
 }
 
 /// `(step, mean return)` points of a metrics.csv.

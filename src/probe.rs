@@ -31,7 +31,7 @@ pub fn write_png(path: &std::path::Path, width: u32, height: u32, rgb: &[u8]) ->
         let mut w = enc.write_header()?;
         w.write_image_data(rgb)?;
     }
-    crate::runs::write_atomic(path, &bytes)
+    Ok(agvrl_run::write_atomic(path, &bytes)?)
 }
 
 /// Read an RGB8 PNG back: (width, height, pixels).

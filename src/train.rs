@@ -4,11 +4,10 @@
 use crate::config::{DEFAULT_TOML, RunConfig};
 use crate::eval::{Driver, Summary, Watch, evaluate};
 use crate::plots::{self};
-use crate::runs::write_atomic;
 use crate::viz::{self, Recorder, Sink};
 use agvrl_envs::{Env, VecEnv, make};
 use agvrl_rl::{Algorithm, Control, DeviceChoice, Learner, Policy, Ppo, Progress, Sac};
-use agvrl_run::{RunDir, files, stamp};
+use agvrl_run::{RunDir, RunReport, files, stamp, write_atomic};
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -205,21 +204,21 @@ pub fn train(a: TrainArgs) -> Result<()> {
             learner.num_timesteps()
         );
         let files = |name: &str| dir.join(name);
-        let text = run_learner(learner.as_mut(), &cfg, target, &files, &previous, &STOP, a.progress)?;
+        let report = run_learner(learner.as_mut(), &cfg, target, &files, &previous, &STOP, a.progress)?;
         println!("run_dir={}", dir.display());
-        print!("{text}");
+        print!("{}", report.text());
         return Ok(());
     }
     let cfg = resolve(&a)?;
     if a.progress == ProgressMode::Json {
         stop_with_parent(&STOP);
     }
-    let (dir, text) = train_run(cfg, a.out.clone(), a.device.into(), &STOP, a.progress)?;
+    let (dir, report) = train_run(cfg, a.out.clone(), a.device.into(), &STOP, a.progress)?;
     if a.progress == ProgressMode::Json {
-        println!("{}", done_json(&dir, &text));
+        println!("{}", done_json(&dir, &report));
     } else {
         println!("run_dir={}", dir.display());
-        print!("{text}");
+        print!("{}", report.text());
     }
     Ok(())
 }
@@ -244,40 +243,27 @@ fn stop_with_parent(stop: &'static AtomicBool) {
         });
 }
 
-/// The last JSON progress line: the run directory and eval.txt's key=value pairs (numbers as
-/// numbers).
-fn done_json(dir: &std::path::Path, eval_text: &str) -> String {
-    let metrics: serde_json::Map<String, serde_json::Value> = eval_text
-        .lines()
-        .filter_map(|l| l.split_once('='))
-        .map(|(k, v)| {
-            let v = match v.parse::<f64>() {
-                Ok(x) if x.is_finite() => serde_json::json!(x),
-                _ if v == "true" || v == "false" => serde_json::json!(v == "true"),
-                _ => serde_json::json!(v),
-            };
-            (k.to_string(), v)
-        })
-        .collect();
+/// The last JSON progress line: the run directory and its evaluation (eval.json's object).
+fn done_json(dir: &std::path::Path, report: &RunReport) -> String {
     serde_json::json!({
         "event": "done",
         "run_dir": dir.display().to_string(),
-        "interrupted": metrics.get("interrupted").is_some_and(|v| v == &serde_json::json!(true)),
-        "metrics": metrics,
+        "interrupted": report.interrupted,
+        "metrics": report,
     })
     .to_string()
 }
 
 /// Train `cfg` into a new run directory (`out`, or runs/<date-time>-<env>-<algo>), stopping
-/// early, with a complete run directory, once `stop` is set. Returns the directory and the text
-/// of its eval.txt.
+/// early, with a complete run directory, once `stop` is set. Returns the directory and its
+/// evaluation.
 pub fn train_run(
     cfg: RunConfig,
     out: Option<PathBuf>,
     device: DeviceChoice,
     stop: &AtomicBool,
     progress: ProgressMode,
-) -> Result<(PathBuf, String)> {
+) -> Result<(PathBuf, RunReport)> {
     let device = device.device()?;
     let device = &device;
     let mut cfg = cfg;
@@ -301,9 +287,9 @@ pub fn train_run(
         )?)
     };
     let files = |name: &str| run.file(name);
-    let text = run_learner(learner.as_mut(), &cfg, cfg.steps, &files, "", stop, progress)?;
+    let report = run_learner(learner.as_mut(), &cfg, cfg.steps, &files, "", stop, progress)?;
     let dir = run.finish()?;
-    Ok((dir, text))
+    Ok((dir, report))
 }
 
 /// `sac` splitting each gradient step over the run's `threads` (between the env rounds the
@@ -317,7 +303,7 @@ static STOP_HANDLER: std::sync::OnceLock<()> = std::sync::OnceLock::new();
 
 /// Train `learner` up to `target` steps (or a Ctrl-C), checkpointing every tenth; write
 /// checkpoint.ckpt, policy.agvrl, metrics.csv (after `previous_csv`), the deterministic
-/// evaluation (plots, recording) and eval.txt, whose text it returns.
+/// evaluation (plots, recording), eval.txt and eval.json; returns the evaluation.
 fn run_learner(
     learner: &mut dyn Learner,
     cfg: &RunConfig,
@@ -326,7 +312,7 @@ fn run_learner(
     previous_csv: &str,
     stop: &AtomicBool,
     progress: ProgressMode,
-) -> Result<String> {
+) -> Result<RunReport> {
     let t0 = Instant::now();
     let rows = learn_in_chunks(learner, cfg, target, file, stop, progress)?;
     let policy_path = file(files::POLICY);
@@ -341,20 +327,16 @@ fn run_learner(
     let summary = evaluate_run(cfg, &policy_path, file)?;
     let title = format!("{} {} seed {}", cfg.env, cfg.algo, cfg.seed);
     plots::learning_curve(&file(files::LEARNING_CURVE), &plots::curve_of_csv(&csv), &title)?;
-    let mut text = format!(
-        "train_s={:.1}\neval_s={:.1}\nsteps={}\n",
+    let report = RunReport {
         train_s,
-        t0.elapsed().as_secs_f64() - train_s,
-        learner.num_timesteps()
-    );
-    if interrupted {
-        text.push_str("interrupted=true\n");
-    }
-    for l in summary.lines() {
-        let _ = writeln!(text, "{l}");
-    }
-    write_atomic(&file(files::EVAL), text.as_bytes())?;
-    Ok(text)
+        eval_s: t0.elapsed().as_secs_f64() - train_s,
+        steps: learner.num_timesteps(),
+        interrupted,
+        eval: summary.report(),
+    };
+    write_atomic(&file(files::EVAL), report.text().as_bytes())?;
+    write_atomic(&file(files::EVAL_JSON), report.to_json().as_bytes())?;
+    Ok(report)
 }
 
 /// `learn` in chunks up to `target` (at least every tenth of the run and every 50,000 steps a

@@ -124,6 +124,7 @@ mod cli {
             "policy.agvrl",
             "checkpoint.ckpt",
             "eval.txt",
+            "eval.json",
             "learning_curve.png",
             "trajectory.png",
             "eval.rrd",
@@ -872,6 +873,11 @@ mod trials {
         assert_eq!(done["interrupted"], true);
         let eval = std::fs::read_to_string(run.join("eval.txt")).unwrap();
         assert!(eval.contains("interrupted=true"), "{eval}");
+        // The done line carries eval.json's object, typed.
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(run.join("eval.json")).unwrap()).unwrap();
+        assert_eq!(done["metrics"], json);
+        assert!(done["metrics"]["steps"].is_u64() && done["metrics"]["ended"].is_array());
         assert!(run.join("policy.agvrl").is_file());
     }
 

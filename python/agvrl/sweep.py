@@ -1,7 +1,7 @@
 """Hyperparameter sweeps of ``agvrl train`` on Optuna.
 
 One ``agvrl train`` process is one training; a trial trains one configuration once per seed
-and its value is the mean of an ``eval.txt`` key over the seeds. Optuna is the engine: studies
+and its value is the mean of an ``eval.json`` key over the seeds (a number). Optuna is the engine: studies
 live in a journal file on one machine or in any SQLAlchemy database (PostgreSQL) for many
 machines, and workers are plain processes started however a cluster starts them.
 
@@ -22,7 +22,7 @@ SWEEP.toml::
     steps = 100000
 
     [objective]
-    key = "mean_return"                   # an eval.txt key
+    key = "mean_return"                   # an eval.json key with a number
     direction = "maximize"                # or "minimize"
     collisions = "penalty"                # "penalty", "constraint" or "ignore"
     penalty = 100.0                       # per collision per evaluation episode
@@ -366,7 +366,7 @@ class Trainer:
             m = done["metrics"]
             key = spec["objective"]["key"]
             if key not in m or not isinstance(m[key], (int, float)):
-                raise RuntimeError(f"eval.txt of {done['run_dir']} has no number '{key}'")
+                raise RuntimeError(f"the evaluation of {done['run_dir']} has no number '{key}'")
             values.append(float(m[key]))
             collisions += float(m.get("collisions", 0))
             episodes += float(m.get("episodes", 0))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -12,8 +13,9 @@ from agvrl import _core
 
 @dataclass
 class RunResult:
-    """A finished run: its directory (config.toml, policy.agvrl, metrics.csv, eval.txt, plots)
-    and the evaluation's ``key=value`` lines as a dict (numbers as floats)."""
+    """A finished run: its directory (config.toml, policy.agvrl, metrics.csv, eval.txt,
+    eval.json, plots) and its evaluation as a dict, eval.json's object: eval.txt's keys with
+    typed values at full precision (``None`` where eval.txt says ``none`` or ``not_reached``)."""
 
     run_dir: Path
     metrics: dict[str, Any] = field(default_factory=dict)
@@ -21,19 +23,6 @@ class RunResult:
     @property
     def policy_path(self) -> Path:
         return self.run_dir / "policy.agvrl"
-
-
-def _parse(text: str) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for line in text.splitlines():
-        key, sep, value = line.partition("=")
-        if not sep:
-            continue
-        try:
-            out[key] = float(value)
-        except ValueError:
-            out[key] = value
-    return out
 
 
 def train(
@@ -52,5 +41,5 @@ def train(
     """
     if not isinstance(config, dict):
         config = os.fspath(config)
-    run_dir, text = _core.train(config, None if out is None else os.fspath(out), overrides or None, device)
-    return RunResult(Path(run_dir), _parse(text))
+    run_dir, report = _core.train(config, None if out is None else os.fspath(out), overrides or None, device)
+    return RunResult(Path(run_dir), json.loads(report))

@@ -103,9 +103,13 @@ def test_train_from_python_writes_the_cli_run_directory(workdir):
         seed=1,
     )
     assert run.run_dir == workdir / "run"
-    for name in ("config.toml", "policy.agvrl", "metrics.csv", "eval.txt", "learning_curve.png"):
+    for name in ("config.toml", "policy.agvrl", "metrics.csv", "eval.txt", "eval.json", "learning_curve.png"):
         assert (run.run_dir / name).is_file(), name
+    assert run.metrics == json.loads((run.run_dir / "eval.json").read_text())
+    # Typed, not guessed from text: counts are ints, flags bools, the episode ends a list.
     assert run.metrics["steps"] == 2048 and run.metrics["episodes"] == 2
+    assert isinstance(run.metrics["steps"], int) and run.metrics["interrupted"] is False
+    assert run.metrics["ended"] == ["time_limit", "time_limit"]
     assert "steps = 2048" in (run.run_dir / "config.toml").read_text()
     policy = agvrl.Policy.load(run.policy_path)
     env = agvrl.make("pendulum")

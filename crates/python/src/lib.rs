@@ -546,7 +546,7 @@ impl Policy {
 /// run directory (`out`, else runs/<date-time>-<env>-<algo> under the working directory),
 /// exactly as `agvrl train --config` does, with the GIL released. Ctrl-C stops it after the
 /// current update with a complete run directory, then raises `KeyboardInterrupt`. Returns
-/// `(run_dir, eval_text)`.
+/// `(run_dir, eval.json's text)`.
 #[pyfunction]
 #[pyo3(signature = (config, out=None, overrides=None, device="flex"))]
 fn train(
@@ -582,7 +582,7 @@ fn train(
                 interrupted = Some(e);
             }
         }
-        let (dir, text) = worker
+        let (dir, report) = worker
             .join()
             .map_err(|_| PyRuntimeError::new_err("agvrl: internal error (the trainer panicked)"))?
             .map_err(PyRuntimeError::new_err)?;
@@ -592,7 +592,7 @@ fn train(
             }
             return Err(e);
         }
-        Ok((dir, text))
+        Ok((dir, report.to_json()))
     })
 }
 

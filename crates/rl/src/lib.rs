@@ -90,7 +90,6 @@ pub use config::{EntCoef, PpoConfig, SacConfig};
 pub use device::{CpuBackend, DeviceChoice, default_device, device_by_name};
 pub use error::{Result, RlError};
 pub use eval::evaluate;
-pub use file::write_atomic;
 #[cfg(feature = "train")]
 pub use learner::Learner;
 pub use normalize::ObsNormalizer;

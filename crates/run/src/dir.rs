@@ -15,8 +15,10 @@ pub mod files {
     pub const CHECKPOINT: &str = "checkpoint.ckpt";
     /// Training metrics, one line per update.
     pub const METRICS: &str = "metrics.csv";
-    /// The evaluation's `key=value` lines, with `train_s` and `eval_s`.
+    /// The evaluation's `key=value` lines, with `train_s` and `eval_s`, for people.
     pub const EVAL: &str = "eval.txt";
+    /// The same figures at full precision, for programs (`RunReport`).
+    pub const EVAL_JSON: &str = "eval.json";
     /// Moving average of the episode return against steps.
     pub const LEARNING_CURVE: &str = "learning_curve.png";
     /// Top view of every evaluated path.
@@ -68,12 +70,39 @@ impl Run {
         self.dir.join(name)
     }
 
+    /// Its evaluation (eval.json).
+    pub fn report(&self) -> Result<crate::RunReport> {
+        crate::RunReport::load(&self.file(files::EVAL_JSON))
+    }
+
     /// Whether `policy` is the policy file of a run directory: then that run's config is its
     /// settings.
     pub fn of_policy(policy: &Path) -> Option<PathBuf> {
         let dir = policy.parent()?;
         (policy.file_name()? == files::POLICY && dir.join(files::CONFIG).is_file()).then(|| dir.to_path_buf())
     }
+}
+
+/// Write `bytes` to `path` through a temporary file in the same directory, fsync and a rename,
+/// so a crash never leaves a half-written file under the final name.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    // Created 0o666 less the umask, as `File::create` does (tempfile's own default is 0o600).
+    let mode = <std::fs::Permissions as std::os::unix::fs::PermissionsExt>::from_mode(0o666);
+    let mut file = tempfile::Builder::new()
+        .permissions(mode)
+        .tempfile_in(dir)
+        .map_err(io(dir))?;
+    file.write_all(bytes)
+        .and_then(|()| file.as_file().sync_all())
+        .map_err(io(path))?;
+    file.persist(path).map_err(|e| io(path)(e.error))?;
+    Ok(())
 }
 
 /// A run directory being filled.

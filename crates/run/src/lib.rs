@@ -1,7 +1,7 @@
 //! agvrl-run: what the `agvrl` command line, `agvrl-drive` and the Python wheel share above the
 //! learners: the run TOML ([`RunConfig`]), run directories ([`Run`], [`RunDir`], [`files`]),
-//! what a `--policy` or `--run` argument means ([`PolicySettings`]), and how an error reads
-//! ([`error_line`]).
+//! what a `--policy` or `--run` argument means ([`PolicySettings`]), what an evaluation found
+//! ([`RunReport`], [`EvalReport`]), and how an error reads ([`error_line`]).
 
 #![warn(missing_docs)]
 
@@ -9,13 +9,15 @@ mod config;
 mod dir;
 mod error;
 mod error_line;
+mod report;
 mod seeds;
 mod settings;
 pub mod stats;
 
 pub use config::RunConfig;
-pub use dir::{Run, RunDir, files, stamp};
+pub use dir::{Run, RunDir, files, stamp, write_atomic};
 pub use error::{Result, RunError};
 pub use error_line::error_line;
+pub use report::{EvalReport, FilterReport, RacingReport, RunReport, SearchReport, SubjectsReport};
 pub use seeds::Seeds;
 pub use settings::{PolicySettings, SettingsSource};

@@ -1,0 +1,128 @@
+//! The evaluation report: eval.json round-trips, eval.txt renders the same figures.
+
+use agvrl_run::{EvalReport, FilterReport, RacingReport, RunReport, SearchReport, SubjectsReport};
+use serde_json::Value;
+
+fn search_run() -> RunReport {
+    RunReport {
+        train_s: 301.25,
+        eval_s: 12.049,
+        steps: 6_000_000,
+        interrupted: true,
+        eval: EvalReport {
+            mean_return: -12.345_678,
+            episodes: 10,
+            collisions: 2,
+            ended: vec!["time_limit".into(), "too_close".into(), "contact".into()],
+            subjects: Some(SubjectsReport {
+                subjects_found: 3,
+                subjects_placed: 5,
+                mean_find_s: Some(7.125_1),
+            }),
+            search: Some(SearchReport {
+                coverage: 0.675_49,
+                distance_m_per_episode: 88.04,
+                clearance_mean_m: Some(1.234_567),
+                clearance_p5_m: Some(0.612_3),
+                steering_change_mean_rad: 0.012_345_6,
+                time_to_coverage_25_s: Some(9.96),
+                coverage_25_reached: 9,
+                time_to_coverage_50_s: None,
+                coverage_50_reached: 0,
+            }),
+            filter: Some(FilterReport {
+                filter_interventions_per_episode: 30.06,
+                filter_corrections_per_episode: 25.04,
+                filter_steered_per_episode: 20.0,
+                filter_braked_per_episode: 5.04,
+                filter_backouts_per_episode: 0.125,
+                filter_backout_ticks_per_episode: 3.3,
+            }),
+            racing: None,
+        },
+    }
+}
+
+fn racing_run() -> RunReport {
+    RunReport {
+        eval: EvalReport {
+            mean_return: 512.0,
+            episodes: 3,
+            ended: vec!["time_limit".into(); 3],
+            racing: Some(RacingReport {
+                laps: 7,
+                best_lap_s: None,
+            }),
+            ..EvalReport::default()
+        },
+        ..RunReport::default()
+    }
+}
+
+#[test]
+fn eval_json_round_trips_every_group_and_the_absence_of_one() {
+    let d = tempfile::tempdir().unwrap();
+    for r in [search_run(), racing_run(), RunReport::default()] {
+        let p = d.path().join("eval.json");
+        agvrl_run::write_atomic(&p, r.to_json().as_bytes()).unwrap();
+        assert_eq!(RunReport::load(&p).unwrap(), r);
+    }
+    // Flat: the text's keys, not nested groups.
+    let v: Value = serde_json::from_str(&search_run().to_json()).unwrap();
+    assert_eq!(v["coverage"], 0.675_49);
+    assert_eq!(v["filter_backouts_per_episode"], 0.125);
+    assert_eq!(v["time_to_coverage_50_s"], Value::Null);
+    assert!(v.get("laps").is_none() && v.get("search").is_none());
+}
+
+#[test]
+fn a_malformed_eval_json_is_an_error_naming_the_file() {
+    let d = tempfile::tempdir().unwrap();
+    let p = d.path().join("eval.json");
+    std::fs::write(&p, "{\"train_s\": \"fast\"}").unwrap();
+    let e = RunReport::load(&p).unwrap_err().to_string();
+    assert!(e.contains("eval.json"), "{e}");
+}
+
+/// Every `key=value` of eval.txt is the JSON's figure of that key, rounded as printed.
+fn agrees(key: &str, text: &str, json: &Value) -> bool {
+    let near = |t: &str, x: f64| {
+        let decimals = t.split_once('.').map_or(0, |(_, f)| f.len());
+        t.parse::<f64>()
+            .is_ok_and(|v| (v - x).abs() <= 0.5 * 10f64.powi(-(decimals as i32)) + 1e-12)
+    };
+    match (key, json.get(key)) {
+        ("ended", Some(Value::Array(a))) => text
+            .split(',')
+            .filter(|e| !e.is_empty())
+            .eq(a.iter().map(|e| e.as_str().unwrap())),
+        ("subjects_found", Some(n)) => text == format!("{n}/{}", json["subjects_placed"]),
+        (k, Some(n)) if k.starts_with("coverage_") && k.ends_with("_reached") => {
+            text == format!("{n}/{}", json["episodes"])
+        }
+        (_, Some(Value::Null)) => text == "none" || text == "not_reached",
+        (_, Some(Value::Bool(b))) => text == b.to_string(),
+        (_, Some(n)) => n.as_f64().is_some_and(|x| near(text, x)),
+        (_, None) => false,
+    }
+}
+
+#[test]
+fn eval_txt_prints_the_json_figures_rounded() {
+    for r in [search_run(), racing_run(), RunReport::default()] {
+        let json: Value = serde_json::from_str(&r.to_json()).unwrap();
+        let text = r.text();
+        let mut printed = Vec::new();
+        for line in text.lines() {
+            let (k, v) = line.split_once('=').unwrap();
+            assert!(agrees(k, v, &json), "{line} against {}", json[k]);
+            printed.push(k);
+        }
+        // What the text leaves out: subjects_placed (folded into subjects_found), interrupted
+        // when false, and figures that are null (no finite clearance, nothing found).
+        for (k, v) in json.as_object().unwrap() {
+            let folded = k == "subjects_placed" || (k == "interrupted" && v == false) || v.is_null();
+            assert!(printed.contains(&k.as_str()) || folded, "{k} missing from\n{text}");
+        }
+    }
+}
