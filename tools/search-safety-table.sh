@@ -14,39 +14,33 @@ cd "$(dirname "$0")/.."
 policy="${1:-assets/policies/search.agvrl}"
 episodes="${2:-100}"
 seed="${3:-0}"
-bin="${AGVRL:-${CARGO_TARGET_DIR:-target}/release/agvrl}"
-[ -x "$bin" ] || cargo build --release -q
-key() { sed -n "s/^$1=//p" <<<"$2"; }
+source tools/search-rows.sh
 ratio() { python3 -c "print(f'{$1 / max($2, 1e-9):.2f}')"; }
+row() { # env layouts preset
+  local b f q m bc fc fr=- pl=- pf=-
+  run() { # driver name, extra args
+    local name=$1
+    shift
+    if [ -n "${CSV_DIR:-}" ]; then
+      mkdir -p "$CSV_DIR"
+      "$bin" "${row_args[@]}" "$@" --coverage-csv "$CSV_DIR/$env-$layouts-$preset-$name.csv"
+    else
+      "$bin" "${row_args[@]}" "$@"
+    fi
+  }
+  local env=$1 layouts=$2 preset=$3
+  b=$(run bare --safety-filter off)
+  f=$(run policy --safety-filter on)
+  bc=$(key coverage "$b"); fc=$(key coverage "$f")
+  if [ "${PLANNERS:-on}" != off ]; then
+    q=$(run frontier --safety-filter on --planner frontier)
+    fr="$(key collisions "$q"), $(key coverage "$q")"
+    pf=$(ratio "$fc" "$(key coverage "$q")")
+    m=$(run planner --safety-filter on --planner map)
+    pl=$(key coverage "$m")
+  fi
+  echo "| $env | $layouts | $preset | $(key collisions "$b") | $bc | $(ratio "$bc" "$fc") | $(key collisions "$f") | $fc | $(key filter_corrections_per_episode "$f") | $(key filter_backouts_per_episode "$f") ($(key filter_backout_ticks_per_episode "$f")) | $(key clearance_mean_m "$b") / $(key clearance_p5_m "$b"); $(key clearance_mean_m "$f") / $(key clearance_p5_m "$f") | $(key steering_change_mean_rad "$b"); $(key steering_change_mean_rad "$f") | $fr | $pf | $pl |"
+}
 echo "| scene | maps | noise | bare: terminations | bare: coverage | bare / filtered coverage | filtered: terminations | filtered: coverage | corrections / episode (steered + braked) | back-outs / episode (reversing ticks) | r_m mean / 5th pct, m (bare; filtered) | steering change / control, rad (bare; filtered) | frontier: terminations, coverage | policy / frontier | map planner: coverage |"
 echo "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
-for preset in none sim2real; do
-  for layouts in builtin procedural; do
-    for env in search-outdoor-20 search-urban-20 search-outdoor-50 search-urban-50; do
-      args=(eval --policy "$policy" --env "$env" --episodes "$episodes" --seed "$seed" --layouts "$layouts" --max-steps 1000)
-      [ "$preset" = none ] || args+=(--preset "$preset")
-      run() { # driver name, extra args
-        local name=$1
-        shift
-        if [ -n "${CSV_DIR:-}" ]; then
-          mkdir -p "$CSV_DIR"
-          "$bin" "${args[@]}" "$@" --coverage-csv "$CSV_DIR/$env-$layouts-$preset-$name.csv"
-        else
-          "$bin" "${args[@]}" "$@"
-        fi
-      }
-      b=$(run bare --safety-filter off)
-      f=$(run policy --safety-filter on)
-      bc=$(key coverage "$b"); fc=$(key coverage "$f")
-      fr=- pl=- pf=-
-      if [ "${PLANNERS:-on}" != off ]; then
-        q=$(run frontier --safety-filter on --planner frontier)
-        fr="$(key collisions "$q"), $(key coverage "$q")"
-        pf=$(ratio "$fc" "$(key coverage "$q")")
-        m=$(run planner --safety-filter on --planner map)
-        pl=$(key coverage "$m")
-      fi
-      echo "| $env | $layouts | $preset | $(key collisions "$b") | $bc | $(ratio "$bc" "$fc") | $(key collisions "$f") | $fc | $(key filter_corrections_per_episode "$f") | $(key filter_backouts_per_episode "$f") ($(key filter_backout_ticks_per_episode "$f")) | $(key clearance_mean_m "$b") / $(key clearance_p5_m "$b"); $(key clearance_mean_m "$f") / $(key clearance_p5_m "$f") | $(key steering_change_mean_rad "$b"); $(key steering_change_mean_rad "$f") | $fr | $pf | $pl |"
-    done
-  done
-done
+search_rows row

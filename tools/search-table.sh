@@ -16,39 +16,32 @@ policy="${1:-assets/policies/search.agvrl}"
 episodes="${2:-100}"
 seed="${3:-0}"
 filter="${4:-}"
-bin="${AGVRL:-${CARGO_TARGET_DIR:-target}/release/agvrl}"
-[ -x "$bin" ] || cargo build --release -q
-key() { sed -n "s/^$1=//p" <<<"$2"; }
+source tools/search-rows.sh
 forward=""
 if "$bin" policy "$policy" | grep -q '^action_mapping = "scaled_reverse"'; then
   forward=1
 fi
 random="random"
 [ -z "$forward" ] || random="random (same car / forward only)"
+row() { # env layouts preset
+  local args=("${row_args[@]}") p pc rt=- rc=- ratio=- r best f fc fi
+  [ -z "$filter" ] || args+=(--safety-filter "$filter")
+  p=$("$bin" "${args[@]}")
+  pc=$(key coverage "$p")
+  if [ "${RANDOM_POLICY:-on}" != off ]; then
+    r=$("$bin" "${args[@]}" --random)
+    rt=$(key collisions "$r"); rc=$(key coverage "$r"); best=$rc
+    if [ -n "$forward" ]; then
+      f=$("$bin" "${args[@]}" --random --set env_config.action_mapping=scaled)
+      fc=$(key coverage "$f")
+      rt="$rt / $(key collisions "$f")"; rc="$rc / $fc"
+      best=$(python3 -c "print(max($best, $fc))")
+    fi
+    ratio=$(python3 -c "print(f'{$pc / max($best, 1e-9):.1f}x')")
+  fi
+  fi=$(key filter_interventions_per_episode "$p"); fi="${fi:-off}"
+  echo "| $1 | $2 | $3 | $(key collisions "$p") | $pc | $fi | $rt | $rc | $ratio |"
+}
 echo "| scene | maps | preset | policy: terminations / $episodes | coverage | filter interventions / episode | $random: terminations | coverage | coverage ratio |"
 echo "|---|---|---|---|---|---|---|---|---|"
-for preset in none sim2real; do
-  for layouts in builtin procedural; do
-    for env in search-outdoor-20 search-urban-20 search-outdoor-50 search-urban-50; do
-      args=(eval --policy "$policy" --env "$env" --episodes "$episodes" --seed "$seed" --layouts "$layouts" --max-steps 1000)
-      [ "$preset" = none ] || args+=(--preset "$preset")
-      [ -z "$filter" ] || args+=(--safety-filter "$filter")
-      p=$("$bin" "${args[@]}")
-      pc=$(key coverage "$p")
-      rt=- rc=- ratio=-
-      if [ "${RANDOM_POLICY:-on}" != off ]; then
-        r=$("$bin" "${args[@]}" --random)
-        rt=$(key collisions "$r"); rc=$(key coverage "$r"); best=$rc
-        if [ -n "$forward" ]; then
-          f=$("$bin" "${args[@]}" --random --set env_config.action_mapping=scaled)
-          fc=$(key coverage "$f")
-          rt="$rt / $(key collisions "$f")"; rc="$rc / $fc"
-          best=$(python3 -c "print(max($best, $fc))")
-        fi
-        ratio=$(python3 -c "print(f'{$pc / max($best, 1e-9):.1f}x')")
-      fi
-      fi=$(key filter_interventions_per_episode "$p"); fi="${fi:-off}"
-      echo "| $env | $layouts | $preset | $(key collisions "$p") | $pc | $fi | $rt | $rc | $ratio |"
-    done
-  done
-done
+search_rows row

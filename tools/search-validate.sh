@@ -9,23 +9,20 @@
 #   tools/search-validate.sh POLICY [POLICY ...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bin="${AGVRL:-${CARGO_TARGET_DIR:-target}/release/agvrl}"
-[ -x "$bin" ] || cargo build --release -q
 [ $# -ge 1 ] || { echo "usage: $0 POLICY [POLICY ...]" >&2; exit 2; }
+source tools/search-rows.sh
+episodes=50
+seed=1000000
+row() {
+  local out
+  out=$("$bin" "${row_args[@]}")
+  total=$((total + $(key collisions "$out")))
+  coverage+=("$(key coverage "$out")")
+}
 for policy in "$@"; do
   total=0
   coverage=()
-  for preset in none sim2real; do
-    for layouts in builtin procedural; do
-      for env in search-outdoor-20 search-urban-20 search-outdoor-50 search-urban-50; do
-        args=(eval --policy "$policy" --env "$env" --episodes 50 --seed 1000000 --layouts "$layouts" --max-steps 1000)
-        [ "$preset" = none ] || args+=(--preset "$preset")
-        out=$("$bin" "${args[@]}")
-        total=$((total + $(sed -n 's/^collisions=//p' <<<"$out")))
-        coverage+=("$(sed -n 's/^coverage=//p' <<<"$out")")
-      done
-    done
-  done
+  search_rows row
   mean=$(python3 -c "import sys; v = [float(x) for x in sys.argv[1:]]; print(f'{sum(v) / len(v):.3f}')" "${coverage[@]}")
   echo "policy=$policy validation_terminations=$total validation_mean_coverage=$mean episodes=800"
 done
