@@ -308,11 +308,18 @@ impl SafetyFilter {
             self.last = Intervention::Reversed;
             return c;
         }
-        if proposed.throttle < 0.0 {
+        let c = if proposed.throttle < 0.0 {
             self.filter_reverse(speed, proposed, steering_limit_rad, fan_half_rad)
         } else {
             self.filter_forward(speed, proposed, steering_limit_rad, fan_half_rad)
+        };
+        // A policy already braking on the clearest arc (zero throttle, or reverse while still
+        // rolling forward) sends what the filter would: nothing was corrected.
+        let clamped = proposed.steering_rad.clamp(-steering_limit_rad, steering_limit_rad);
+        if self.last == Intervention::Braked && c.throttle == proposed.throttle && c.steering_rad == clamped {
+            self.last = Intervention::None;
         }
+        c
     }
 
     /// A forward (or zero-throttle) control: its arc must be clear for reacting, braking and,
@@ -928,6 +935,33 @@ mod tests {
         assert_eq!(c.throttle, 0.0);
         let mut f = on();
         assert_eq!(f.filter(&wall_frame(1.7, 0.0, 1.5), go, 0.36, FAN), go);
+    }
+
+    #[test]
+    fn a_policy_already_braking_on_the_clearest_arc_is_not_corrected() {
+        let go = Control {
+            throttle: 1.0,
+            steering_rad: 0.0,
+        };
+        let frame = wall_frame(1.2, 0.0, 1.5);
+        let braked = on().filter(&frame, go, 0.36, FAN);
+        assert_eq!(braked.throttle, 0.0);
+        // Zero throttle on the filter's own arc, and reverse (the drive brakes while the car
+        // still rolls forward) on it: the control goes out as proposed and counts as none.
+        for throttle in [0.0, -0.5] {
+            let own = Control { throttle, ..braked };
+            let mut f = on();
+            assert_eq!(f.apply(&frame, own, 0.36, FAN), (own, None), "throttle {throttle}");
+            assert_eq!(f.last_intervention(), Intervention::None);
+        }
+        // Any throttle on that arc is still corrected to zero.
+        let slower = Control {
+            throttle: 0.3,
+            ..braked
+        };
+        let mut f = on();
+        assert_eq!(f.apply(&frame, slower, 0.36, FAN), (braked, Some(braked)));
+        assert_eq!(f.last_intervention(), Intervention::Braked);
     }
 
     #[test]
