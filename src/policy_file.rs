@@ -27,11 +27,7 @@ pub struct PolicyArgs {
 pub fn policy(a: PolicyArgs) -> Result<()> {
     let mut data = PolicyData::load(&a.file)?;
     let (cfg, source) = match &a.settings {
-        Some(path) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-            let cfg = RunConfig::from_toml_with(&text, &path.display().to_string(), &a.set)?;
-            (Some(cfg), path.display().to_string())
-        }
+        Some(path) => (Some(RunConfig::load_with(path, &a.set)?), path.display().to_string()),
         None => {
             let src = PolicySettings::of_policy(&a.file, &data, &a.set)?;
             (src.run, src.source.to_string())

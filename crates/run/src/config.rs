@@ -115,11 +115,16 @@ impl RunConfig {
 
     /// Load a run TOML file.
     pub fn load(path: &Path) -> Result<Self> {
+        Self::load_with(path, &[])
+    }
+
+    /// [`Self::load`] with `sets` on top (see [`Self::from_toml_with`]).
+    pub fn load_with(path: &Path, sets: &[String]) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|source| RunError::Io {
             path: path.to_path_buf(),
             source,
         })?;
-        Self::from_toml(&text, &path.display().to_string())
+        Self::from_toml_with(&text, &path.display().to_string(), sets)
     }
 
     /// Check values a typo would break.

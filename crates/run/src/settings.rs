@@ -60,7 +60,7 @@ impl PolicySettings {
             let path = opened.file(files::CONFIG);
             return Ok(Self {
                 policy: policy.map_or_else(|| opened.file(files::POLICY), Path::to_path_buf),
-                run: Some(load_with(&path, sets)?),
+                run: Some(RunConfig::load_with(&path, sets)?),
                 source: SettingsSource::RunDir(path),
                 data: None,
             });
@@ -92,10 +92,10 @@ impl PolicySettings {
                 SettingsSource::Embedded(policy.to_path_buf()),
             )
         } else if let Some(side) = Some(policy.with_extension("toml")).filter(|p| p.is_file()) {
-            (Some(load_with(&side, sets)?), SettingsSource::Beside(side))
+            (Some(RunConfig::load_with(&side, sets)?), SettingsSource::Beside(side))
         } else if let Some(dir) = Run::of_policy(policy) {
             let path = dir.join(files::CONFIG);
-            (Some(load_with(&path, sets)?), SettingsSource::RunDir(path))
+            (Some(RunConfig::load_with(&path, sets)?), SettingsSource::RunDir(path))
         } else if let Some(s) = sets.first() {
             return Err(RunError::Config(format!(
                 "--set {s}: {} carries no settings to override (none embedded, no TOML beside \
@@ -141,12 +141,4 @@ impl PolicySettings {
             .as_ref()
             .map_or_else(EnvConfig::default, RunConfig::drive_env_config)
     }
-}
-
-fn load_with(path: &Path, sets: &[String]) -> Result<RunConfig> {
-    let text = std::fs::read_to_string(path).map_err(|source| RunError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    RunConfig::from_toml_with(&text, &path.display().to_string(), sets)
 }
