@@ -180,7 +180,10 @@ pub fn train(a: TrainArgs) -> Result<()> {
             .with_context(|| format!("{} is not a run directory", dir.display()))?;
         let ckpt = dir.join(files::CHECKPOINT);
         let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
-            Box::new(Ppo::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?)
+            Box::new(ppo_with_threads(
+                Ppo::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?,
+                &cfg,
+            ))
         } else {
             Box::new(sac_with_threads(
                 Sac::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?,
@@ -279,7 +282,10 @@ pub fn train_run(
         cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs
     );
     let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
-        Box::new(Ppo::new(cfg.ppo.clone(), vec_env(&cfg)?, device, cfg.seed)?)
+        Box::new(ppo_with_threads(
+            Ppo::new(cfg.ppo.clone(), vec_env(&cfg)?, device, cfg.seed)?,
+            &cfg,
+        ))
     } else {
         Box::new(sac_with_threads(
             Sac::new(cfg.sac.clone(), vec_env(&cfg)?, device, cfg.seed)?,
@@ -297,6 +303,12 @@ pub fn train_run(
 fn sac_with_threads<E: Env>(mut sac: Sac<E>, cfg: &RunConfig) -> Result<Sac<E>> {
     sac.set_threads(cfg.threads)?;
     Ok(sac)
+}
+
+/// `ppo` splitting each image minibatch over the run's `threads`.
+fn ppo_with_threads<E: Env>(mut ppo: Ppo<E>, cfg: &RunConfig) -> Ppo<E> {
+    ppo.set_threads(cfg.threads);
+    ppo
 }
 
 static STOP_HANDLER: std::sync::OnceLock<()> = std::sync::OnceLock::new();

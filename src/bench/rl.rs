@@ -20,7 +20,9 @@
 //! Burn's `rayon`/`simd` options gave no measurable gain on this busy machine and are off.
 //!
 //! `cnn_forward_us` times the NatureCNN encoder alone (batch 1, one 1x48x64 image);
-//! `ppo_cnn_steps_per_s` a small PPO run with it (rollout and update) on random observations.
+//! `ppo_cnn_steps_per_s` a small PPO run with it (rollout and update) on random observations,
+//! each minibatch split over two threads (`_1thread`: on one). Both run on the host
+//! (`host_cnn.rs`: im2col and the `gemm` crate's kernels), whatever `--backend` says.
 
 use super::median;
 use agvrl_envs::{BoxSpace, Env, EnvError, Info, Step, VecEnv, make};
@@ -266,7 +268,7 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
 
     // NatureCNN encoder alone, batch 1, one 48x64 depth image.
     let spec = ImageSpec::new(1, 48, 64);
-    let enc = Encoder::new(spec, &spec.init(Init::TorchDefault, &mut rng)?, &device)?;
+    let enc = Encoder::new(spec, &spec.init(Init::TorchDefault, &mut rng)?)?;
     let image: Vec<f32> = (0..spec.len()).map(|_| rng.uniform() as f32).collect();
     let calls = if quick { 200 } else { 500 };
     let mut us = vec![];
@@ -285,24 +287,34 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         2.0 * spec.macs()? as f64 / 1e6
     ));
 
-    // PPO with that encoder on random observations (vector 8 + image): rollouts and updates.
-    let cfg = PpoConfig {
-        n_steps: 256,
-        image: Some(spec),
-        ..PpoConfig::default()
-    };
-    let env = VecEnv::new(vec![RandomEnv::new(8 + spec.len(), a)], 1)?;
-    let mut ppo = Ppo::new(cfg, env, &device, 0)?;
-    ppo.learn(256, &mut |_| Control::Continue)?;
-    let mut sps = vec![];
-    for _ in 0..ppo_reps {
-        let t = Instant::now();
+    // PPO with that encoder on random observations (vector 8 + image): rollouts and updates,
+    // each minibatch on one thread, then split over two.
+    let mut per_threads = vec![];
+    for threads in [1, 2] {
+        let cfg = PpoConfig {
+            n_steps: 256,
+            image: Some(spec),
+            ..PpoConfig::default()
+        };
+        let env = VecEnv::new(vec![RandomEnv::new(8 + spec.len(), a)], 1)?;
+        let mut ppo = Ppo::new(cfg, env, &device, 0)?;
+        ppo.set_threads(threads);
         ppo.learn(256, &mut |_| Control::Continue)?;
-        sps.push(256.0 / t.elapsed().as_secs_f64());
+        let mut sps = vec![];
+        for _ in 0..ppo_reps {
+            let t = Instant::now();
+            ppo.learn(256, &mut |_| Control::Continue)?;
+            sps.push(256.0 / t.elapsed().as_secs_f64());
+        }
+        per_threads.push(median(sps));
     }
     lines.push(format!(
-        "ppo_cnn_steps_per_s={:.0} image=1x48x64 n_envs=1 n_steps=256 batch=64 n_epochs=10 reps={ppo_reps}",
-        median(sps)
+        "ppo_cnn_steps_per_s={:.0} threads=2 image=1x48x64 n_envs=1 n_steps=256 batch=64 n_epochs=10 reps={ppo_reps}",
+        per_threads[1]
+    ));
+    lines.push(format!(
+        "ppo_cnn_steps_per_s_1thread={:.0} reps={ppo_reps}",
+        per_threads[0]
     ));
     Ok(lines)
 }

@@ -18,10 +18,10 @@
 use crate::error::{Result, RlError};
 use crate::nets::{HostParams, Init, init_layer};
 use crate::rng::Rng;
+use burn::tensor::Tensor;
 use burn::tensor::activation::relu;
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
-use burn::tensor::{Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
 /// NatureCNN's conv layers: (output channels, kernel, stride), no padding.
@@ -195,24 +195,22 @@ pub fn encode(params: &[Tensor<3>], spec: &ImageSpec, x: Tensor<3>) -> Tensor<3>
     }
 }
 
-/// An encoder with its weights as plain tensors, for shape checks and quick inference.
+/// An encoder with its weights on the host ([`crate::host_cnn`]), for shape checks, inference
+/// and timing.
 pub struct Encoder {
     spec: ImageSpec,
-    weights: Vec<Tensor<3>>,
-    device: burn::tensor::Device,
+    host: crate::host_cnn::HostEncoder,
 }
 
 impl Encoder {
-    /// Weights from `params` on `device` (autodiff stripped).
-    pub fn new(spec: ImageSpec, params: &HostParams, device: &burn::tensor::Device) -> Result<Self> {
+    /// An encoder with weights `params`.
+    pub fn new(spec: ImageSpec, params: &HostParams) -> Result<Self> {
         if params.shapes != spec.param_shapes()? {
             return Err(RlError::Config("encoder weights do not match the image spec".into()));
         }
-        let device = device.clone().without_autodiff();
         Ok(Self {
             spec,
-            weights: params.to_device(&device),
-            device,
+            host: crate::host_cnn::HostEncoder::new(&spec, &params.data),
         })
     }
 
@@ -227,8 +225,7 @@ impl Encoder {
             });
         }
         let n = obs.len() / obs_dim;
-        let x = Tensor::<3>::from_data(TensorData::new(obs.to_vec(), [1, n, obs_dim]), &self.device);
-        crate::nets::to_vec(encode(&self.weights, &self.spec, x))
+        Ok(self.host.encode_rows(obs, obs_dim, n).1)
     }
 }
 
@@ -246,6 +243,28 @@ mod tests {
         assert!(e.contains("too small"), "{e}");
         assert!(ImageSpec::new(1, 36, 36).conv_shapes().is_ok());
         assert!(ImageSpec::new(1, 48, 64).vector_dim(100).is_err());
+    }
+
+    /// The host encoder (inference, the learners' host path) against the tensor formulation.
+    #[test]
+    fn host_encoder_matches_the_tensor_encoder() {
+        let spec = ImageSpec {
+            features_dim: 48,
+            ..ImageSpec::new(3, 40, 52)
+        };
+        let params = spec.init(Init::Orthogonal(2f64.sqrt()), &mut Rng::new(4)).unwrap();
+        let (n, o) = (3, 4 + spec.len());
+        let mut rng = Rng::new(5);
+        let obs: Vec<f32> = (0..n * o).map(|_| rng.uniform() as f32).collect();
+        let host = Encoder::new(spec, &params).unwrap().forward(&obs, o).unwrap();
+        let dev = crate::device::default_device();
+        let x = Tensor::<3>::from_data(burn::tensor::TensorData::new(obs, [1, n, o]), &dev);
+        let tensor = crate::nets::to_vec(encode(&params.to_device(&dev), &spec, x)).unwrap();
+        assert_eq!(host.len(), tensor.len());
+        assert!(host.iter().any(|v| *v > 0.0));
+        for (k, (h, t)) in host.iter().zip(&tensor).enumerate() {
+            assert!((h - t).abs() < 1e-5 + 1e-4 * t.abs(), "[{k}] {h} vs {t}");
+        }
     }
 
     #[test]

@@ -62,6 +62,7 @@ pub mod eval;
 mod file;
 #[cfg(feature = "train")]
 mod gaussian;
+mod host_cnn;
 #[cfg(feature = "train")]
 mod host_gemm;
 #[cfg(feature = "train")]

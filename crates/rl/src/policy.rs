@@ -7,7 +7,7 @@
 //! header, its 8 arrays after the MLP's); 3 adds the settings the policy drives with (a run
 //! TOML in the header), so a policy file is self-contained.
 
-use crate::cnn::{ImageSpec, encode};
+use crate::cnn::ImageSpec;
 use crate::error::{Result, RlError};
 use crate::file;
 use crate::nets::{HostParams, MlpSpec, mlp_forward, to_vec};
@@ -346,7 +346,8 @@ pub(crate) fn check_space(what: &'static str, file: &BoxSpace, env: &BoxSpace) -
 pub struct Policy {
     data: PolicyData,
     weights: Vec<Tensor<3>>,
-    encoder: Vec<Tensor<3>>,
+    /// The image encoder on the host, when there is one.
+    encoder: Option<crate::host_cnn::HostEncoder>,
     device: Device,
     rng: Rng,
     scratch: Vec<f32>,
@@ -357,7 +358,10 @@ impl Policy {
     pub fn new(data: PolicyData, device: &Device) -> Self {
         let device = device.clone().without_autodiff();
         let weights = data.params.to_device(&device);
-        let encoder = data.encoder.as_ref().map_or(vec![], |e| e.params.to_device(&device));
+        let encoder = data
+            .encoder
+            .as_ref()
+            .map(|e| crate::host_cnn::HostEncoder::new(&e.spec, &e.params.data));
         Self {
             data,
             weights,
@@ -432,10 +436,16 @@ impl Policy {
         if let Some(norm) = &self.data.normalizer {
             norm.normalize_rows(&mut self.scratch, o);
         }
-        let mut x = Tensor::<3>::from_data(TensorData::new(self.scratch.clone(), [1, n, o]), &self.device);
-        if let Some(e) = &self.data.encoder {
-            x = encode(&self.encoder, &e.spec, x);
-        }
+        // The encoder runs on the host (`host_cnn`): batch-1 inference is dominated by
+        // per-op overhead on the tensor path.
+        let x = match &self.encoder {
+            Some(e) => {
+                let (_, rows) = e.encode_rows(&self.scratch, o, n);
+                let w = rows.len() / n;
+                Tensor::<3>::from_data(TensorData::new(rows, [1, n, w]), &self.device)
+            }
+            None => Tensor::<3>::from_data(TensorData::new(self.scratch.clone(), [1, n, o]), &self.device),
+        };
         let net = &self.data.net;
         let (out, latent) = match self.data.head {
             ActionHead::StateDependent { .. } if !deterministic => {

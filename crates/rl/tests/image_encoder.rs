@@ -95,13 +95,12 @@ fn vec_env(n: usize) -> VecEnv<BarSide> {
 
 #[test]
 fn encoder_output_shapes_for_depth_and_rgb_images() {
-    let dev = default_device();
     for (channels, features) in [(1, 64), (3, 256)] {
         let spec = ImageSpec {
             features_dim: features,
             ..ImageSpec::new(channels, 48, 64)
         };
-        let enc = Encoder::new(spec, &spec.init(Init::TorchDefault, &mut Rng::new(1)).unwrap(), &dev).unwrap();
+        let enc = Encoder::new(spec, &spec.init(Init::TorchDefault, &mut Rng::new(1)).unwrap()).unwrap();
         // 3 rows of a 5-value vector part and the image.
         let o = 5 + spec.len();
         let mut rng = Rng::new(2);

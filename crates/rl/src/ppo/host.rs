@@ -6,10 +6,13 @@
 //! churn and a scalar libm `expf` per activation. Here the products are ndarray's
 //! `general_mat_mul` (matrixmultiply's kernels, picked for the CPU at run time) on views of the
 //! host weights, and tanh is a rational approximation of a few ulp in a loop the compiler
-//! vectorises, so one minibatch costs a fraction of the tensor path. Used for every config without an image
-//! encoder; `tests::host_gradients_match_autodiff` checks it against Burn's autodiff.
+//! vectorises, so one minibatch costs a fraction of the tensor path. With an image, the
+//! NatureCNN runs on the host too ([`crate::host_cnn`]) and its features join the vector part
+//! at the trunks' input. `tests::host_gradients_match_autodiff` checks both against Burn's
+//! autodiff.
 
 use super::Layout;
+use crate::host_cnn::{EncoderPass, HostEncoder};
 use crate::host_gemm::{activate, activation_grad, affine, input_grads, weight_grads};
 use crate::nets::{Activation, HostParams};
 
@@ -17,6 +20,8 @@ use crate::nets::{Activation, HostParams};
 /// action mean and the value.
 pub(crate) struct Forward {
     n: usize,
+    /// With an image: the encoder's pass and the trunks' input rows `[vector | features]`.
+    encoder: Option<(EncoderPass, Vec<f32>)>,
     /// `outs[l][m]`: layer `l`'s activated output for member `m` (0 actor, 1 critic), `[n x out]`.
     outs: Vec<[Vec<f32>; 2]>,
     /// Action mean, `[n x a]`.
@@ -26,15 +31,29 @@ pub(crate) struct Forward {
 }
 
 impl Forward {
+    /// What the trunks saw for observations `obs`: `obs` itself, or with an image its encoding.
+    pub(crate) fn input<'a>(&'a self, obs: &'a [f32]) -> &'a [f32] {
+        self.encoder.as_ref().map_or(obs, |(_, x)| x)
+    }
+
     /// The actor's last hidden layer (gSDE's latent), `[n x latent]`; the input without hidden layers.
-    pub(crate) fn latent<'a>(&'a self, x: &'a [f32]) -> &'a [f32] {
-        self.outs.last().map_or(x, |o| &o[0])
+    pub(crate) fn latent<'a>(&'a self, obs: &'a [f32]) -> &'a [f32] {
+        self.outs.last().map_or(self.input(obs), |o| &o[0])
     }
 }
 
-/// The networks of `params` (laid out as [`Layout`] for `n_layers` hidden layers) on the
-/// observations `x [n x in]`.
-pub(crate) fn forward(params: &HostParams, l: &Layout, act: Activation, x: &[f32], n: usize) -> Forward {
+/// The networks of `params` (laid out as [`Layout`]) on the observations `obs [n x o]`; with
+/// `image` (the encoder made from `params`), the last `C*H*W` values of a row are an image.
+pub(crate) fn forward(
+    params: &HostParams,
+    l: &Layout,
+    act: Activation,
+    image: Option<&HostEncoder>,
+    obs: &[f32],
+    n: usize,
+) -> Forward {
+    let encoder = image.map(|e| e.encode_rows(obs, obs.len() / n, n));
+    let x = encoder.as_ref().map_or(obs, |(_, x)| x.as_slice());
     let mut outs: Vec<[Vec<f32>; 2]> = Vec::with_capacity(l.trunk.len() / 2);
     for k in (l.trunk.start..l.trunk.end).step_by(2) {
         let [_, i, o] = params.shapes[k];
@@ -73,21 +92,30 @@ pub(crate) fn forward(params: &HostParams, l: &Layout, act: Activation, x: &[f32
         (n, lat_v, 1),
         &mut value,
     );
-    Forward { n, outs, mean, value }
+    Forward {
+        n,
+        encoder,
+        outs,
+        mean,
+        value,
+    }
 }
 
 /// Gradients of `sum(mean * d_mean) + sum(value * d_value)` with respect to every tensor of
-/// `params`, in its order (zeros for `log_std` and any tensor outside the networks).
+/// `params`, in its order (zeros for `log_std`), for the pass `f` on `obs` (`image` as there).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn backward(
     params: &HostParams,
     l: &Layout,
     act: Activation,
-    x: &[f32],
+    image: Option<&HostEncoder>,
+    obs: &[f32],
     f: &Forward,
     d_mean: &[f32],
     d_value: &[f32],
 ) -> Vec<Vec<f32>> {
     let n = f.n;
+    let x = f.input(obs);
     let mut grads: Vec<Vec<f32>> = params.data.iter().map(|p| vec![0.0; p.len()]).collect();
     let last = |m: usize| f.outs.last().map_or(x, |o| &o[m]);
     // Heads, then each member's trunk from the top.
@@ -115,11 +143,22 @@ pub(crate) fn backward(
                 &mut gw[m * i * o..(m + 1) * i * o],
                 &mut gb[m * o..(m + 1) * o],
             );
-            if depth > 0 {
+            if depth > 0 || image.is_some() {
                 let dz = std::mem::take(dhm);
                 input_grads(&dz, &params.data[k][m * i * o..(m + 1) * i * o], (n, i, o), dhm);
             }
         }
+    }
+    if let (Some(enc), Some((pass, _))) = (image, &f.encoder) {
+        // `dh` now holds each member's gradient at the trunks' input; both read the features.
+        let w = x.len() / n;
+        let fd = params.shapes[l.encoder.start + 7][2];
+        let v = w - fd;
+        let mut d_features = Vec::with_capacity(n * fd);
+        for (a, c) in dh[0].chunks_exact(w).zip(dh[1].chunks_exact(w)) {
+            d_features.extend(a[v..].iter().zip(&c[v..]).map(|(a, c)| a + c));
+        }
+        enc.backward(pass, &d_features, &mut grads[l.encoder.clone()]);
     }
     grads
 }

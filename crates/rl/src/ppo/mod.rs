@@ -20,16 +20,15 @@ pub use update::GradientProbe;
 
 use crate::adam::Adam;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter, Common};
-use crate::cnn::encode;
 use crate::error::Result;
 use crate::gaussian::{self, HALF_LN_2PI_F32};
-use crate::nets::{HostParams, Init, MlpSpec, init_layer, mlp_forward, to_vec};
+use crate::nets::{HostParams, Init, MlpSpec, init_layer};
 use crate::normalize::ObsNormalizer;
 use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData};
 use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
 use agvrl_envs::{Env, VecEnv};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -80,15 +79,20 @@ impl Layout {
     }
 }
 
+#[cfg(test)]
+use burn::tensor::Tensor;
+
 /// `(mean [1, b, a], value [1, b, 1], actor latent [1, b, latent])` for observations
-/// `x [1, b, o]`, with `params` laid out as [`Layout`].
+/// `x [1, b, o]`, with `params` laid out as [`Layout`]: the tensor formulation the host path
+/// is checked against.
+#[cfg(test)]
 pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (Tensor<3>, Tensor<3>, Tensor<3>) {
     let l = Layout::of(cfg);
     let x = match &cfg.image {
-        Some(spec) => encode(l.encoder_of(params), spec, x),
+        Some(spec) => crate::cnn::encode(l.encoder_of(params), spec, x),
         None => x,
     };
-    let h = mlp_forward(l.trunk_of(params), x, cfg.activation_fn, true);
+    let h = crate::nets::mlp_forward(l.trunk_of(params), x, cfg.activation_fn, true);
     let latent = h.clone().narrow(0, 0, 1);
     let mean = latent.clone().matmul(params[l.pi_w].clone()) + params[l.pi_b].clone();
     let value = h.narrow(0, 1, 1).matmul(params[l.vf_w].clone()) + params[l.vf_b].clone();
@@ -129,6 +133,8 @@ pub struct Ppo<E: Env> {
     last: Option<(Vec<f32>, Vec<bool>)>,
     /// Minibatches in shuffled order (off only to replay an update in another implementation).
     shuffle: bool,
+    /// Threads an image minibatch is split over (see [`Ppo::set_threads`]).
+    threads: usize,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -257,6 +263,7 @@ impl<E: Env> Ppo<E> {
             losses: Losses::default(),
             last: None,
             shuffle: true,
+            threads: 1,
         })
     }
 
@@ -265,6 +272,19 @@ impl<E: Env> Ppo<E> {
     #[doc(hidden)]
     pub fn set_minibatch_shuffle(&mut self, on: bool) {
         self.shuffle = on;
+    }
+
+    /// The image encoder at the current weights, laid out for the host products.
+    pub(crate) fn encoder(&self) -> Option<crate::host_cnn::HostEncoder> {
+        let l = Layout::of(&self.cfg);
+        (self.cfg.image.as_ref()).map(|spec| crate::host_cnn::HostEncoder::new(spec, l.encoder_of(&self.params.data)))
+    }
+
+    /// Split each minibatch of an image config over `threads` threads (default 1). A run is
+    /// the same bit for bit for a given count; configs without an image ignore it (their
+    /// minibatches are too small to gain).
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.max(1);
     }
 
     /// The configuration.
@@ -316,13 +336,6 @@ impl<E: Env> Ppo<E> {
     fn collect_rollout(&mut self) -> Result<Rollout> {
         let (n_envs, o, a, n_steps) = (self.env.n_envs(), self.obs_dim, self.act_dim, self.cfg.n_steps);
         let total = n_steps * n_envs;
-        let dev = self.device.clone();
-        // The host path (configs without an image) needs no device copy.
-        let params = if self.cfg.image.is_some() {
-            self.params.to_device(&dev)
-        } else {
-            Vec::new()
-        };
         let log_std = self.params.data[Layout::of(&self.cfg).log_std].clone();
         let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
         // log N(x; m, s) summed over elements = sum(-z^2/2) - sum(log s) - a ln(2 pi)/2
@@ -358,18 +371,12 @@ impl<E: Env> Ppo<E> {
         let space = self.env.action_space().clone();
         let sde = self.cfg.use_sde;
         let (host_params, layout) = (&self.params, Layout::of(&self.cfg));
-        let value_of =
-            |params: &[Tensor<3>], x: Vec<f32>, n: usize, cfg: &PpoConfig| -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
-                if cfg.image.is_none() {
-                    let f = host::forward(host_params, &layout, cfg.activation_fn, &x, n);
-                    let latent = if sde { f.latent(&x).to_vec() } else { vec![] };
-                    return Ok((f.mean, f.value, latent));
-                }
-                let t = Tensor::<3>::from_data(TensorData::new(x, [1, n, o]), &dev);
-                let (mean, value, latent) = forward(params, t, cfg);
-                let latent = if sde { to_vec(latent)? } else { vec![] };
-                Ok((to_vec(mean)?, to_vec(value)?, latent))
-            };
+        let encoder = self.encoder();
+        let value_of = |x: Vec<f32>, n: usize, cfg: &PpoConfig| -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
+            let f = host::forward(host_params, &layout, cfg.activation_fn, encoder.as_ref(), &x, n);
+            let latent = if sde { f.latent(&x).to_vec() } else { vec![] };
+            Ok((f.mean, f.value, latent))
+        };
         for step in 0..n_steps {
             let freq = self.cfg.sde_sample_freq;
             if sde && (step == 0 || (freq > 0 && step as i64 % freq == 0)) {
@@ -379,7 +386,7 @@ impl<E: Env> Ppo<E> {
                 }
             }
             let x = self.normalized(&obs);
-            let (mean, value, latent) = value_of(&params, x.clone(), n_envs, &self.cfg)?;
+            let (mean, value, latent) = value_of(x.clone(), n_envs, &self.cfg)?;
             let mut actions = Vec::with_capacity(n_envs * a);
             let mut clipped = Vec::with_capacity(n_envs * a);
             for e in 0..n_envs {
@@ -418,7 +425,7 @@ impl<E: Env> Ppo<E> {
                     fx.extend_from_slice(f);
                 }
                 let fx = self.normalized(&fx);
-                let (_, fv, _) = value_of(&params, fx, trunc.len(), &self.cfg)?;
+                let (_, fv, _) = value_of(fx, trunc.len(), &self.cfg)?;
                 for (k, &e) in trunc.iter().enumerate() {
                     rew[e] += (self.cfg.gamma as f32) * fv[k];
                 }
@@ -448,7 +455,7 @@ impl<E: Env> Ppo<E> {
             starts = (0..n_envs).map(|e| st.terminated[e] || st.truncated[e]).collect();
             obs = st.obs;
         }
-        let (_, last_values, _) = value_of(&params, self.normalized(&obs), n_envs, &self.cfg)?;
+        let (_, last_values, _) = value_of(self.normalized(&obs), n_envs, &self.cfg)?;
         let dones = starts.iter().map(|s| *s as u8 as f32).collect();
         r.compute_gae(
             [rewards, values, episode_starts, last_values, dones],

@@ -2,20 +2,18 @@
 //! minibatches, clipped surrogate + `vf_coef` * value MSE - `ent_coef` * entropy, global
 //! gradient clipping, Adam.
 //!
-//! The loss head is fused: the networks run forward on the autodiff device once, the loss and
-//! its gradients with respect to the action mean, the value and `log_std` are computed in one
-//! host pass ([`loss_head`]), and a single backward of `sum(mean * dL/dmean) + sum(value *
-//! dL/dvalue)` carries them into the weights. That replaces ~25 small graph ops per minibatch
-//! (each a Burn dispatch plus its backward) by 5; `tests::fused_head_matches_autodiff` checks
-//! the result against the plain autodiff formulation.
+//! The loss head is fused: the networks run forward on the host once ([`super::host`]), the
+//! loss and its gradients with respect to the action mean, the value and `log_std` are computed
+//! in one pass ([`loss_head`]), and a single backward of `sum(mean * dL/dmean) + sum(value *
+//! dL/dvalue)` carries them into the weights. `tests::fused_head_matches_autodiff` checks the
+//! head against the plain autodiff formulation, `tests::host_gradients_match_autodiff` the
+//! networks.
 
-use super::{Layout, Ppo, Rollout, forward, host};
+use super::{Layout, Ppo, Rollout, host};
 use crate::adam::Adam;
 use crate::error::{Result, RlError};
 use crate::gaussian::{self, HALF_LN_2PI};
-use crate::nets::{grads_of, to_vec};
 use agvrl_envs::Env;
-use burn::tensor::{Tensor, TensorData};
 
 /// What [`Ppo::gradient_probe`] returns (weights in agvrl's layout: `[members, in, out]`).
 #[doc(hidden)]
@@ -211,9 +209,25 @@ fn explained_variance(returns: &[f32], advantages: &[f32]) -> f64 {
     1.0 - var(advantages) / vr
 }
 
+/// `job` on every item, item 0 on the calling thread and one scoped thread for each other;
+/// results in item order.
+fn on_threads<T: Sync, R: Send>(items: &[T], job: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    std::thread::scope(|s| {
+        let job = &job;
+        let others: Vec<_> = items[1..].iter().map(|t| s.spawn(move || job(t))).collect();
+        let mut out = vec![job(&items[0])];
+        out.extend(
+            others
+                .into_iter()
+                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
+        );
+        out
+    })
+}
+
 impl<E: Env> Ppo<E> {
     /// Loss and gradients (before clipping) of one minibatch; `adv` already normalised. The
-    /// networks run on the host ([`super::host`]) unless the config has an image encoder.
+    /// networks run on the host ([`super::host`]), an image minibatch split over the threads.
     fn minibatch(
         &self,
         obs: Vec<f32>,
@@ -239,29 +253,52 @@ impl<E: Env> Ppo<E> {
             };
             loss_head(&x, self.cfg.clip_range, self.cfg.vf_coef, self.cfg.ent_coef)
         };
-        let (head, mut grads) = if self.cfg.image.is_none() {
-            let act_fn = self.cfg.activation_fn;
-            let f = host::forward(&self.params, &l, act_fn, &obs, n);
+        let (encoder, act_fn) = (self.encoder(), self.cfg.activation_fn);
+        let image = encoder.as_ref();
+        // An image minibatch is split over the threads (MLP-only ones are too small to gain).
+        let k = if image.is_some() { self.threads.clamp(1, n) } else { 1 };
+        let (head, mut grads) = if k == 1 {
+            let f = host::forward(&self.params, &l, act_fn, image, &obs, n);
             let head = head_of(&f.mean, &f.value, self.cfg.use_sde.then(|| f.latent(&obs)));
-            let grads = host::backward(&self.params, &l, act_fn, &obs, &f, &head.d_mean, &head.d_value);
+            let grads = host::backward(&self.params, &l, act_fn, image, &obs, &f, &head.d_mean, &head.d_value);
             (head, grads)
         } else {
-            let ad = self.device.clone().autodiff();
-            let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
-            // log_std's gradient comes from the host head; only the networks are tracked.
-            let mut params: Vec<Tensor<3>> = self.params.to_tracked(&ad);
-            params[l.log_std] = params[l.log_std].clone().detach();
-            let (mean, value, latent) = forward(&params, t3(obs, [1, n, o]), &self.cfg);
-            let (mean_h, value_h) = (to_vec(mean.clone().inner())?, to_vec(value.clone().inner())?);
-            let latent_h = if self.cfg.use_sde {
-                Some(to_vec(latent.inner())?)
-            } else {
-                None
-            };
-            let head = head_of(&mean_h, &value_h, latent_h.as_deref());
-            let surrogate =
-                (mean * t3(head.d_mean.clone(), [1, n, a])).sum() + (value * t3(head.d_value.clone(), [1, n, 1])).sum();
-            let grads = grads_of(&params, &surrogate.backward())?;
+            let rows: Vec<std::ops::Range<usize>> = (0..k).map(|i| i * n / k..(i + 1) * n / k).collect();
+            let (params, l, obs) = (&self.params, &l, &obs);
+            let passes = on_threads(&rows, |r| {
+                host::forward(params, l, act_fn, image, &obs[r.start * o..r.end * o], r.len())
+            });
+            let (mut mean, mut value, mut latent) = (Vec::with_capacity(n * a), Vec::with_capacity(n), Vec::new());
+            for (f, r) in passes.iter().zip(&rows) {
+                mean.extend_from_slice(&f.mean);
+                value.extend_from_slice(&f.value);
+                if self.cfg.use_sde {
+                    latent.extend_from_slice(f.latent(&obs[r.start * o..r.end * o]));
+                }
+            }
+            let head = head_of(&mean, &value, self.cfg.use_sde.then_some(&latent[..]));
+            let (d_mean, d_value) = (&head.d_mean, &head.d_value);
+            let jobs: Vec<_> = rows.iter().cloned().zip(&passes).collect();
+            let parts = on_threads(&jobs, |(r, f)| {
+                host::backward(
+                    params,
+                    l,
+                    act_fn,
+                    image,
+                    &obs[r.start * o..r.end * o],
+                    f,
+                    &d_mean[r.start * a..r.end * a],
+                    &d_value[r.clone()],
+                )
+            });
+            // Summed in row order, so a thread count gives the same bits every run.
+            let mut parts = parts.into_iter();
+            let mut grads = parts.next().expect("one part per thread");
+            for p in parts {
+                for (g, q) in grads.iter_mut().zip(p) {
+                    g.iter_mut().zip(q).for_each(|(g, q)| *g += q);
+                }
+            }
             (head, grads)
         };
         grads[l.log_std] = head.d_log_std.clone();
@@ -420,8 +457,12 @@ impl<E: Env> Ppo<E> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::forward;
     use super::*;
+    use crate::nets::{grads_of, to_vec};
     use crate::rng::Rng;
+    use agvrl_envs::VecEnv;
+    use burn::tensor::{Tensor, TensorData};
 
     /// The loss written with autodiff tensor ops (the unfused formulation, SB3's).
     fn autodiff_loss(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f64) -> (f64, Vec<f32>, Vec<f32>, Vec<f32>) {
@@ -510,44 +551,97 @@ mod tests {
         assert!(close(&h.d_log_std, &d_log_std), "{:?} {:?}", h.d_log_std, d_log_std);
     }
 
+    /// An env of `o`-value observations and 2 actions, only for building learners of that shape.
+    struct Shape(usize);
+
+    impl Env for Shape {
+        fn observation_space(&self) -> agvrl_envs::BoxSpace {
+            agvrl_envs::BoxSpace::uniform(self.0, 0.0, 1.0)
+        }
+        fn action_space(&self) -> agvrl_envs::BoxSpace {
+            agvrl_envs::BoxSpace::uniform(2, -1.0, 1.0)
+        }
+        fn reset(&mut self, _: Option<u64>) -> std::result::Result<(Vec<f32>, agvrl_envs::Info), agvrl_envs::EnvError> {
+            Ok((vec![0.0; self.0], Default::default()))
+        }
+        fn step(&mut self, _: &[f32]) -> std::result::Result<agvrl_envs::Step, agvrl_envs::EnvError> {
+            Ok(agvrl_envs::Step {
+                obs: vec![0.0; self.0],
+                reward: 0.0,
+                terminated: true,
+                truncated: false,
+                info: Default::default(),
+            })
+        }
+        fn dt_s(&self) -> f64 {
+            0.1
+        }
+    }
+
     /// The host networks' outputs and gradients against the same networks through Burn's
     /// autodiff (tanh there is `2 sigmoid(2x) - 1` on libm's `expf`), for both activations,
-    /// with and without gSDE's latent.
+    /// with and without gSDE's latent, and with the NatureCNN (1 and 3 channels, a vector part
+    /// or none, split over 1 and 3 threads).
     #[test]
     fn host_gradients_match_autodiff() {
+        use crate::cnn::ImageSpec;
         use crate::nets::Activation;
-        for (arch, act, sde) in [
-            (vec![64, 64], Activation::Tanh, false),
-            (vec![32, 16], Activation::Relu, true),
-            (vec![8], Activation::Tanh, true),
+        let image = |c, v| {
+            let spec = ImageSpec {
+                features_dim: 24,
+                ..ImageSpec::new(c, 38, 44)
+            };
+            Some((spec, v))
+        };
+        for (arch, act, sde, image, threads) in [
+            (vec![64, 64], Activation::Tanh, false, None, 1),
+            (vec![32, 16], Activation::Relu, true, None, 1),
+            (vec![8], Activation::Tanh, true, None, 1),
+            (vec![16, 8], Activation::Tanh, false, image(1, 5), 1),
+            (vec![16], Activation::Relu, true, image(3, 0), 3),
+            (vec![12], Activation::Tanh, false, image(1, 2), 2),
         ] {
             let cfg = super::super::PpoConfig {
                 net_arch: arch.clone(),
                 activation_fn: act,
                 use_sde: sde,
+                image: image.map(|(s, _)| s),
                 ..Default::default()
             };
-            let env = crate::learning::pendulum_envs(2).unwrap();
             let device = crate::device::default_device();
-            let ppo = Ppo::new(cfg.clone(), env, &device, 3).unwrap();
+            let env: VecEnv<Box<dyn Env>> = match image {
+                None => crate::learning::pendulum_envs(2).unwrap(),
+                Some((spec, v)) => VecEnv::new(vec![Box::new(Shape(v + spec.len())) as Box<dyn Env>], 1).unwrap(),
+            };
+            let mut ppo = Ppo::new(cfg.clone(), env, &device, 3).unwrap();
+            ppo.set_threads(threads);
             let (o, a, n) = (ppo.obs_dim, ppo.act_dim, 40);
             let mut rng = Rng::new(5);
-            let x: Vec<f32> = rng.normals(n * o).iter().map(|v| 2.0 * v).collect();
+            // Images in [0, 1] as the envs give them; a vector part of any sign.
+            let x: Vec<f32> = (0..n * o)
+                .map(|k| match image {
+                    Some((_, v)) if k % o >= v => rng.uniform() as f32,
+                    _ => 2.0 * rng.normal() as f32,
+                })
+                .collect();
             let (d_mean, d_value) = (rng.normals(n * a), rng.normals(n));
             let l = Layout::of(&cfg);
-            let f = host::forward(&ppo.params, &l, act, &x, n);
-            let host_grads = host::backward(&ppo.params, &l, act, &x, &f, &d_mean, &d_value);
+            let enc = ppo.encoder();
+            let f = host::forward(&ppo.params, &l, act, enc.as_ref(), &x, n);
+            let host_grads = host::backward(&ppo.params, &l, act, enc.as_ref(), &x, &f, &d_mean, &d_value);
 
             let ad = device.clone().autodiff();
             let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), &ad);
             let params = ppo.params.to_tracked(&ad);
             let (mean, value, latent) = forward(&params, t3(x.clone(), [1, n, o]), &cfg);
-            let close = |p: &[f32], q: &[f32], what: &str| {
-                assert_eq!(p.len(), q.len(), "{what}");
+            let what = format!("{arch:?} {act:?} image {image:?}");
+            let close = |p: &[f32], q: &[f32], name: &str| {
+                assert_eq!(p.len(), q.len(), "{what} {name}");
+                let scale = q.iter().fold(0.0f32, |m, v| m.max(v.abs()));
                 for (k, (p, q)) in p.iter().zip(q).enumerate() {
                     assert!(
-                        (p - q).abs() < 2e-5 + 2e-4 * q.abs(),
-                        "{arch:?} {act:?} {what}[{k}]: {p} vs {q}"
+                        (p - q).abs() < 2e-5 + 2e-4 * q.abs() + 1e-5 * scale,
+                        "{what} {name}[{k}]: {p} vs {q}"
                     );
                 }
             };
@@ -559,10 +653,27 @@ mod tests {
             let surrogate =
                 (mean * t3(d_mean.clone(), [1, n, a])).sum() + (value * t3(d_value.clone(), [1, n, 1])).sum();
             let auto = grads_of(&params, &surrogate.backward()).unwrap();
-            for k in 0..=l.vf_b {
+            for k in (0..auto.len()).filter(|k| *k != l.log_std) {
                 close(&host_grads[k], &auto[k], &format!("grad {k}"));
             }
             assert!(host_grads[l.log_std].iter().all(|g| *g == 0.0));
+            if image.is_some() {
+                // The encoder's gradients are there, and the split minibatch sums to the same.
+                assert!(host_grads[l.encoder.start].iter().any(|g| *g != 0.0), "{what}");
+                let (adv, old_lp) = (rng.normals(n), vec![-1.0; n]);
+                let (ret, acts) = (rng.normals(n), rng.normals(n * a));
+                let mb =
+                    |p: &Ppo<Box<dyn Env>>| p.minibatch(x.clone(), acts.clone(), &old_lp, &adv, &ret, None).unwrap();
+                let (h1, g1) = mb(&ppo);
+                ppo.set_threads(1);
+                let (h2, g2) = mb(&ppo);
+                // Products of other shapes round differently: equal to f32 rounding.
+                let near = |p: f64, q: f64| (p - q).abs() < 1e-5 * (1.0 + q.abs());
+                assert!(near(h1.pg_loss, h2.pg_loss) && near(h1.vf_loss, h2.vf_loss), "{what}");
+                for (k, (p, q)) in g1.iter().zip(&g2).enumerate() {
+                    close(p, q, &format!("split grad {k}"));
+                }
+            }
         }
     }
 
