@@ -307,29 +307,34 @@ impl Recorder {
             && (v.step.is_multiple_of(self.image_every.max(1)) || v.done)
         {
             let res = [img.width, img.height];
-            rec.log("camera/rgb", &rerun::Image::from_rgb24(img.rgb.clone(), res))?;
+            // A depth-only camera has no colour or segmentation.
+            if !img.rgb.is_empty() {
+                rec.log("camera/rgb", &rerun::Image::from_rgb24(img.rgb.clone(), res))?;
+            }
             let depth: Vec<u8> = img.depth_m.iter().flat_map(|d| d.to_le_bytes()).collect();
             rec.log(
                 "camera/depth",
                 &rerun::DepthImage::from_data_type_and_bytes(depth, res, rerun::datatypes::ChannelDatatype::F32)
                     .with_meter(1.0),
             )?;
-            let seg: Vec<u8> = img
-                .segmentation
-                .iter()
-                .map(|&s| match s {
-                    0 => 0,
-                    id => self.class_of.get(id as usize - 1).copied().unwrap_or(0),
-                })
-                .flat_map(|c: u16| c.to_le_bytes())
-                .collect();
-            rec.log(
-                "camera/segmentation",
-                &rerun::SegmentationImage::new(
-                    seg,
-                    rerun::components::ImageFormat::segmentation(res, rerun::datatypes::ChannelDatatype::U16),
-                ),
-            )?;
+            if !img.segmentation.is_empty() {
+                let seg: Vec<u8> = img
+                    .segmentation
+                    .iter()
+                    .map(|&s| match s {
+                        0 => 0,
+                        id => self.class_of.get(id as usize - 1).copied().unwrap_or(0),
+                    })
+                    .flat_map(|c: u16| c.to_le_bytes())
+                    .collect();
+                rec.log(
+                    "camera/segmentation",
+                    &rerun::SegmentationImage::new(
+                        seg,
+                        rerun::components::ImageFormat::segmentation(res, rerun::datatypes::ChannelDatatype::U16),
+                    ),
+                )?;
+            }
         }
         let a = v.frame.applied;
         rec.log("plots/reward", &rerun::Scalars::single(v.reward))?;

@@ -85,6 +85,7 @@ pub(super) fn run(quick: bool) -> Vec<String> {
         out.push(format!("{line} reps={reps}"));
     }
     out.extend(shipped_search(steps, reps));
+    out.extend(camera_obs(steps, reps));
     for (id, n_envs) in [
         ("racing-oval", 8),
         ("racing-oval", 16),
@@ -146,6 +147,58 @@ fn shipped_search(steps: usize, reps: usize) -> Vec<String> {
         ));
     }
     out
+}
+
+/// The camera-only racing observation (configs/racing-camera.toml: a 64x48 depth image, no
+/// LiDAR in the observation) against the LiDAR one on the same car, one thread, timed in turn
+/// in every repetition: `camera_obs_us` is the extra time per step (render and observation).
+fn camera_obs(steps: usize, reps: usize) -> Vec<String> {
+    const CAMERA: &str = r#"
+[camera]
+width = 64
+height = 48
+fov_deg = 70.0
+far_m = 10.0
+depth_only = true
+[observation]
+ranges = "off"
+[observation.image]
+channels = "depth"
+width = 64
+height = 48
+depth_max_m = 8.0
+"#;
+    let run = || -> anyhow::Result<String> {
+        let cam: agvrl_envs::EnvConfig = toml::from_str(CAMERA)?;
+        let mut envs = [
+            make("racing-oval", &cam)?,
+            make("racing-oval", &agvrl_envs::EnvConfig::default())?,
+        ];
+        let (mut cam_s, mut lidar_s, mut t) = (Vec::new(), Vec::new(), 1);
+        for e in envs.iter_mut() {
+            e.reset(Some(0))?;
+        }
+        for r in 0..=reps {
+            let c = timed_s(|| drive(&mut envs[..1], 1, t..t + steps));
+            let l = timed_s(|| drive(&mut envs[1..], 1, t..t + steps));
+            t += steps;
+            if r > 0 {
+                cam_s.push(c);
+                lidar_s.push(l);
+            }
+        }
+        let per_step = |v: Vec<f64>| median(v) * 1e6 / steps as f64;
+        let (c, l) = (per_step(cam_s), per_step(lidar_s));
+        Ok(format!(
+            "camera_obs_us={:.0} env=racing-oval image=depth-64x48 camera_env_step_us={c:.0} lidar_env_step_us={l:.0} threads=1 reps={reps}",
+            c - l
+        ))
+    };
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build();
+    match one.map_err(anyhow::Error::from).and_then(|p| p.install(run)) {
+        Ok(line) => vec![line],
+        Err(e) => vec![format!("camera_obs_error=\"{e}\"")],
+    }
 }
 
 /// `n` fresh envs of `id`, reset with seeds `0..n`.

@@ -266,6 +266,24 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
             "observation.explored is a search observation; {id} is a racing env"
         )));
     }
+    if let Some(cam) = cfg.sim.camera.as_ref().filter(|c| c.depth_only) {
+        use crate::task::ImageChannels;
+        if matches!(
+            cfg.observation.image.channels,
+            ImageChannels::Rgb | ImageChannels::DepthRgb
+        ) {
+            return Err(EnvError::Config(
+                "observation.image takes RGB but camera.depth_only renders depth alone".into(),
+            ));
+        }
+        if spec.task != TaskKind::Racing && cfg.sim.subjects > 0 {
+            return Err(EnvError::Config(format!(
+                "{id} finds its subjects by the camera's segmentation, which camera.depth_only \
+                 leaves out ({}x{} depth only)",
+                cam.width, cam.height
+            )));
+        }
+    }
     let mut safety_filter = cfg.safety_filter;
     if safety_filter.decel_mps2 == 0.0 {
         safety_filter.decel_mps2 = cfg.sim.brake_mps2 as f32;

@@ -746,6 +746,87 @@ mod camera_frames {
         let mut plain = make_vehicle("racing-oval", &EnvConfig::default()).unwrap();
         assert!(plain.reset(0).unwrap().image.is_none());
     }
+
+    /// configs/racing-camera.toml's env settings.
+    fn camera_only() -> EnvConfig {
+        toml::from_str(
+            "[camera]\nwidth = 64\nheight = 48\nfov_deg = 70.0\ndepth_only = true\n\
+             [observation]\nranges = \"off\"\n\
+             [observation.image]\nchannels = \"depth\"\nwidth = 64\nheight = 48\ndepth_max_m = 8.0\n",
+        )
+        .unwrap()
+    }
+
+    /// Without the LiDAR the observation is speed, yaw rate, steering, throttle and the depth
+    /// image; under sim2real the depth gets noise growing with distance, holes and the minimum
+    /// range, and a pixel without a reading reads 0.
+    #[test]
+    fn a_camera_only_observation_and_its_depth_noise() {
+        let cfg = EnvConfig {
+            spawn: SpawnMode::Fixed,
+            ..camera_only()
+        };
+        let mut env = make("racing-oval", &cfg).unwrap();
+        let (obs, _) = env.reset(Some(0)).unwrap();
+        assert_eq!(obs.len(), 4 + 64 * 48);
+        assert_eq!(env.observation_space().dim(), obs.len());
+        let image = &obs[4..];
+        assert!(image.iter().all(|v| (0.0..=1.0).contains(v)));
+        let clean_frame = make_vehicle("racing-oval", &cfg).unwrap().reset(0).unwrap();
+        let depth = clean_frame.image.unwrap().depth_m;
+        assert!(depth.iter().all(|z| z.is_finite()));
+        let noisy_cfg = EnvConfig {
+            noise: EnvConfig::sim2real().noise,
+            ..cfg.clone()
+        };
+        let frame = make_vehicle("racing-oval", &noisy_cfg).unwrap().reset(0).unwrap();
+        let noisy = frame.image.unwrap().depth_m;
+        let holes = noisy.iter().filter(|z| z.is_nan()).count();
+        // The ground just in front of the car lies within the camera's 0.3 m minimum range.
+        let pairs = || depth.iter().zip(&noisy);
+        assert!(pairs().filter(|(z, _)| **z < 0.299).all(|(_, n)| n.is_nan()));
+        // 2 % holes elsewhere.
+        let beyond = pairs().filter(|(z, _)| **z > 0.4).count();
+        let far_holes = pairs().filter(|(z, n)| **z > 0.4 && n.is_nan()).count();
+        let expected = 0.02 * beyond as f64;
+        assert!(
+            (far_holes as f64 - expected).abs() < 4.0 * expected.sqrt() + 2.0,
+            "{far_holes} holes among {beyond} pixels"
+        );
+        let err = |near: bool| {
+            let d: Vec<f64> = depth
+                .iter()
+                .zip(&noisy)
+                .filter(|(z, n)| !n.is_nan() && (**z < 2.0) == near && **z < 8.0)
+                .map(|(z, n)| ((n - z) / (z * z)) as f64)
+                .collect();
+            (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt()
+        };
+        // The error over z^2 has the same spread near and far: 0.0033 / m.
+        for near in [true, false] {
+            assert!((err(near) - 0.0033).abs() < 0.001, "near {near}: {}", err(near));
+        }
+        let mut noisy_env = make("racing-oval", &noisy_cfg).unwrap();
+        let (obs, _) = noisy_env.reset(Some(0)).unwrap();
+        let zeros = obs[4..].iter().filter(|v| **v == 0.0).count();
+        let too_near = depth.iter().filter(|z| **z < 0.299).count();
+        assert!(
+            too_near > 0 && zeros > too_near && holes > too_near,
+            "{zeros} {too_near} {holes}"
+        );
+        let rgb = EnvConfig {
+            observation: agvrl_envs::task::ObsConfig {
+                image: agvrl_envs::task::ImageObs {
+                    channels: agvrl_envs::task::ImageChannels::Rgb,
+                    ..cfg.observation.image
+                },
+                ..cfg.observation
+            },
+            ..cfg
+        };
+        let e = make("racing-oval", &rgb).err().unwrap().to_string();
+        assert!(e.contains("depth_only"), "{e}");
+    }
 }
 
 mod subjects {

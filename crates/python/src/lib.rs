@@ -236,6 +236,7 @@ impl Env {
                     let frame = inner.last_frame();
                     if self.has_camera
                         && let Some(img) = frame.and_then(|f| f.image.as_ref())
+                        && !img.rgb.is_empty()
                     {
                         return Ok(Some((img.rgb.clone(), img.width, img.height)));
                     }

@@ -907,6 +907,7 @@ mod camera_images {
             fov_deg: fov,
             near_m: 0.01,
             far_m: 100.0,
+            depth_only: false,
         });
         Sim::new(SimConfig {
             scene,
@@ -928,6 +929,28 @@ mod camera_images {
             assert!((z - 4.0).abs() < 0.01, "pixel {i}: depth {z}");
             assert_eq!(f.frame.segmentation[i], 1, "the boundary is object 0 (id + 1 = 1)");
             assert_eq!(f.classes[i], class::WALL);
+        }
+    }
+
+    /// A depth camera renders what the full render's depth buffer holds, bit for bit, and
+    /// nothing else.
+    #[test]
+    fn a_depth_only_frame_is_the_full_frames_depth() {
+        let full = cam_sim(SceneSource::Builtin("urban-50".into()), 64, 48, 70.0);
+        let mut settings = full.config().settings.clone();
+        settings.camera.as_mut().unwrap().depth_only = true;
+        let depth = Sim::new(SimConfig {
+            scene: SceneSource::Builtin("urban-50".into()),
+            settings,
+        })
+        .unwrap();
+        for (x, y, yaw) in [(0.0, 0.0, 0.0), (3.0, -4.0, 2.0), (-10.0, 6.0, -1.0)] {
+            let pose = Pose::from_parts(Vector::new(x, y, 0.3), Rotation::from_rotation_z(yaw));
+            let (a, b) = (full.render_at(&pose), depth.render_at(&pose));
+            assert_eq!(a.frame.depth_m, b.frame.depth_m);
+            assert!(a.frame.depth_m.iter().any(|z| *z < 20.0));
+            assert!(b.frame.rgb.is_empty() && b.frame.segmentation.is_empty() && b.classes.is_empty());
+            assert_eq!((b.frame.width, b.frame.height), (64, 48));
         }
     }
 

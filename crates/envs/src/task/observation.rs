@@ -15,6 +15,9 @@ pub enum RangeScale {
     /// Divided by the LiDAR's range_max, in [0, 1].
     #[default]
     Normalised,
+    /// Not in the observation (a camera-driven policy); the task may still read the scan for
+    /// its reward and termination.
+    Off,
 }
 
 /// Composition of the observation vector: the LiDAR ranges, then the enabled extras in this
@@ -57,7 +60,7 @@ pub enum ImageChannels {
 
 /// The camera part of the observation: the frame resampled (nearest pixel) to `width` x
 /// `height`, flattened channel-major (`[C, H, W]`, depth first), every value in [0, 1] (depth /
-/// `depth_max_m`, colour / 255), ready for a CNN encoder.
+/// `depth_max_m`, a pixel without a depth reading 0; colour / 255), ready for a CNN encoder.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ImageObs {
@@ -117,7 +120,13 @@ impl ImageObs {
             for y in 0..h {
                 for x in 0..w {
                     let z = img.depth_m.get(src(x, y)).copied().unwrap_or(self.depth_max_m);
-                    out.push((z / self.depth_max_m).clamp(0.0, 1.0));
+                    // No reading (NaN: a hole, or nearer than the camera's minimum range) reads
+                    // 0, as in a 16-bit depth image.
+                    out.push(if z.is_nan() {
+                        0.0
+                    } else {
+                        (z / self.depth_max_m).clamp(0.0, 1.0)
+                    });
                 }
             }
         }
@@ -181,9 +190,10 @@ impl ObsConfig {
 
     /// The space for `n_rays` rays of range `range_max_m`.
     pub fn space(&self, n_rays: usize, range_max_m: f32) -> BoxSpace {
-        let hi = match self.ranges {
-            RangeScale::Raw => range_max_m,
-            RangeScale::Normalised => 1.0,
+        let (n_rays, hi) = match self.ranges {
+            RangeScale::Raw => (n_rays, range_max_m),
+            RangeScale::Normalised => (n_rays, 1.0),
+            RangeScale::Off => (0, 1.0),
         };
         let mut s = BoxSpace::uniform(n_rays, 0.0, hi);
         for (on, lo, hi) in [
@@ -212,6 +222,7 @@ impl ObsConfig {
             match self.ranges {
                 RangeScale::Raw => out.extend(scan.ranges.iter().map(|r| r.clamp(0.0, scan.range_max))),
                 RangeScale::Normalised => out.extend(scan.ranges.iter().map(|r| (r / scan.range_max).clamp(0.0, 1.0))),
+                RangeScale::Off => {}
             }
         }
         let imu = frame.imu.as_ref();

@@ -27,11 +27,19 @@ pub struct NoiseConfig {
     pub gps_sigma_m: f64,
     /// Commands take effect this many control periods late.
     pub latency_steps: usize,
+    /// Depth camera noise: Gaussian with a standard deviation of this times the depth squared
+    /// (a stereo camera's error grows with the square of the distance), 1/m.
+    pub depth_sigma_per_m: f64,
+    /// Probability that a depth pixel has no reading (NaN, as a stereo camera's holes).
+    pub depth_hole_prob: f64,
+    /// Depth below this reads NaN (the camera's minimum range), metres.
+    pub depth_min_m: f64,
 }
 
 impl NoiseConfig {
     /// The `sim2real` preset, sized for a YDLIDAR-class scanner (1 cm, 1 % dropouts), a
-    /// consumer MEMS IMU and an RTK-grade GPS (2 cm), with one period of command latency.
+    /// consumer MEMS IMU, an RTK-grade GPS (2 cm) and a ZED 2 depth camera (under 1 % error at
+    /// 3 m, 2 % holes, 0.3 m minimum range), with one period of command latency.
     pub fn sim2real() -> Self {
         Self {
             lidar_sigma_m: 0.01,
@@ -43,6 +51,9 @@ impl NoiseConfig {
             vel_sigma_mps: 0.02,
             gps_sigma_m: 0.02,
             latency_steps: 1,
+            depth_sigma_per_m: 0.0033,
+            depth_hole_prob: 0.02,
+            depth_min_m: 0.3,
         }
     }
 
@@ -112,6 +123,19 @@ impl<V: Vehicle> Noisy<V> {
         if let Some(gps) = f.gps.as_mut() {
             for k in 0..2 {
                 gps.position_m[k] += self.gauss(c.gps_sigma_m);
+            }
+        }
+        if let Some(img) = f.image.as_mut()
+            && (c.depth_sigma_per_m > 0.0 || c.depth_hole_prob > 0.0 || c.depth_min_m > 0.0)
+        {
+            for z in img.depth_m.iter_mut() {
+                let hole = c.depth_hole_prob > 0.0 && self.rng.random::<f64>() < c.depth_hole_prob;
+                let noisy = *z as f64 + self.gauss(c.depth_sigma_per_m * (*z as f64).powi(2));
+                *z = if hole || noisy < c.depth_min_m {
+                    f32::NAN
+                } else {
+                    noisy as f32
+                };
             }
         }
         f

@@ -29,6 +29,9 @@ pub struct CameraConfig {
     pub near_m: f32,
     /// Far clipping distance, metres (depth of sky pixels).
     pub far_m: f32,
+    /// Render depth only, as a depth camera gives it (no colour, no segmentation: the frame's
+    /// `rgb` and `segmentation` are empty), for observations that take depth alone.
+    pub depth_only: bool,
 }
 
 impl Default for CameraConfig {
@@ -40,6 +43,7 @@ impl Default for CameraConfig {
             fov_deg: 80.0,
             near_m: 0.01,
             far_m: 100.0,
+            depth_only: false,
         }
     }
 }
@@ -160,9 +164,9 @@ pub fn compute_projection_matrix_fov(fov_deg: f32, aspect: f32, near: f32, far: 
 /// A frame with the semantic class of every pixel alongside the object ids.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RenderedFrame {
-    /// RGB, depth and object ids.
+    /// RGB, depth and object ids (depth alone with `depth_only`).
     pub frame: CameraFrame,
-    /// Semantic class per pixel (`class::*`).
+    /// Semantic class per pixel (`class::*`; empty with `depth_only`).
     pub classes: Vec<u8>,
 }
 
@@ -182,6 +186,28 @@ struct Decal {
     class: u8,
 }
 
+/// `1 / d` per component, a huge finite value where `d` is 0, so that the slab test below never
+/// multiplies 0 by infinity.
+fn slab_recip(d: Vector) -> Vector {
+    let r = |x: f32| if x == 0.0 { 1e30 } else { 1.0 / x };
+    Vector::new(r(d.x), r(d.y), r(d.z))
+}
+
+/// Whether `o + t d`, `0 <= t <= max_t`, meets `aabb` (slabs, with `inv = slab_recip(d)`).
+fn crosses_box(o: Vector, inv: Vector, aabb: &Aabb, max_t: f32) -> bool {
+    let (a, b) = ((aabb.mins - o) * inv, (aabb.maxs - o) * inv);
+    let enter = a.min(b).max_element().max(0.0);
+    let exit = a.max(b).min_element().min(max_t);
+    enter <= exit
+}
+
+/// `x.floor() as i32` without the libm call a build for baseline x86-64 makes of `floor`
+/// (grid coordinates are far inside i32's range).
+fn floor_i(x: f32) -> i32 {
+    let i = x as i32;
+    if (i as f32) > x { i - 1 } else { i }
+}
+
 /// A renderer bound to one scene.
 pub struct Camera {
     cfg: CameraConfig,
@@ -190,6 +216,8 @@ pub struct Camera {
     ground_half: [f32; 2],
     ground_color: [f32; 3],
     decals: Vec<Decal>,
+    /// The top of the tallest object, metres.
+    top_z: f32,
 }
 
 const SKY_RGB: [f32; 3] = [0.62, 0.76, 0.92];
@@ -267,6 +295,11 @@ impl Camera {
             ground_half: [gx / 2.0, gy / 2.0],
             ground_color: scene.file.ground.color,
             decals,
+            top_z: statics
+                .entries
+                .iter()
+                .filter(|e| e.object_id.is_some())
+                .fold(f32::NEG_INFINITY, |z, e| z.max(e.aabb.maxs.z)),
         }
     }
 
@@ -285,9 +318,38 @@ impl Camera {
         let (w, h) = (self.cfg.width as usize, self.cfg.height as usize);
         let tan_y = (self.cfg.fov_deg.to_radians() / 2.0).tan();
         let tan_x = tan_y * w as f32 / h as f32;
+        // Pixel (u, v)'s unit ray and its length: unnormalised, the ray's component along the
+        // optical axis is 1, so the ray parameter at a hit over the length is the depth.
+        let ray = |u: usize, v: usize| {
+            let y = 1.0 - 2.0 * (v as f32 + 0.5) / h as f32;
+            let x = 2.0 * (u as f32 + 0.5) / w as f32 - 1.0;
+            let dir = fwd + right * (x * tan_x) + up * (y * tan_y);
+            let len = dir.length();
+            (dir / len, len)
+        };
         let n = w * h;
-        let mut rgb = vec![0u8; 3 * n];
         let mut depth = vec![0f32; n];
+        let frame = |rgb, segmentation, depth_m| CameraFrame {
+            width: self.cfg.width,
+            height: self.cfg.height,
+            rgb,
+            depth_m,
+            segmentation,
+        };
+        if self.cfg.depth_only {
+            depth.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
+                for (u, z) in row.iter_mut().enumerate() {
+                    let (d, len) = ray(u, v);
+                    let (t, _, _) = self.nearest(statics, eye, d, self.cfg.far_m * len);
+                    *z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
+                }
+            });
+            return RenderedFrame {
+                frame: frame(vec![], vec![], depth),
+                classes: vec![],
+            };
+        }
+        let mut rgb = vec![0u8; 3 * n];
         let mut seg = vec![0u32; n];
         let mut cls = vec![0u8; n];
         rgb.par_chunks_mut(3 * w)
@@ -296,14 +358,8 @@ impl Camera {
             .zip(cls.par_chunks_mut(w))
             .enumerate()
             .for_each(|(v, (((rgb_row, depth_row), seg_row), cls_row))| {
-                let y = 1.0 - 2.0 * (v as f32 + 0.5) / h as f32;
                 for u in 0..w {
-                    let x = 2.0 * (u as f32 + 0.5) / w as f32 - 1.0;
-                    // Unnormalised: its component along the optical axis is 1, so the ray
-                    // parameter at a hit is the depth.
-                    let dir = fwd + right * (x * tan_x) + up * (y * tan_y);
-                    let len = dir.length();
-                    let d = dir / len;
+                    let (d, len) = ray(u, v);
                     let (t, color, id, c) = self.shade(statics, eye, d, self.cfg.far_m * len);
                     let z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
                     depth_row[u] = z;
@@ -315,20 +371,14 @@ impl Camera {
                 }
             });
         RenderedFrame {
-            frame: CameraFrame {
-                width: self.cfg.width,
-                height: self.cfg.height,
-                rgb,
-                depth_m: depth,
-                segmentation: seg,
-            },
+            frame: frame(rgb, seg, depth),
             classes: cls,
         }
     }
 
-    /// (distance, colour, object id + 1, class) of the first surface along `o + t d`.
-    fn shade(&self, statics: &StaticIndex, o: Vector, d: Vector, max_t: f32) -> (f32, [f32; 3], u32, u8) {
-        let sun = Vector::from_array(SUN).normalize();
+    /// The first surface along `o + t d` (`d` unit) before `max_t`: its distance, the static
+    /// entry hit and its normal, or whether it is the ground.
+    fn nearest(&self, statics: &StaticIndex, o: Vector, d: Vector, max_t: f32) -> (f32, Option<(usize, Vector)>, bool) {
         // The ground plane bounds the walk.
         let mut best = max_t;
         let mut hit: Option<(usize, Vector)> = None;
@@ -341,16 +391,45 @@ impl Camera {
                 ground = true;
             }
         }
+        // A ray rising above the tallest object meets nothing more: the walk stops there.
+        let mut reach = best;
+        if d.z > 1e-6 {
+            reach = reach.min(((self.top_z - o.z) / d.z).max(0.0));
+        }
+        let inv = slab_recip(d);
+        // The last entries tested: one that missed misses in every further cell (the reach only
+        // shrinks), and a long wall spans many cells.
+        let mut seen = [u32::MAX; 8];
+        let mut next = 0;
         self.walk(
             o,
             d,
-            &mut best,
+            &mut reach,
             |k, t_max| {
+                if seen.contains(&k) {
+                    return None;
+                }
+                seen[next % seen.len()] = k;
+                next += 1;
                 let e = &statics.entries[k as usize];
+                // The box first: most rays pass above or beside most of a cell's entries.
+                if !crosses_box(o, inv, &e.aabb, t_max) {
+                    return None;
+                }
                 e.fast.cast_normal(o, d, t_max).map(|(t, n)| (t, n, k as usize))
             },
             &mut hit,
         );
+        if hit.is_some() {
+            best = reach;
+        }
+        (best, hit, ground)
+    }
+
+    /// (distance, colour, object id + 1, class) of the first surface along `o + t d`.
+    fn shade(&self, statics: &StaticIndex, o: Vector, d: Vector, max_t: f32) -> (f32, [f32; 3], u32, u8) {
+        let sun = Vector::from_array(SUN).normalize();
+        let (best, hit, ground) = self.nearest(statics, o, d, max_t);
         if let Some((k, n)) = hit {
             let e = &statics.entries[k];
             let lambert = 0.35 + 0.65 * n.dot(sun).max(0.0);
@@ -381,12 +460,12 @@ impl Camera {
         o: Vector,
         d: Vector,
         best: &mut f32,
-        test: impl Fn(u32, f32) -> Option<(f32, Vector, usize)>,
+        mut test: impl FnMut(u32, f32) -> Option<(f32, Vector, usize)>,
         hit: &mut Option<(usize, Vector)>,
     ) {
         let g = &self.grid;
         let (px, py) = ((o.x - g.origin[0]) / g.cell, (o.y - g.origin[1]) / g.cell);
-        let (mut i, mut j) = (px.floor() as i32, py.floor() as i32);
+        let (mut i, mut j) = (floor_i(px), floor_i(py));
         let step_i = if d.x > 0.0 { 1 } else { -1 };
         let step_j = if d.y > 0.0 { 1 } else { -1 };
         let inv_x = if d.x.abs() > 1e-9 {
@@ -399,7 +478,10 @@ impl Camera {
         } else {
             f32::INFINITY
         };
-        let frac = |p: f32, s: i32| if s > 0 { p.floor() + 1.0 - p } else { p - p.floor() };
+        let frac = |p: f32, s: i32| {
+            let f = floor_i(p) as f32;
+            if s > 0 { f + 1.0 - p } else { p - f }
+        };
         let mut t_x = frac(px, step_i) * inv_x;
         let mut t_y = frac(py, step_j) * inv_y;
         // A camera outside the grid: jump to where the ray enters it.
@@ -419,8 +501,8 @@ impl Camera {
             }
             let p = o + d * (enter + 1e-4);
             let (qx, qy) = ((p.x - g.origin[0]) / g.cell, (p.y - g.origin[1]) / g.cell);
-            i = (qx.floor() as i32).clamp(0, g.nx - 1);
-            j = (qy.floor() as i32).clamp(0, g.ny - 1);
+            i = floor_i(qx).clamp(0, g.nx - 1);
+            j = floor_i(qy).clamp(0, g.ny - 1);
             t_x = enter + frac(qx, step_i) * inv_x;
             t_y = enter + frac(qy, step_j) * inv_y;
         }
