@@ -5,7 +5,10 @@
 #     and no termination, and its summary line is x86_64's (timings aside);
 #  2. on the x86_64 run's observations its actions match x86_64's to 1e-4, and the other way;
 #  3. over DDS on loopback it drives an x86_64 `--serve-sim` robot (lockstep) for 300 ticks,
-#     every command received.
+#     every command received;
+#  4. the camera-only racing policy (the host CNN: NEON kernels here, AVX2/AVX-512 on x86_64)
+#     laps the oval from the simulator's depth frames, and each build's actions match the
+#     other's on its observations to 1e-4.
 #
 #   tools/check-aarch64.sh AARCH64_AGVRL_DRIVE X86_64_AGVRL_DRIVE
 set -euo pipefail
@@ -64,4 +67,15 @@ echo "aarch64 driver over DDS: $sum_dds"
 echo "x86_64 robot:            $sum_robot"
 [ "$(field ticks "$sum_dds")" = 300 ] && [ "$(field events "$sum_dds")" = 0 ] || fail "driver: $sum_dds"
 [ "$(field commands "$sum_robot")" -ge 300 ] && [ "$(field terminations "$sum_robot")" = 0 ] || fail "robot: $sum_robot"
+# 4. The camera policy. Closed loop, the two builds' rounding may steer apart, so the summaries
+#    are not compared; the actions on the same observations are.
+camera=assets/policies/racing-oval-camera.agvrl
+cam_a64=$("${qemu[@]}" "$a64" --policy "$camera" --steps 1200 --quiet --trace "$tmp/cam-a64.jsonl" | tail -1)
+cam_x86=$("$x86" --policy "$camera" --steps 1200 --quiet --trace "$tmp/cam-x86.jsonl" | tail -1)
+echo "aarch64 camera: $cam_a64"
+echo "x86_64 camera:  $cam_x86"
+[ "$(field events "$cam_a64")" = 0 ] && [ "$(field terminations "$cam_a64")" = 0 ] || fail "camera policy on aarch64: $cam_a64"
+[ "$(field laps "$cam_a64")" -ge 1 ] || fail "no lap from the camera on aarch64: $cam_a64"
+"${qemu[@]}" "$a64" --policy "$camera" --check-trace "$tmp/cam-x86.jsonl" --tolerance 1e-4 || fail "aarch64 camera actions on x86_64's observations"
+"$x86" --policy "$camera" --check-trace "$tmp/cam-a64.jsonl" --tolerance 1e-4 || fail "x86_64 camera actions on aarch64's observations"
 echo "check-aarch64: ok"

@@ -11,6 +11,9 @@
 //! and policy files are the same; `ppo::update`'s tests check both passes against Burn's
 //! autodiff.
 
+// Inference builds (`default-features = false`, what agvrl-drive links) run the forward pass only.
+#![cfg_attr(not(feature = "train"), allow(dead_code))]
+
 use crate::cnn::{CONV_LAYERS, ImageSpec};
 
 /// A matrix view: element `(r, c)` at `data[r * rs + c * cs]`.

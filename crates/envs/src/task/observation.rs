@@ -116,17 +116,22 @@ impl ImageObs {
         let src = |x: usize, y: usize| ((y * sh + sh / 2) / h).min(sh - 1) * sw + ((x * sw + sw / 2) / w).min(sw - 1);
         let depth = matches!(self.channels, ImageChannels::Depth | ImageChannels::DepthRgb);
         let rgb = matches!(self.channels, ImageChannels::Rgb | ImageChannels::DepthRgb);
-        if depth {
+        // No reading (NaN: a hole, or nearer than the camera's minimum range) reads 0, as in a
+        // 16-bit depth image.
+        let scaled = |z: f32| {
+            if z.is_nan() {
+                0.0
+            } else {
+                (z / self.depth_max_m).clamp(0.0, 1.0)
+            }
+        };
+        if depth && (sw, sh) == (w, h) && img.depth_m.len() == w * h {
+            // A camera rendered at the observation's size: no resampling.
+            out.extend(img.depth_m.iter().map(|z| scaled(*z)));
+        } else if depth {
             for y in 0..h {
                 for x in 0..w {
-                    let z = img.depth_m.get(src(x, y)).copied().unwrap_or(self.depth_max_m);
-                    // No reading (NaN: a hole, or nearer than the camera's minimum range) reads
-                    // 0, as in a 16-bit depth image.
-                    out.push(if z.is_nan() {
-                        0.0
-                    } else {
-                        (z / self.depth_max_m).clamp(0.0, 1.0)
-                    });
+                    out.push(scaled(img.depth_m.get(src(x, y)).copied().unwrap_or(self.depth_max_m)));
                 }
             }
         }

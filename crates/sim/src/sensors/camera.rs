@@ -228,7 +228,7 @@ impl Camera {
     /// Prepare a camera for `scene` (whose colliders are `statics`).
     pub fn new(cfg: CameraConfig, scene: &Scene, statics: &StaticIndex) -> Self {
         let [gx, gy] = scene.file.ground.size_m;
-        let cell = 2.0f32;
+        let cell = 1.0f32;
         let (half_x, half_y) = (gx / 2.0 + 1.0, gy / 2.0 + 1.0);
         let mut lo = [-half_x, -half_y];
         let mut hi = [half_x, half_y];
