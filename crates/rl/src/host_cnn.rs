@@ -175,12 +175,19 @@ fn add_col_sums(m: &[f32], cols: usize, out: &mut [f32]) {
 /// `[rows x cols]` row-major to `[cols x rows]` row-major.
 fn transpose(m: &[f32], rows: usize, cols: usize) -> Vec<f32> {
     let mut t = vec![0.0; m.len()];
-    for (r, row) in m.chunks_exact(cols).enumerate() {
-        for (c, v) in row.iter().enumerate() {
-            t[c * rows + r] = *v;
+    transpose_blocks(m, rows, cols, &mut t);
+    t
+}
+
+/// Each `[rows x cols]` block of `m` transposed into the same block of `out`.
+fn transpose_blocks(m: &[f32], rows: usize, cols: usize, out: &mut [f32]) {
+    for (block, t) in m.chunks_exact(rows * cols).zip(out.chunks_exact_mut(rows * cols)) {
+        for (r, row) in block.chunks_exact(cols).enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                t[c * rows + r] = *v;
+            }
         }
     }
-    t
 }
 
 /// The encoder's weights laid out for its products, made once per set of weights (a policy
@@ -259,6 +266,11 @@ impl HostEncoder {
         }
     }
 
+    /// Width of the encoder's output.
+    pub(crate) fn features_dim(&self) -> usize {
+        self.spec.features_dim
+    }
+
     /// Where layer `l` reads: the observation rows (`[c, h, w]` after the vector values) for
     /// the first, the previous layer's position-major output for the others.
     fn source(&self, l: usize, obs_dim: usize) -> Source {
@@ -323,14 +335,8 @@ impl HostEncoder {
         let (c, hw) = (CONV_LAYERS[2].0, self.convs[2].oh * self.convs[2].ow);
         let nf = c * hw;
         pass.flat = vec![0.0; n * nf];
-        for (i, flat) in pass.flat.chunks_exact_mut(nf).enumerate() {
-            let out = &pass.outs[2][i * nf..(i + 1) * nf];
-            for p in 0..hw {
-                for ch in 0..c {
-                    flat[ch * hw + p] = out[p * c + ch];
-                }
-            }
-        }
+        // Each image's `[hw, c]` to `[c, hw]`.
+        transpose_blocks(&pass.outs[2], hw, c, &mut pass.flat);
         let fd = self.spec.features_dim;
         bias_rows(&self.lin_b, n, &mut pass.features);
         matmul(
@@ -384,14 +390,7 @@ impl HostEncoder {
         );
         // Back to position-major, through conv 3's ReLU.
         let mut dz = vec![0.0; n * nf];
-        for (i, d) in dz.chunks_exact_mut(nf).enumerate() {
-            let flat = &d_flat[i * nf..(i + 1) * nf];
-            for p in 0..hw {
-                for ch in 0..c3 {
-                    d[p * c3 + ch] = flat[ch * hw + p];
-                }
-            }
-        }
+        transpose_blocks(&d_flat, c3, hw, &mut dz);
         relu_grad(&mut dz, &pass.outs[2]);
         let mut dp = Vec::new();
         for l in (0..3).rev() {

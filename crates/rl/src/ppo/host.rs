@@ -151,8 +151,7 @@ pub(crate) fn backward(
     }
     if let (Some(enc), Some((pass, _))) = (image, &f.encoder) {
         // `dh` now holds each member's gradient at the trunks' input; both read the features.
-        let w = x.len() / n;
-        let fd = params.shapes[l.encoder.start + 7][2];
+        let (w, fd) = (x.len() / n, enc.features_dim());
         let v = w - fd;
         let mut d_features = Vec::with_capacity(n * fd);
         for (a, c) in dh[0].chunks_exact(w).zip(dh[1].chunks_exact(w)) {
