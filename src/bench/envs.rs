@@ -153,23 +153,9 @@ fn shipped_search(steps: usize, reps: usize) -> Vec<String> {
 /// LiDAR in the observation) against the LiDAR one on the same car, one thread, timed in turn
 /// in every repetition: `camera_obs_us` is the extra time per step (render and observation).
 fn camera_obs(steps: usize, reps: usize) -> Vec<String> {
-    const CAMERA: &str = r#"
-[camera]
-width = 64
-height = 48
-fov_deg = 70.0
-far_m = 10.0
-depth_only = true
-[observation]
-ranges = "off"
-[observation.image]
-channels = "depth"
-width = 64
-height = 48
-depth_max_m = 8.0
-"#;
+    const CONFIG: &str = include_str!("../../configs/racing-camera.toml");
     let run = || -> anyhow::Result<String> {
-        let cam: agvrl_envs::EnvConfig = toml::from_str(CAMERA)?;
+        let cam = agvrl_run::RunConfig::from_toml(CONFIG, "configs/racing-camera.toml")?.env_config;
         let mut envs = [
             make("racing-oval", &cam)?,
             make("racing-oval", &agvrl_envs::EnvConfig::default())?,

@@ -749,12 +749,8 @@ mod camera_frames {
 
     /// configs/racing-camera.toml's env settings.
     fn camera_only() -> EnvConfig {
-        toml::from_str(
-            "[camera]\nwidth = 64\nheight = 48\nfov_deg = 70.0\ndepth_only = true\n\
-             [observation]\nranges = \"off\"\n\
-             [observation.image]\nchannels = \"depth\"\nwidth = 64\nheight = 48\ndepth_max_m = 8.0\n",
-        )
-        .unwrap()
+        let run: toml::Table = toml::from_str(include_str!("../../../configs/racing-camera.toml")).unwrap();
+        run["env_config"].clone().try_into().unwrap()
     }
 
     /// Without the LiDAR the observation is speed, yaw rate, steering, throttle and the depth
