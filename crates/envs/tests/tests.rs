@@ -822,6 +822,13 @@ mod camera_frames {
         };
         let e = make("racing-oval", &rgb).err().unwrap().to_string();
         assert!(e.contains("depth_only"), "{e}");
+        // Search subjects are found by segmentation, which a depth camera leaves out.
+        let mut search = camera_only();
+        search.sim.subjects = 3;
+        let e = make("search-outdoor-20", &search).err().unwrap().to_string();
+        assert!(e.contains("segmentation") && e.contains("depth_only"), "{e}");
+        search.sim.subjects = 0;
+        assert!(make("search-outdoor-20", &search).is_ok());
     }
 }
 
