@@ -184,14 +184,26 @@ mod ros2_loopback {
         faults: Faults,
         f: impl FnOnce(Result<Loop, DeployError>, &RobotHandle) -> R,
     ) -> R {
-        let env_cfg = EnvConfig::default();
-        let mut robot = SimRobot::new("racing-oval", &env_cfg, cfg.clone(), 0, faults).unwrap();
+        let policy = Policy::load(&shipped_policy("racing-oval-ppo")).unwrap();
+        with_policy_robot_at(policy, &EnvConfig::default(), None, pace, cfg, faults, f)
+    }
+
+    /// As `with_robot_at`, with `policy` on env settings `env_cfg` (and the policy camera).
+    fn with_policy_robot_at<R>(
+        policy: Policy,
+        env_cfg: &EnvConfig,
+        camera: Option<agvrl_sim::sensors::CameraConfig>,
+        pace: Pace,
+        cfg: Ros2Config,
+        faults: Faults,
+        f: impl FnOnce(Result<Loop, DeployError>, &RobotHandle) -> R,
+    ) -> R {
+        let mut robot = SimRobot::new("racing-oval", env_cfg, cfg.clone(), 0, faults).unwrap();
         let h = robot.handle();
         let th = std::thread::spawn(move || robot.run(pace, 0));
         let realtime = pace == Pace::Realtime;
-        let v = Ros2Vehicle::new(cfg.clone(), !realtime).unwrap();
-        let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
-        let policy = Policy::load(&shipped_policy("racing-oval-ppo")).unwrap();
+        let v = Ros2Vehicle::new(cfg.clone(), !realtime, camera).unwrap();
+        let task = make_task("racing-oval", env_cfg, cfg.drive.steering_limit_rad).unwrap();
         let drive = DriveConfig {
             realtime,
             ..DriveConfig::default()
@@ -389,6 +401,82 @@ mod ros2_loopback {
                 assert!(t.event.is_none(), "tick {k}: {:?}", t.event);
             }
         });
+    }
+
+    /// The camera-only policy over DDS, both sides the `agvrl-drive` binary: the robot
+    /// publishes its camera's depth as a 32FC1 Image, the drive decodes it to the policy's
+    /// frame; a lap, no collision, no watchdog event.
+    #[test]
+    fn the_camera_policy_laps_the_oval_over_dds_from_depth_images() {
+        let policy = shipped_policy("racing-oval-camera");
+        let d = domain().to_string();
+        let ticks = "1200"; // 40 s; a lap takes about 31 s
+        let bin = env!("CARGO_BIN_EXE_agvrl-drive");
+        let robot = std::process::Command::new(bin)
+            .arg("--policy")
+            .arg(&policy)
+            .args(["--serve-sim", "racing-oval", "--steps", ticks, "--domain-id", &d])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let drive = std::process::Command::new(bin)
+            .arg("--policy")
+            .arg(&policy)
+            .args(["--vehicle", "ros2", "--steps", ticks, "--domain-id", &d, "--quiet"])
+            .output()
+            .unwrap();
+        let robot = robot.wait_with_output().unwrap();
+        let (out, rout) = (
+            String::from_utf8_lossy(&drive.stdout),
+            String::from_utf8_lossy(&robot.stdout),
+        );
+        assert!(drive.status.success(), "{}", String::from_utf8_lossy(&drive.stderr));
+        assert!(robot.status.success(), "{}", String::from_utf8_lossy(&robot.stderr));
+        assert!(out.contains("summary ticks=1200 events=0 terminations=0 "), "{out}");
+        assert!(
+            rout.contains("summary ticks=1200 ") && rout.contains(" commands=1200 "),
+            "{rout}"
+        );
+        assert!(rout.contains(" terminations=0") && !rout.contains(" laps=0 "), "{rout}");
+    }
+
+    /// A 15 Hz camera against the 30 Hz loop in real time: an image counts one camera period
+    /// past its stamp, so frames between images are not stale (without that allowance a tick
+    /// just before the next image sees one 67 ms old plus transport, over the 2-period limit).
+    #[test]
+    fn depth_images_at_half_the_tick_rate_keep_the_real_time_loop_fresh() {
+        let mut src =
+            agvrl_run::PolicySettings::resolve(None, Some(&shipped_policy("racing-oval-camera")), &[]).unwrap();
+        let env_cfg = src.drive_env_config();
+        let policy = src.load_policy().unwrap();
+        let faults = Faults {
+            image_every: 2,
+            ..Faults::default()
+        };
+        let camera = env_cfg.sim.camera.clone();
+        let (events, moving) = with_policy_robot_at(
+            policy,
+            &env_cfg,
+            camera,
+            Pace::Realtime,
+            ros_cfg(InvalidRay::Stop),
+            faults,
+            |lp, _| {
+                let mut lp = lp.unwrap();
+                let (mut events, mut moving) = (Vec::new(), 0);
+                for k in 0..90u64 {
+                    let t = lp.tick().unwrap();
+                    if let Some(e) = t.event {
+                        events.push((k, e));
+                    }
+                    moving += usize::from(t.control.throttle > 0.0);
+                }
+                (events, moving)
+            },
+        );
+        assert!(events.is_empty(), "{events:?}");
+        assert!(moving >= 80, "the policy drove on {moving} of 90 ticks");
     }
 
     #[test]

@@ -181,7 +181,13 @@ fn drive_ros2(a: &Args, env: &str, env_cfg: &EnvConfig, policy: Policy, drive: D
         cfg.drive.full_throttle_mps()
     );
     let task = make_task(env, env_cfg, cfg.drive.steering_limit_rad)?;
-    let vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime)?;
+    let camera = if task.needs().image {
+        let c = env_cfg.sim.camera.clone();
+        Some(c.ok_or_else(|| anyhow::anyhow!("the policy sees a camera image, but its env has no camera"))?)
+    } else {
+        None
+    };
+    let vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime, camera)?;
     drive_loop(a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?)
 }
 

@@ -23,6 +23,8 @@ pub struct Ros2Config {
     pub qos: Qos,
     /// LaserScan to observation rays.
     pub scan: ScanMapping,
+    /// Depth image to the policy's camera frame.
+    pub camera: CameraMapping,
     /// Control to AckermannDrive.
     pub drive: DriveMapping,
 }
@@ -37,6 +39,7 @@ impl Default for Ros2Config {
             topics: Topics::default(),
             qos: Qos::default(),
             scan: ScanMapping::default(),
+            camera: CameraMapping::default(),
             drive: DriveMapping::default(),
         }
     }
@@ -54,6 +57,9 @@ pub struct Topics {
     pub odom: String,
     /// `sensor_msgs/NavSatFix`.
     pub navsat: String,
+    /// `sensor_msgs/Image` depth (32FC1 metres or 16UC1 millimetres), subscribed only when the
+    /// policy's observation takes a camera image. The default is the ZED ROS 2 wrapper's.
+    pub image: String,
     /// `ackermann_msgs/AckermannDriveStamped`, published.
     pub drive: String,
     /// `header.frame_id` of the published commands.
@@ -67,6 +73,7 @@ impl Default for Topics {
             imu: "/imu".into(),
             odom: "/odom".into(),
             navsat: String::new(),
+            image: "/zed/zed_node/depth/depth_registered".into(),
             drive: "/drive".into(),
             frame_id: "base_link".into(),
         }
@@ -166,6 +173,31 @@ impl Default for ScanMapping {
     }
 }
 
+/// A depth image to the policy's camera frame: the centre window with the policy camera's
+/// vertical field of view and aspect ratio (square pixels), resized by nearest pixel to its
+/// size. A pixel without a reading (NaN, 0 in 16UC1, -inf: nearer than the camera's minimum
+/// range) reads NaN, as the simulated camera's holes; +inf (farther than its maximum) stays.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraMapping {
+    /// The car camera's vertical field of view, degrees.
+    pub vertical_fov_deg: f32,
+    /// An image counts as fresh until this long after its stamp, seconds: images come slower
+    /// than the 30 Hz ticks, so one frame period of the camera (15 Hz: 0.067) is added to its
+    /// stamp before the frame takes the oldest stamp. Lockstep waits for a newer image anyway.
+    pub frame_period_s: f64,
+}
+
+impl Default for CameraMapping {
+    /// A ZED 2 (70 degrees vertically) at 15 Hz.
+    fn default() -> Self {
+        Self {
+            vertical_fov_deg: 70.0,
+            frame_period_s: 1.0 / 15.0,
+        }
+    }
+}
+
 /// Control to `AckermannDrive`: speed = throttle * `max_speed_mps`, steering_angle = steering.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -237,7 +269,8 @@ impl Ros2Config {
     /// Check the values, naming the first bad one.
     pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
         let s = &self.scan;
-        let checks: [(bool, &str); 10] = [
+        let c = &self.camera;
+        let checks: [(bool, &str); 12] = [
             (self.domain_id <= 232, "domain_id must be in 0..=232"),
             (
                 self.startup_timeout_s > 0.0 && self.fresh_timeout_s > 0.0,
@@ -262,6 +295,14 @@ impl Ros2Config {
             (
                 s.range_min_m >= 0.0 && s.range_min_m < s.range_max_m && s.range_max_m.is_finite(),
                 "scan ranges must satisfy 0 <= range_min_m < range_max_m < inf",
+            ),
+            (
+                c.vertical_fov_deg > 0.0 && c.vertical_fov_deg < 179.0,
+                "camera.vertical_fov_deg must be in (0, 179)",
+            ),
+            (
+                (0.0..=1.0).contains(&c.frame_period_s),
+                "camera.frame_period_s must be in [0, 1]",
             ),
             (
                 self.qos.sensors.depth >= 1 && self.qos.drive.depth >= 1,
@@ -300,6 +341,21 @@ impl Ros2Config {
                 lidar.n_rays,
                 a0 + span,
                 lidar.range_max_m
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Ros2Config {
+    /// Error unless the car's camera sees at least the policy camera's vertical field of view
+    /// (a narrower one cannot be cropped to it; the width is checked per image).
+    pub fn check_camera(&self, cam: &agvrl_sim::sensors::CameraConfig) -> Result<(), DeployError> {
+        if self.camera.vertical_fov_deg + 0.05 < cam.fov_deg {
+            return Err(DeployError::Config(format!(
+                "camera.vertical_fov_deg = {}, but the policy's camera sees {} degrees vertically: a narrower \
+                 camera cannot be cropped to it",
+                self.camera.vertical_fov_deg, cam.fov_deg
             )));
         }
         Ok(())

@@ -2,10 +2,11 @@
 //! (messages in, `SensorFrame` parts out, `Control` to a drive command) and the sim-backed
 //! robot's side (readings to messages, a drive command back to `Control`).
 
-use super::config::{DriveMapping, InvalidRay, ScanMapping};
+use super::config::{CameraMapping, DriveMapping, InvalidRay, ScanMapping};
 use super::msg;
 use agvrl_envs::api::Control;
-use agvrl_sim::msg::{Geodetic, GpsReading, ImuReading, LaserScan};
+use agvrl_sim::msg::{CameraFrame, Geodetic, GpsReading, ImuReading, LaserScan};
+use agvrl_sim::sensors::CameraConfig;
 
 /// Resample a `sensor_msgs/LaserScan` to the policy's rays (see [`ScanMapping`]). A ray with
 /// no valid reading follows `m.invalid`; with `InvalidRay::Stop` it is NaN, which the watchdog
@@ -292,6 +293,93 @@ pub fn navsat_msg(g: &Geodetic, stamp_s: f64, frame_id: &str) -> msg::NavSatFix 
     }
 }
 
+/// A depth `sensor_msgs/Image` as the policy camera's frame (see [`CameraMapping`]): depth
+/// only, `cam.width` x `cam.height`. The error says why the image cannot be used.
+pub fn depth_frame(img: &msg::Image, m: &CameraMapping, cam: &CameraConfig) -> Result<CameraFrame, String> {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let bpp = match img.encoding.as_str() {
+        "32FC1" => 4,
+        "16UC1" | "mono16" => 2,
+        e => {
+            return Err(format!(
+                "encoding '{e}' is no depth image (32FC1 metres or 16UC1 millimetres)"
+            ));
+        }
+    };
+    let step = img.step as usize;
+    if w == 0 || h == 0 || step < w * bpp || img.data.len() < step * (h - 1) + w * bpp {
+        return Err(format!(
+            "a {w}x{h} {} image with step {step} needs {} bytes and has {}",
+            img.encoding,
+            step * h.saturating_sub(1) + w * bpp,
+            img.data.len()
+        ));
+    }
+    let (pw, ph) = (cam.width as usize, cam.height as usize);
+    let half_tan = |deg: f32| (0.5 * deg as f64).to_radians().tan();
+    let ch = h as f64 * half_tan(cam.fov_deg) / half_tan(m.vertical_fov_deg);
+    let cw = ch * pw as f64 / ph as f64;
+    // Half a pixel of slack: equal fields of view must not fail on rounding.
+    if ch > h as f64 + 0.5 || cw > w as f64 + 0.5 {
+        return Err(format!(
+            "a {w}x{h} image over {} degrees vertically does not cover the policy camera ({pw}x{ph} over {} \
+             degrees needs a {cw:.0}x{ch:.0} window)",
+            m.vertical_fov_deg, cam.fov_deg
+        ));
+    }
+    let (x0, y0) = (0.5 * (w as f64 - cw), 0.5 * (h as f64 - ch));
+    let src = |i: usize, n: usize, origin: f64, span: f64, max: usize| {
+        ((origin + (i as f64 + 0.5) * span / n as f64).floor().max(0.0) as usize).min(max - 1)
+    };
+    let big = img.is_bigendian != 0;
+    let read = |x: usize, y: usize| -> f32 {
+        let o = y * step + x * bpp;
+        let b = &img.data[o..o + bpp];
+        let z = if bpp == 4 {
+            let b = [b[0], b[1], b[2], b[3]];
+            if big {
+                f32::from_be_bytes(b)
+            } else {
+                f32::from_le_bytes(b)
+            }
+        } else {
+            let b = [b[0], b[1]];
+            let mm = if big {
+                u16::from_be_bytes(b)
+            } else {
+                u16::from_le_bytes(b)
+            };
+            if mm == 0 { f32::NAN } else { mm as f32 / 1000.0 }
+        };
+        if z > 0.0 { z } else { f32::NAN }
+    };
+    let cols: Vec<usize> = (0..pw).map(|x| src(x, pw, x0, cw, w)).collect();
+    let mut depth_m = Vec::with_capacity(pw * ph);
+    for y in 0..ph {
+        let sy = src(y, ph, y0, ch, h);
+        depth_m.extend(cols.iter().map(|&sx| read(sx, sy)));
+    }
+    Ok(CameraFrame {
+        width: cam.width,
+        height: cam.height,
+        depth_m,
+        ..CameraFrame::default()
+    })
+}
+
+/// A simulated camera frame's depth as a 32FC1 `sensor_msgs/Image` (little-endian metres).
+pub fn depth_image_msg(f: &CameraFrame, stamp_s: f64, frame_id: &str) -> msg::Image {
+    msg::Image {
+        header: header(stamp_s, frame_id),
+        height: f.height,
+        width: f.width,
+        encoding: "32FC1".into(),
+        is_bigendian: 0,
+        step: 4 * f.width,
+        data: f.depth_m.iter().flat_map(|z| z.to_le_bytes()).collect(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -368,6 +456,137 @@ mod tests {
         // Clockwise scanner: first ray at +0.5.
         let out = scan_to_rays(&scan(0.5, -0.25, vec![1.0, 2.0, 3.0, 4.0, 5.0]), &m);
         assert_eq!(out.ranges, vec![5.0, 4.0, 3.0, 2.0, 1.0]);
+    }
+
+    fn cam(width: u32, height: u32, fov_deg: f32) -> CameraConfig {
+        CameraConfig {
+            width,
+            height,
+            fov_deg,
+            ..CameraConfig::default()
+        }
+    }
+
+    /// A 32FC1 image whose pixel (x, y) reads 1 + x + 1000 y metres.
+    fn coded(w: u32, h: u32) -> msg::Image {
+        let f = CameraFrame {
+            width: w,
+            height: h,
+            depth_m: (0..h)
+                .flat_map(|y| (0..w).map(move |x| (1 + x + 1000 * y) as f32))
+                .collect(),
+            ..CameraFrame::default()
+        };
+        depth_image_msg(&f, 1.0, "camera")
+    }
+
+    /// Column and row of the coded image a pixel came from.
+    fn origin(z: f32) -> (u32, u32) {
+        let k = z as u32 - 1;
+        (k % 1000, k / 1000)
+    }
+
+    #[test]
+    fn a_depth_image_of_the_policys_geometry_passes_through_bit_for_bit() {
+        let m = CameraMapping::default();
+        let img = coded(64, 48);
+        let f = depth_frame(&img, &m, &cam(64, 48, 70.0)).unwrap();
+        assert_eq!((f.width, f.height), (64, 48));
+        let want: Vec<f32> = img
+            .data
+            .chunks(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect();
+        assert_eq!(f.depth_m, want);
+        assert!(f.rgb.is_empty() && f.segmentation.is_empty());
+    }
+
+    #[test]
+    fn a_wide_image_is_centre_cropped_to_the_policys_aspect_and_resized_by_nearest_pixel() {
+        // 16:9, 128x72, same vertical field of view: the 96x72 centre window (x 16..112), each
+        // policy pixel taking the source pixel under its centre (1.5 source pixels per pixel).
+        let m = CameraMapping::default();
+        let f = depth_frame(&coded(128, 72), &m, &cam(64, 48, 70.0)).unwrap();
+        for y in 0..48u32 {
+            for x in 0..64u32 {
+                let (sx, sy) = origin(f.depth_m[(y * 64 + x) as usize]);
+                // floor((i + 0.5) * 1.5) in integers.
+                assert_eq!(sx, 16 + (2 * x + 1) * 3 / 4, "column of ({x}, {y})");
+                assert_eq!(sy, (2 * y + 1) * 3 / 4, "row of ({x}, {y})");
+            }
+        }
+        // A camera seeing 90 degrees vertically: the window is tan(35)/tan(45) = 0.700 of the
+        // height, centred.
+        let wide = CameraMapping {
+            vertical_fov_deg: 90.0,
+            ..m
+        };
+        let f = depth_frame(&coded(128, 72), &wide, &cam(64, 48, 70.0)).unwrap();
+        let ch = 72.0 * (35f64.to_radians().tan());
+        let (x0, y0) = (64.0 - ch * 4.0 / 6.0, 36.0 - ch / 2.0);
+        for (y, x) in [(0u32, 0u32), (47, 63), (24, 32), (10, 50)] {
+            let (sx, sy) = origin(f.depth_m[(y * 64 + x) as usize]);
+            assert_eq!(sx, (x0 + (x as f64 + 0.5) * ch * 4.0 / 3.0 / 64.0).floor() as u32);
+            assert_eq!(sy, (y0 + (y as f64 + 0.5) * ch / 48.0).floor() as u32);
+        }
+    }
+
+    #[test]
+    fn depth_without_a_reading_is_nan_and_16_bit_millimetres_decode_in_either_byte_order() {
+        let m = CameraMapping::default();
+        let mut img = coded(4, 3);
+        for (i, z) in [f32::NAN, f32::NEG_INFINITY, f32::INFINITY, 0.0, -1.0]
+            .into_iter()
+            .enumerate()
+        {
+            img.data[4 * i..4 * i + 4].copy_from_slice(&z.to_le_bytes());
+        }
+        let f = depth_frame(&img, &m, &cam(4, 3, 70.0)).unwrap();
+        assert!(f.depth_m[0].is_nan() && f.depth_m[1].is_nan(), "no reading, too close");
+        assert_eq!(f.depth_m[2], f32::INFINITY, "farther than the camera sees");
+        assert!(f.depth_m[3].is_nan() && f.depth_m[4].is_nan());
+        assert_eq!(f.depth_m[5], 1002.0, "pixel (1, 1)");
+        let mm: [u16; 6] = [0, 1, 1500, 65535, 300, 8000];
+        for big in [false, true] {
+            let img = msg::Image {
+                width: 3,
+                height: 2,
+                encoding: "16UC1".into(),
+                is_bigendian: big.into(),
+                step: 8, // rows padded to 8 bytes
+                data: [&mm[..3], &[7][..], &mm[3..], &[7][..]]
+                    .concat()
+                    .iter()
+                    .flat_map(|v| if big { v.to_be_bytes() } else { v.to_le_bytes() })
+                    .collect(),
+                ..msg::Image::default()
+            };
+            let f = depth_frame(&img, &m, &cam(3, 2, 70.0)).unwrap();
+            assert!(f.depth_m[0].is_nan(), "0 mm is no reading");
+            assert_eq!(&f.depth_m[1..], &[0.001, 1.5, 65.535, 0.3, 8.0]);
+        }
+    }
+
+    #[test]
+    fn an_unusable_image_is_refused_with_the_reason() {
+        let m = CameraMapping::default();
+        let mut img = coded(64, 48);
+        img.encoding = "rgb8".into();
+        let e = depth_frame(&img, &m, &cam(64, 48, 70.0)).unwrap_err();
+        assert!(e.contains("'rgb8'"), "{e}");
+        let mut img = coded(64, 48);
+        img.data.truncate(100);
+        let e = depth_frame(&img, &m, &cam(64, 48, 70.0)).unwrap_err();
+        assert!(e.contains("12288") && e.contains("100"), "{e}");
+        // A 4:3 policy cannot be cut from a 1:1 image of the same vertical field of view.
+        let e = depth_frame(&coded(48, 48), &m, &cam(64, 48, 70.0)).unwrap_err();
+        assert!(e.contains("64x48 window"), "{e}");
+        // Nor from a camera narrower than the policy's.
+        let narrow = CameraMapping {
+            vertical_fov_deg: 60.0,
+            ..m
+        };
+        assert!(depth_frame(&coded(128, 72), &narrow, &cam(64, 48, 70.0)).is_err());
     }
 
     #[test]

@@ -276,3 +276,23 @@ pub struct AckermannDriveStamped {
     /// The command.
     pub drive: AckermannDrive,
 }
+
+/// `sensor_msgs/Image`: `height` rows of `step` bytes each; `data` is a CDR byte sequence.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Image {
+    /// Header (stamp: acquisition time; frame_id: the optical frame).
+    pub header: Header,
+    /// Rows.
+    pub height: u32,
+    /// Columns.
+    pub width: u32,
+    /// Pixel encoding (`32FC1`, `16UC1`, `rgb8`, ...).
+    pub encoding: String,
+    /// 1 when multi-byte pixels are big-endian.
+    pub is_bigendian: u8,
+    /// Bytes per row.
+    pub step: u32,
+    /// Pixels, `step * height` bytes.
+    #[serde(with = "serde_bytes")]
+    pub data: Vec<u8>,
+}

@@ -1,5 +1,6 @@
 //! The ROS 2 `Vehicle` over DDS (ros2-client / RustDDS, no ROS install): subscribes the
-//! car's LaserScan, Imu, Odometry and NavSatFix topics, publishes AckermannDriveStamped.
+//! car's LaserScan, Imu, Odometry and NavSatFix topics (and a depth Image for a policy that
+//! sees one), publishes AckermannDriveStamped.
 //!
 //! Two ways to keep time. Real time (`lockstep = false`, for a car): `sense` returns the newest
 //! messages at once and the drive loop holds the rate with the wall clock. Lockstep (for the
@@ -8,13 +9,17 @@
 //! produced, so both sides' clocks move one period per tick, as fast as DDS allows.
 //!
 //! The frame's `stamp_s` is the oldest header stamp among the subscribed topics, so a topic
-//! that stops makes the whole frame stale and the watchdog stops the car.
+//! that stops makes the whole frame stale and the watchdog stops the car. An image counts with
+//! its stamp plus `camera.frame_period_s` (a 15 Hz camera is older than the 30 Hz tick); the
+//! lockstep wait takes no such allowance.
 
 use super::config::{Reliability, Ros2Config, TopicQos};
 use super::mapping::{self, scan_to_rays};
 use super::msg;
 use crate::DeployError;
 use agvrl_envs::api::{Control, EnvError, SensorFrame, Vehicle};
+use agvrl_sim::msg::CameraFrame;
+use agvrl_sim::sensors::CameraConfig;
 use ros2_client::dds::rustdds::Topic;
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
 use ros2_client::qos::{Durability, History, WhenFull};
@@ -29,6 +34,7 @@ pub(crate) const SCAN_TYPE: (&str, &str) = ("sensor_msgs", "LaserScan");
 pub(crate) const IMU_TYPE: (&str, &str) = ("sensor_msgs", "Imu");
 pub(crate) const ODOM_TYPE: (&str, &str) = ("nav_msgs", "Odometry");
 pub(crate) const NAVSAT_TYPE: (&str, &str) = ("sensor_msgs", "NavSatFix");
+pub(crate) const IMAGE_TYPE: (&str, &str) = ("sensor_msgs", "Image");
 pub(crate) const DRIVE_TYPE: (&str, &str) = ("ackermann_msgs", "AckermannDriveStamped");
 
 fn dds_err(what: &str, e: impl std::fmt::Display) -> DeployError {
@@ -140,6 +146,10 @@ struct Latest {
     imu: Option<msg::Imu>,
     odom: Option<msg::Odometry>,
     navsat: Option<msg::NavSatFix>,
+    /// The newest image that decoded, as the policy camera's frame.
+    image: Option<(msg::Header, CameraFrame)>,
+    /// Why the newest image that did not decode was refused.
+    image_error: Option<String>,
 }
 
 /// A car (or the sim-backed robot) over ROS 2.
@@ -153,6 +163,9 @@ pub struct Ros2Vehicle {
     imu: Option<Subscription<msg::Imu>>,
     odom: Option<Subscription<msg::Odometry>>,
     navsat: Option<Subscription<msg::NavSatFix>>,
+    image: Option<Subscription<msg::Image>>,
+    /// The policy's camera (images are cropped and resized to it).
+    camera: Option<CameraConfig>,
     drive: Publisher<msg::AckermannDriveStamped>,
     poll: Poll,
     events: Events,
@@ -164,15 +177,26 @@ pub struct Ros2Vehicle {
 }
 
 impl Ros2Vehicle {
-    /// Join domain `cfg.domain_id` and create the subscriptions and the drive publisher.
-    pub fn new(cfg: Ros2Config, lockstep: bool) -> Result<Self, DeployError> {
+    /// Join domain `cfg.domain_id` and create the subscriptions and the drive publisher; with
+    /// `camera` (the policy's), subscribe the depth image too.
+    pub fn new(cfg: Ros2Config, lockstep: bool, camera: Option<CameraConfig>) -> Result<Self, DeployError> {
         cfg.validate().map_err(|e| DeployError::Config(e.message))?;
+        if let Some(c) = &camera {
+            if cfg.topics.image.is_empty() {
+                return Err(DeployError::Config(
+                    "the policy sees a camera image: topics.image must name the depth image topic".into(),
+                ));
+            }
+            cfg.check_camera(c)?;
+        }
         let (ctx, mut node) = node_in_context(&cfg, &cfg.node_name)?;
         let (t, q) = (&cfg.topics, cfg.qos.sensors);
         let mut scan = subscribe(&mut node, &t.scan, SCAN_TYPE, q)?;
         let mut imu = subscribe(&mut node, &t.imu, IMU_TYPE, q)?;
         let mut odom = subscribe(&mut node, &t.odom, ODOM_TYPE, q)?;
         let mut navsat = subscribe(&mut node, &t.navsat, NAVSAT_TYPE, q)?;
+        let image_topic = if camera.is_some() { t.image.as_str() } else { "" };
+        let mut image = subscribe(&mut node, image_topic, IMAGE_TYPE, q)?;
         let drive = publisher(&mut node, &t.drive, DRIVE_TYPE, cfg.qos.drive)?;
         let poll = Poll::new().map_err(|e| dds_err("poll", e))?;
         let reg = poll.registry();
@@ -189,6 +213,9 @@ impl Ros2Vehicle {
         if let Some(s) = navsat.as_mut() {
             reg.register(s, Token(3), Interest::READABLE).map_err(io)?;
         }
+        if let Some(s) = image.as_mut() {
+            reg.register(s, Token(4), Interest::READABLE).map_err(io)?;
+        }
         Ok(Self {
             cfg,
             lockstep,
@@ -198,6 +225,8 @@ impl Ros2Vehicle {
             imu,
             odom,
             navsat,
+            image,
+            camera,
             drive,
             poll,
             events: Events::with_capacity(16),
@@ -246,10 +275,23 @@ impl Ros2Vehicle {
         drain(&self.imu, &mut self.latest.imu, b);
         drain(&self.odom, &mut self.latest.odom, b);
         drain(&self.navsat, &mut self.latest.navsat, b);
+        let mut img = None;
+        drain(&self.image, &mut img, b);
+        // Only the newest image of a drain is decoded (a 1280x720 32FC1 is 3.7 MB).
+        if let (Some(img), Some(cam)) = (img, &self.camera) {
+            match mapping::depth_frame(&img, &self.cfg.camera, cam) {
+                Ok(f) => self.latest.image = Some((img.header, f)),
+                Err(e) => {
+                    self.bad_messages += 1;
+                    self.latest.image_error = Some(e);
+                }
+            }
+        }
     }
 
-    /// Stamps of the subscribed topics (None: one has sent nothing yet).
-    fn stamps(&self) -> Option<f64> {
+    /// The oldest stamp of the subscribed topics, an image's `image_lag_s` later than its own
+    /// (None: one has sent nothing yet).
+    fn stamps(&self, image_lag_s: f64) -> Option<f64> {
         let l = &self.latest;
         let s = |on: bool, h: Option<&msg::Header>| -> Option<f64> {
             if on {
@@ -263,6 +305,7 @@ impl Ros2Vehicle {
             s(self.imu.is_some(), l.imu.as_ref().map(|m| &m.header))?,
             s(self.odom.is_some(), l.odom.as_ref().map(|m| &m.header))?,
             s(self.navsat.is_some(), l.navsat.as_ref().map(|m| &m.header))?,
+            s(self.image.is_some(), l.image.as_ref().map(|m| &m.0))? + image_lag_s,
         ];
         Some(all.into_iter().fold(f64::INFINITY, f64::min))
     }
@@ -272,7 +315,7 @@ impl Ros2Vehicle {
         let deadline = Instant::now() + timeout;
         loop {
             self.drain();
-            if self.stamps().is_some_and(|t| t > after_s) {
+            if self.stamps(0.0).is_some_and(|t| t > after_s) {
                 return true;
             }
             let left = deadline.saturating_duration_since(Instant::now());
@@ -288,7 +331,7 @@ impl Ros2Vehicle {
         let l = &self.latest;
         let odom_ready = self.odom.is_none() || l.odom.is_some();
         SensorFrame {
-            stamp_s: self.stamps().unwrap_or(f64::NEG_INFINITY),
+            stamp_s: self.stamps(self.cfg.camera.frame_period_s).unwrap_or(f64::NEG_INFINITY),
             scan: l.scan.as_ref().map(|s| scan_to_rays(s, &self.cfg.scan)),
             imu: l
                 .imu
@@ -297,7 +340,7 @@ impl Ros2Vehicle {
                 .map(|i| mapping::imu_reading(i, l.odom.as_ref())),
             gps: (l.odom.is_some() || l.navsat.is_some())
                 .then(|| mapping::gps_reading(l.odom.as_ref(), l.navsat.as_ref())),
-            image: None,
+            image: l.image.as_ref().map(|(_, f)| f.clone()),
             contact: None,
             applied: self.applied,
         }
@@ -313,12 +356,16 @@ impl Vehicle for Ros2Vehicle {
         let t0 = Instant::now();
         if !self.wait_newer(f64::NEG_INFINITY, timeout) {
             let t = &self.cfg.topics;
+            let image = if self.image.is_some() { t.image.as_str() } else { "" };
+            let refused = match &self.latest.image_error {
+                Some(e) => format!("; images on {} were refused: {e}", t.image),
+                None => String::new(),
+            };
             return Err(EnvError::Vehicle(format!(
-                "no sensor data on {} within {} s (domain {}); is the car or `agvrl-drive --serve-sim` running?",
-                [&t.scan, &t.imu, &t.odom, &t.navsat]
-                    .iter()
+                "no sensor data on {} within {} s (domain {}){refused}; is the car or `agvrl-drive --serve-sim` running?",
+                [t.scan.as_str(), &t.imu, &t.odom, &t.navsat, image]
+                    .into_iter()
                     .filter(|n| !n.is_empty())
-                    .map(|n| n.as_str())
                     .collect::<Vec<_>>()
                     .join(", "),
                 self.cfg.startup_timeout_s,
@@ -368,7 +415,7 @@ impl Vehicle for Ros2Vehicle {
             // The set in hand may be as old as the wait for the subscriber: start from a newer
             // one (a car whose sensors stopped meanwhile starts stale, and is stopped). In
             // lockstep the robot re-sends its set unchanged until the first command.
-            let before = self.stamps().unwrap_or(f64::NEG_INFINITY);
+            let before = self.stamps(0.0).unwrap_or(f64::NEG_INFINITY);
             let left = timeout
                 .saturating_sub(t0.elapsed())
                 .max(Duration::from_secs_f64(self.cfg.fresh_timeout_s));

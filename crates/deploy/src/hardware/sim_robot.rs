@@ -1,5 +1,6 @@
 //! A sim-backed ROS 2 robot (`agvrl-drive --serve-sim ENV`): publishes the simulated car's
-//! LaserScan, Imu, Odometry (and NavSatFix) and applies the AckermannDriveStamped commands it
+//! LaserScan, Imu, Odometry (and NavSatFix, and its camera's depth as a 32FC1 Image when the
+//! env's car carries a camera) and applies the AckermannDriveStamped commands it
 //! receives, so the whole drive loop runs over real DDS. Each tick advances the simulator by
 //! exactly one control period; the task's evaluation counts laps and collisions on this side
 //! (a car's drive loop knows no map).
@@ -8,7 +9,8 @@ use super::config::Ros2Config;
 use super::mapping;
 use super::msg;
 use super::ros2::{
-    DRIVE_TYPE, IMU_TYPE, NAVSAT_TYPE, ODOM_TYPE, Publisher, SCAN_TYPE, Subscription, node, publisher, subscribe,
+    DRIVE_TYPE, IMAGE_TYPE, IMU_TYPE, NAVSAT_TYPE, ODOM_TYPE, Publisher, SCAN_TYPE, Subscription, node, publisher,
+    subscribe,
 };
 use crate::DeployError;
 use agvrl_envs::api::{Control, SensorFrame, TerminationCause, Vehicle};
@@ -46,6 +48,8 @@ pub struct Faults {
     /// The robot's drive reader joins only after this many ticks (a car whose motor node
     /// starts after its sensors); real-time pace only.
     pub drive_reader_from: u64,
+    /// Camera images go out on every this many ticks (2: a 15 Hz camera on a 30 Hz car).
+    pub image_every: u64,
 }
 
 impl Default for Faults {
@@ -55,6 +59,7 @@ impl Default for Faults {
             nan_ticks: 0..0,
             nan_rays: 0..0,
             drive_reader_from: 0,
+            image_every: 1,
         }
     }
 }
@@ -115,6 +120,7 @@ pub struct SimRobot {
     imu: Option<Publisher<msg::Imu>>,
     odom: Option<Publisher<msg::Odometry>>,
     navsat: Option<Publisher<msg::NavSatFix>>,
+    image: Option<Publisher<msg::Image>>,
     drive: Option<Subscription<msg::AckermannDriveStamped>>,
     poll: Poll,
     events: Events,
@@ -165,6 +171,8 @@ impl SimRobot {
         let imu = opt(&mut node, &t.imu, IMU_TYPE, q)?;
         let odom = opt(&mut node, &t.odom, ODOM_TYPE, q)?;
         let navsat = opt(&mut node, &t.navsat, NAVSAT_TYPE, q)?;
+        let image_topic = if frame.image.is_some() { t.image.as_str() } else { "" };
+        let image = opt(&mut node, image_topic, IMAGE_TYPE, q)?;
         let poll = Poll::new().map_err(|e| DeployError::Vehicle(format!("poll: {e}")))?;
         let drive = if faults.drive_reader_from == 0 {
             drive_reader(&mut node, &cfg, &poll)?
@@ -182,6 +190,7 @@ impl SimRobot {
             imu,
             odom,
             navsat,
+            image,
             drive,
             poll,
             events: Events::with_capacity(8),
@@ -232,6 +241,12 @@ impl SimRobot {
         if let (Some(p), Some(geo)) = (&self.navsat, f.gps.as_ref().and_then(|g| g.geodetic)) {
             p.publish(mapping::navsat_msg(&geo, stamp_s, "gps"))
                 .map_err(|e| pub_err(&t.navsat, e.to_string()))?;
+        }
+        if let (Some(p), Some(img)) = (&self.image, &f.image)
+            && tick.is_multiple_of(self.faults.image_every.max(1))
+        {
+            p.publish(mapping::depth_image_msg(img, stamp_s, "camera"))
+                .map_err(|e| pub_err(&t.image, e.to_string()))?;
         }
         Ok(())
     }
