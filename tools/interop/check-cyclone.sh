@@ -6,7 +6,10 @@
 #      the car is told to stop within 3 control periods plus DDS latency of the last scan;
 #   c) only a geometry_msgs/Twist reader on /drive: agvrl-drive refuses to start, naming it;
 #   d, e) only an AckermannDriveStamped reader whose QoS the writer cannot satisfy
-#      (transient-local durability, XCDR2 only): refused too, naming the policy.
+#      (transient-local durability, XCDR2 only): refused too, naming the policy;
+#   f) a depth camera: 672x376 32FC1 Images (ZED 2 VGA, 1 MB each, fragmented) at 15 Hz over
+#      80 degrees vertically; the camera-only policy drives 5 s in real time without a watchdog
+#      event, and every traced observation's image is the crop and resize recomputed in Python.
 #
 #   tools/interop/check-cyclone.sh [path/to/agvrl-drive]
 #
@@ -57,9 +60,9 @@ expect() {
   fi
 }
 
-# scenario NAME DOMAIN CAR_ARGS DRIVE_ARGS: the car in the background, agvrl-drive in front.
+# scenario NAME DOMAIN CAR_ARGS DRIVE_ARGS [POLICY]: the car in the background, agvrl-drive in front.
 scenario() {
-  local name=$1 d=$2 car_args=$3 drive_args=$4
+  local name=$1 d=$2 car_args=$3 drive_args=$4 policy=${5:-$POLICY}
   # shellcheck disable=SC2086
   "$PY" "$CAR" --domain-id "$d" $car_args >"$TMP/$name.car" 2>"$TMP/$name.car.err" &
   CAR_PID=$!
@@ -67,7 +70,7 @@ scenario() {
   local t0 t1
   t0=$(date +%s.%N)
   # shellcheck disable=SC2086
-  timeout 30 "$BIN" --vehicle ros2 --realtime --domain-id "$d" --policy "$POLICY" $drive_args \
+  timeout 30 "$BIN" --vehicle ros2 --realtime --domain-id "$d" --policy "$policy" $drive_args \
     >"$TMP/$name.drive" 2>"$TMP/$name.drive.err"
   echo $? >"$TMP/$name.rc"
   t1=$(date +%s.%N)
@@ -136,8 +139,26 @@ expect e drive_exit "$(cat $E.rc)" 'v != 0 && v != 124'
 expect e error_names_representation "$(grep -c 'incompatible QoS: Representation' $E.drive.err)" 'v >= 1'
 expect e commands_received "$(kv $E.car commands)" 'v == 0'
 
+# f) The camera-only policy from a depth camera that sees more than it was trained on.
+printf '[camera]\nvertical_fov_deg = 80.0\n' >"$TMP/camera.toml"
+scenario f $((DOMAIN + 5)) "--duration-s 7.5 --depth-image-hz 15 --image-vfov-deg 80" \
+  "--steps 150 --config $TMP/camera.toml --trace $TMP/f.trace" assets/policies/racing-oval-camera.agvrl
+F=$TMP/f
+expect f drive_exit "$(cat $F.rc)" 'v == 0'
+expect f ticks "$(kv $F.drive ticks)" 'v == 150'
+# Images come every 2-3 ticks; each counts camera.max_lag_s (100 ms) past its stamp.
+expect f watchdog_events "$(kv $F.drive events)" 'v == 0'
+expect f images_published "$(kv $F.car images_published)" 'v >= 100'
+expect f commands_received "$(kv $F.car commands)" 'v >= 140'
+expect f fields_ok "$(kv $F.car fields_ok)" 'v == 1'
+"$PY" "$CAR" --verify-image-trace "$F.trace" --image-size 672x376 --image-vfov-deg 80 >"$F.verify"
+tr '\n' ' ' <"$F.verify" | sed 's/^/  trace: /'
+echo
+expect f image_rows "$(kv $F.verify image_rows)" 'v == 150'
+expect f image_pixels_wrong "$(kv $F.verify image_pixels_wrong)" 'v == 0'
+
 if [ "$FAILED" = 0 ]; then
-  echo "PASS: agvrl-drive and Cyclone DDS interoperate (5 scenarios)"
+  echo "PASS: agvrl-drive and Cyclone DDS interoperate (6 scenarios)"
 else
   echo "FAIL: see the FAIL lines above" >&2
   exit 1

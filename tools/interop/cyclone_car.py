@@ -8,19 +8,26 @@ topic, checks every command it receives and prints `key=value` lines at exit.
 
 Scenarios: --scan-stop-after-s (scans stop: agvrl-drive must command zero speed),
 --drive-reader-delay-s (the drive reader joins late), --twist-reader (only a Twist reader on
-the drive topic: agvrl-drive must refuse to start). See tools/interop/check-cyclone.sh.
+the drive topic: agvrl-drive must refuse to start), --depth-image-hz (a depth camera: 32FC1
+Images whose pixels code their own column and row; `--verify-image-trace TRACE` then checks
+the camera part of agvrl-drive's observations against the crop and resize recomputed here).
+See tools/interop/check-cyclone.sh.
 """
 
 import argparse
+import array
+import json
 import math
 import os
 import signal
 import statistics
+import struct
 import sys
 import threading
 import time
 from dataclasses import dataclass, field
 
+from cyclonedds._clayer import ddspy_write
 from cyclonedds.core import Listener, Policy, Qos
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.idl import IdlStruct
@@ -137,6 +144,17 @@ class Odometry(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
 
 
 @dataclass
+class Image(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
+    header: Header
+    height: types.uint32
+    width: types.uint32
+    encoding: str
+    is_bigendian: types.uint8
+    step: types.uint32
+    data: types.sequence[types.uint8]
+
+
+@dataclass
 class AckermannDrive(IdlStruct, typename="ackermann_msgs::msg::dds_::AckermannDrive_"):
     steering_angle: types.float32
     steering_angle_velocity: types.float32
@@ -169,6 +187,62 @@ def corridor_scan(n_rays, fov_rad, half_width_m, range_max_m):
         r = half_width_m / s if s > 1e-9 else math.inf
         out.append(r if r <= range_max_m else math.inf)
     return a0, inc, out
+
+
+def coded_depth(k, n):
+    """Depth of pixel k (row-major) of n: 0.3 + 7.5 k / n metres, so a reading names its pixel."""
+    return 0.3 + 7.5 * k / n
+
+
+def depth_image(w, h):
+    """A 32FC1 little-endian image of coded depths."""
+    px = array.array("f", (coded_depth(k, w * h) for k in range(w * h)))
+    if sys.byteorder != "little":
+        px.byteswap()
+    return px.tobytes()
+
+
+class PrestampedImage:
+    """An Image serialized once; each write patches only its stamp. Serializing 1 MB of uint8
+    takes ~90 ms in cyclonedds' Python, longer than the 50 Hz loop's period."""
+
+    def __init__(self, writer, w, h, frame_id):
+        self.writer = writer
+        ser = Image(Header(Time(0, 0), frame_id), h, w, "32FC1", 0, 4 * w, depth_image(w, h)).serialize()
+        assert ser[:2] == b"\x00\x01", "little-endian plain CDR"  # the stamp follows at offset 4
+        self.ser = bytearray(ser.ljust((len(ser) + 3) & ~3, b"\0"))
+
+    def write(self, stamp):
+        struct.pack_into("<iI", self.ser, 4, stamp.sec, stamp.nanosec)
+        if ddspy_write(self.writer._ref, bytes(self.ser)) < 0:
+            raise RuntimeError("writing an image failed")
+
+
+def verify_image_trace(a):
+    """Check the camera part of each traced observation: depth / depth_max of the source pixel
+    that the crop (centre window with the policy's vertical field of view and aspect) and the
+    nearest-pixel resize pick. Prints key=value lines; exit 1 on a wrong pixel."""
+    w, h = (int(v) for v in a.image_size.split("x"))
+    pw, ph = (int(v) for v in a.policy_image.split("x"))
+    ch = h * math.tan(math.radians(a.policy_vfov_deg) / 2) / math.tan(math.radians(a.image_vfov_deg) / 2)
+    cw = ch * pw / ph
+    x0, y0 = (w - cw) / 2, (h - ch) / 2
+    want = [coded_depth(min(h - 1, math.floor(y0 + (y + 0.5) * ch / ph)) * w
+                        + min(w - 1, math.floor(x0 + (x + 0.5) * cw / pw)), w * h) / a.depth_max_m
+            for y in range(ph) for x in range(pw)]
+    rows = wrong = worst = 0
+    with open(a.verify_image_trace) as f:
+        for line in f:
+            img = json.loads(line)["obs"][-pw * ph:]
+            rows += 1
+            for got, exp in zip(img, want):
+                err = abs(got - exp)
+                worst = max(worst, err)
+                # Neighbouring pixels differ by 7.5 / (w h depth_max); f32 rounding is far below.
+                wrong += err > 0.25 * 7.5 / (w * h * a.depth_max_m)
+    print(f"image_rows={rows}\nimage_pixels_checked={rows * pw * ph}\nimage_pixels_wrong={wrong}\n"
+          f"image_max_abs_err={worst:.3g}")
+    return 0 if rows and not wrong else 1
 
 
 @dataclass
@@ -210,7 +284,18 @@ def main():
     p.add_argument("--fov-deg", type=float, default=90.0)
     p.add_argument("--range-max-m", type=float, default=12.0)
     p.add_argument("--corridor-half-width-m", type=float, default=1.5)
+    p.add_argument("--depth-image-hz", type=float, default=0.0, help="publish depth Images at this rate")
+    p.add_argument("--image-topic", default="/zed/zed_node/depth/depth_registered")
+    p.add_argument("--image-size", default="672x376", help="WxH of the published image (ZED 2 VGA)")
+    p.add_argument("--image-vfov-deg", type=float, default=70.0, help="its vertical field of view")
+    p.add_argument("--verify-image-trace", metavar="TRACE",
+                   help="check agvrl-drive's --trace instead of running the car")
+    p.add_argument("--policy-image", default="64x48", help="the policy camera's WxH")
+    p.add_argument("--policy-vfov-deg", type=float, default=70.0)
+    p.add_argument("--depth-max-m", type=float, default=8.0, help="observation depth that reads 1")
     a = p.parse_args()
+    if a.verify_image_trace:
+        sys.exit(verify_image_trace(a))
 
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -233,6 +318,12 @@ def main():
     scan_w = DataWriter(dp, Topic(dp, dds_topic(a.scan_topic), LaserScan), sensor_qos)
     imu_w = DataWriter(dp, Topic(dp, dds_topic(a.imu_topic), Imu), sensor_qos)
     odom_w = DataWriter(dp, Topic(dp, dds_topic(a.odom_topic), Odometry), sensor_qos)
+    image_w = None
+    if a.depth_image_hz > 0:
+        image_w = DataWriter(dp, Topic(dp, dds_topic(a.image_topic), Image), sensor_qos)
+        iw, ih = (int(v) for v in a.image_size.split("x"))
+        image = PrestampedImage(image_w, iw, ih, "zed_left_camera_optical_frame")
+    images = 0
 
     log = Log()
     published_stamps = set()  # (sec, nanosec) of every sensor set, to check command stamps against
@@ -299,6 +390,9 @@ def main():
                                    0.05, a.range_max_m, ranges, []))
             last_scan_s, last_scan_stamp = time.time(), stamp
             scans += 1
+        if image_w is not None and el * a.depth_image_hz >= images:
+            image.write(stamp)
+            images += 1
         imu_w.write(Imu(Header(stamp, a.frame_id), Quaternion(0.0, 0.0, 0.0, 1.0), zeros9,
                         Vector3(0.0, 0.0, yaw_rate), zeros9, Vector3(0.0, 0.0, 9.81), zeros9))
         odom_w.write(Odometry(Header(stamp, "odom"), a.frame_id,
@@ -310,6 +404,8 @@ def main():
         cmds = list(log.cmds)
         decode_errors = log.decode_errors
     report(a, cmds, decode_errors, published_stamps, t0, reader_created_s, scans, last_scan_s, last_scan_stamp)
+    if image_w is not None:
+        print(f"images_published={images}")
     del domain
 
 

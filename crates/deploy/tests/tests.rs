@@ -441,7 +441,7 @@ mod ros2_loopback {
         assert!(rout.contains(" terminations=0") && !rout.contains(" laps=0 "), "{rout}");
     }
 
-    /// A 15 Hz camera against the 30 Hz loop in real time: an image counts one camera period
+    /// A 15 Hz camera against the 30 Hz loop in real time: an image counts `camera.max_lag_s`
     /// past its stamp, so frames between images are not stale (without that allowance a tick
     /// just before the next image sees one 67 ms old plus transport, over the 2-period limit).
     #[test]

@@ -182,10 +182,10 @@ impl Default for ScanMapping {
 pub struct CameraMapping {
     /// The car camera's vertical field of view, degrees.
     pub vertical_fov_deg: f32,
-    /// An image counts as fresh until this long after its stamp, seconds: images come slower
-    /// than the 30 Hz ticks, so one frame period of the camera (15 Hz: 0.067) is added to its
-    /// stamp before the frame takes the oldest stamp. Lockstep waits for a newer image anyway.
-    pub frame_period_s: f64,
+    /// How much older than the other sensors an image may be, seconds: its stamp plus this
+    /// counts toward the frame's oldest stamp. A 15 Hz camera's frame period (67 ms) plus 33 ms
+    /// of its latency; lockstep waits for a newer image anyway.
+    pub max_lag_s: f64,
 }
 
 impl Default for CameraMapping {
@@ -193,7 +193,7 @@ impl Default for CameraMapping {
     fn default() -> Self {
         Self {
             vertical_fov_deg: 70.0,
-            frame_period_s: 1.0 / 15.0,
+            max_lag_s: 0.1,
         }
     }
 }
@@ -300,10 +300,7 @@ impl Ros2Config {
                 c.vertical_fov_deg > 0.0 && c.vertical_fov_deg < 179.0,
                 "camera.vertical_fov_deg must be in (0, 179)",
             ),
-            (
-                (0.0..=1.0).contains(&c.frame_period_s),
-                "camera.frame_period_s must be in [0, 1]",
-            ),
+            ((0.0..=1.0).contains(&c.max_lag_s), "camera.max_lag_s must be in [0, 1]"),
             (
                 self.qos.sensors.depth >= 1 && self.qos.drive.depth >= 1,
                 "qos depth must be at least 1",

@@ -10,7 +10,7 @@
 //!
 //! The frame's `stamp_s` is the oldest header stamp among the subscribed topics, so a topic
 //! that stops makes the whole frame stale and the watchdog stops the car. An image counts with
-//! its stamp plus `camera.frame_period_s` (a 15 Hz camera is older than the 30 Hz tick); the
+//! its stamp plus `camera.max_lag_s` (a 15 Hz camera is older than the 30 Hz tick); the
 //! lockstep wait takes no such allowance.
 
 use super::config::{Reliability, Ros2Config, TopicQos};
@@ -331,7 +331,7 @@ impl Ros2Vehicle {
         let l = &self.latest;
         let odom_ready = self.odom.is_none() || l.odom.is_some();
         SensorFrame {
-            stamp_s: self.stamps(self.cfg.camera.frame_period_s).unwrap_or(f64::NEG_INFINITY),
+            stamp_s: self.stamps(self.cfg.camera.max_lag_s).unwrap_or(f64::NEG_INFINITY),
             scan: l.scan.as_ref().map(|s| scan_to_rays(s, &self.cfg.scan)),
             imu: l
                 .imu
