@@ -491,7 +491,11 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         ..Watch::default()
     };
     if let Some(sink) = viz::sink_of(a.rerun.as_deref(), a.spawn_viewer) {
-        watch.rec = Some(Recorder::new(sink, &format!("{} eval", src.policy.display()))?);
+        watch.rec = Some(Recorder::new(
+            sink,
+            &format!("{} eval", src.policy.display()),
+            env_cfg.sim.camera.as_ref(),
+        )?);
     }
     let driver = match (&mut policy, a.planner) {
         (Some(p), _) => Driver::Policy(p),

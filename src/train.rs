@@ -451,6 +451,7 @@ fn evaluate_run(cfg: &RunConfig, policy_path: &std::path::Path, file: &dyn Fn(&s
         watch.rec = Some(Recorder::new(
             Sink::File(file(files::RECORDING)),
             &format!("{} {} eval", cfg.env, cfg.algo),
+            cfg.eval_env_config().sim.camera.as_ref(),
         )?);
     }
     let summary = evaluate(

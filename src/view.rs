@@ -72,7 +72,7 @@ pub fn view(a: ViewArgs) -> Result<()> {
     };
     let sink = viz::sink_of(a.rerun.as_deref(), a.spawn_viewer)
         .unwrap_or_else(|| Sink::File(PathBuf::from(format!("view-{env_id}.rrd"))));
-    let mut rec = Recorder::new(sink, &format!("{env_id} view"))?;
+    let mut rec = Recorder::new(sink, &format!("{env_id} view"), env_cfg.sim.camera.as_ref())?;
     let space = env.action_space();
     let mut rng = RandomActions::new(a.seed);
     let mut act = |o: &[f32]| -> Result<Vec<f32>> {

@@ -40,19 +40,24 @@ fn y_up_to_z_up(pose: &Pose) -> rerun::Quaternion {
 
 /// How a recording opens in the viewer: the scene and the car large, the LiDAR and the camera
 /// beside them, the time series below.
-fn layout() -> rerun::blueprint::Blueprint {
+/// A depth-only camera (the camera racing policy's) opens on its depth tab.
+fn layout(depth_first: bool) -> rerun::blueprint::Blueprint {
     use rerun::blueprint::{Blueprint, Horizontal, Spatial2DView, Spatial3DView, Tabs, TimeSeriesView, Vertical};
     let scene = Spatial3DView::new("scene").with_origin("world");
     let lidar = Spatial3DView::new("LiDAR")
         .with_origin("world")
         .with_contents(["world/lidar/**", "world/vehicle/**"]);
-    let camera = Tabs::new([
-        Spatial2DView::new("camera").with_origin("camera/rgb").into(),
-        Spatial2DView::new("depth").with_origin("camera/depth").into(),
-        Spatial2DView::new("segmentation")
-            .with_origin("camera/segmentation")
-            .into(),
-    ]);
+    // The first tab is the one shown.
+    let rgb = Spatial2DView::new("camera").with_origin("camera/rgb").into();
+    let depth = Spatial2DView::new("depth").with_origin("camera/depth").into();
+    let seg = Spatial2DView::new("segmentation")
+        .with_origin("camera/segmentation")
+        .into();
+    let camera = Tabs::new(if depth_first {
+        [depth, rgb, seg]
+    } else {
+        [rgb, depth, seg]
+    });
     let side = Vertical::new([lidar.into(), camera.into()]);
     let plots = Horizontal::new(
         ["reward", "speed_mps", "steering_rad", "throttle", "min_range_m"]
@@ -63,11 +68,11 @@ fn layout() -> rerun::blueprint::Blueprint {
 }
 
 impl Recorder {
-    /// Open a recording named `name`.
-    pub fn new(sink: Sink, name: &str) -> Result<Self> {
+    /// Open a recording named `name` of an env with camera `camera`.
+    pub fn new(sink: Sink, name: &str, camera: Option<&agvrl_sim::sensors::CameraConfig>) -> Result<Self> {
         let builder = rerun::RecordingStreamBuilder::new("agvrl")
             .recording_name(name)
-            .with_blueprint(layout());
+            .with_blueprint(layout(camera.is_some_and(|c| c.depth_only)));
         let (rec, file) = match sink {
             Sink::File(path) => {
                 let tmp = path.with_extension("rrd.tmp");

@@ -13,7 +13,7 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    pub fn new(_sink: Sink, _name: &str) -> Result<Self> {
+    pub fn new(_sink: Sink, _name: &str, _camera: Option<&agvrl_sim::sensors::CameraConfig>) -> Result<Self> {
         bail!("this agvrl was built without rerun; rebuild with the default features (cargo build --release)")
     }
 

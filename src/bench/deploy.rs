@@ -176,7 +176,7 @@ fn loopback(quick: bool) -> Vec<(String, String)> {
         let h = robot.handle();
         let th = std::thread::spawn(move || robot.run(Pace::Lockstep, 0));
         let res = (|| {
-            let v = Ros2Vehicle::new(cfg.clone(), true).map_err(|e| e.to_string())?;
+            let v = Ros2Vehicle::new(cfg.clone(), true, None).map_err(|e| e.to_string())?;
             let t = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).map_err(|e| e.to_string())?;
             let p = Policy::load(&shipped_policy()).map_err(|e| e.to_string())?;
             let mut lp = DriveLoop::new(v, t, p, DriveConfig::default(), 0).map_err(|e| e.to_string())?;
