@@ -13,7 +13,9 @@
 
 #![warn(missing_docs)]
 
+pub mod bag;
 pub mod hardware;
+pub mod record;
 pub mod run_loop;
 pub mod stats;
 

@@ -21,6 +21,9 @@ pub enum DeployError {
     /// A bad setting (the car's TOML, a topic name).
     #[error("config: {0}")]
     Config(String),
+    /// A bag could not be written or read.
+    #[error("bag: {0}")]
+    Bag(String),
     /// A file (the car's TOML) could not be read.
     #[error("{path}")]
     Io {
@@ -114,6 +117,12 @@ pub struct Tick {
     pub intervention: Intervention,
     /// Watchdog checks + observation + inference time, microseconds.
     pub infer_us: f64,
+    /// Real time: how long after its deadline the tick started, seconds (0 in lockstep). A
+    /// tick more than one period late is a late tick.
+    pub late_s: f64,
+    /// From the start of the tick to the command sent (sensing, inference, actuation),
+    /// microseconds.
+    pub tick_us: f64,
     /// What the task says about the frame (a car without a map has no laps).
     pub racing: Option<RacingInfo>,
     /// The task's termination verdict on the frame (collision, too close, ...); the loop
@@ -217,6 +226,13 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
     /// period per tick (the vehicle's own time when it is simulated).
     pub fn tick(&mut self) -> Result<Tick, DeployError> {
         let period = 1.0 / self.cfg.rate_hz;
+        let started = Instant::now();
+        let late_s = if self.cfg.realtime {
+            let deadline = self.start + Duration::from_secs_f64(period * self.ticks as f64);
+            started.saturating_duration_since(deadline).as_secs_f64()
+        } else {
+            0.0
+        };
         let frame = self.vehicle.sense().map_err(vehicle_err)?;
         // Timed from here: checks, observation and inference (not the vehicle's wait).
         let t0 = Instant::now();
@@ -250,6 +266,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
         let infer_us = t0.elapsed().as_secs_f64() * 1e6;
         let outcome = fresh.then(|| self.task.evaluate(&frame, self.vehicle.map()));
         self.vehicle.actuate(control).map_err(vehicle_err)?;
+        let tick_us = started.elapsed().as_secs_f64() * 1e6;
         self.clock_s += period;
         self.ticks += 1;
         if self.cfg.realtime {
@@ -266,6 +283,8 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             event,
             intervention,
             infer_us,
+            late_s,
+            tick_us,
             racing: outcome.as_ref().and_then(|o| o.racing.clone()),
             termination: outcome.and_then(|o| o.termination),
             inference,

@@ -630,3 +630,147 @@ fn agvrl_drive_refuses_a_setting_that_agvrl_train_would_refuse() {
     let o = drive(&old, &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// `agvrl-drive --record` on the simulated car: a rosbag2 bag whose topics hold one message
+/// per tick (plus the first frame's), decoding back to what the drive did: the ticks' actions
+/// are the --trace of the same run, the commands the ticks' controls scaled to speed.
+#[test]
+fn a_recorded_drive_decodes_back_to_the_drive() {
+    use agvrl_deploy::bag;
+    use agvrl_deploy::hardware::msg;
+    let dir = scratch("bag");
+    let (bag_dir, trace) = (dir.path().join("drive"), dir.path().join("trace.jsonl"));
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
+        .arg("--policy")
+        .arg(shipped_policy("racing-oval-ppo"))
+        .args(["--steps", "90", "--quiet", "--record"])
+        .arg(&bag_dir)
+        .arg("--trace")
+        .arg(&trace)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (msgs, damage) = bag::read_messages(&bag_dir).unwrap();
+    assert_eq!(damage, None);
+    assert!(out.contains(&format!(" bag_messages={}", msgs.len())), "{out}");
+    let count = |t: &str| msgs.iter().filter(|m| m.topic == t).count();
+    // The first tick senses the reset's frame (recorded once), each later one a new frame.
+    assert_eq!([count("/scan"), count("/imu"), count("/odom"), count("/tf")], [90; 4]);
+    assert_eq!([count("/drive"), count("/agvrl/tick")], [90, 90]);
+    assert_eq!([count("/tf_static"), count("/robot_description")], [1, 1]);
+    let urdf: msg::StdString =
+        bag::decode(&msgs.iter().find(|m| m.topic == "/robot_description").unwrap().data).unwrap();
+    assert!(urdf.data.contains("<robot"), "the URDF");
+    // Log time is simulated time: one control period per tick.
+    let scans: Vec<&bag::BagMessage> = msgs.iter().filter(|m| m.topic == "/scan").collect();
+    for (k, m) in scans.iter().enumerate() {
+        let s: msg::LaserScan = bag::decode(&m.data).unwrap();
+        assert_eq!(s.ranges.len(), 100);
+        assert!(
+            (m.log_ns as f64 * 1e-9 - k as f64 / 30.0).abs() < 1e-6,
+            "scan {k} at {}",
+            m.log_ns
+        );
+        let stamp_ns = s.header.stamp.sec as i64 * 1_000_000_000 + s.header.stamp.nanosec as i64;
+        assert!(
+            (stamp_ns - m.log_ns as i64).abs() <= 1,
+            "log time is the stamp: {stamp_ns} {}",
+            m.log_ns
+        );
+    }
+    let rows: Vec<serde_json::Value> = std::fs::read_to_string(&trace)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let ticks: Vec<msg::Tick> = msgs
+        .iter()
+        .filter(|m| m.topic == "/agvrl/tick")
+        .map(|m| bag::decode(&m.data).unwrap())
+        .collect();
+    let drives: Vec<msg::AckermannDriveStamped> = msgs
+        .iter()
+        .filter(|m| m.topic == "/drive")
+        .map(|m| bag::decode(&m.data).unwrap())
+        .collect();
+    for ((t, row), d) in ticks.iter().zip(&rows).zip(&drives) {
+        let action: Vec<f32> = serde_json::from_value(row["action"].clone()).unwrap();
+        assert_eq!(t.action, action, "tick {}", t.tick);
+        assert_eq!(t.observation.len(), 104);
+        assert!(
+            (d.drive.speed as f64 - t.throttle * 1.79).abs() < 0.02,
+            "tick {}: {d:?}",
+            t.tick
+        );
+        assert_eq!(d.drive.steering_angle, t.steering_rad as f32);
+    }
+    // metadata.yaml counts what the file holds.
+    let meta = std::fs::read_to_string(bag_dir.join("metadata.yaml")).unwrap();
+    assert!(meta.contains(&format!("  message_count: {}\n", msgs.len())), "{meta}");
+    assert!(
+        meta.contains("name: /agvrl/tick\n        type: agvrl_msgs/msg/Tick"),
+        "{meta}"
+    );
+}
+
+/// A bag cut short (a killed recording) reads up to its last complete chunk, says where it
+/// stopped, and `--reindex` rebuilds its metadata.yaml from what is left.
+#[test]
+fn a_truncated_bag_yields_its_intact_messages_and_reindexes() {
+    use agvrl_deploy::bag::{self, BagWriter, Offered, Topic};
+    use agvrl_deploy::hardware::msg;
+    let dir = scratch("cut");
+    let d = dir.path().join("b");
+    let mut w = BagWriter::create(&d).unwrap();
+    let scan = w
+        .add_topic(Topic {
+            name: "/scan".into(),
+            ty: "sensor_msgs/msg/LaserScan".into(),
+            offered: Offered::Sensor,
+        })
+        .unwrap();
+    let n = 3000u64; // about 3.5 MB: four 1 MiB chunks
+    for k in 0..n {
+        let m = msg::LaserScan {
+            ranges: vec![k as f32; 270],
+            ..msg::LaserScan::default()
+        };
+        w.write(scan, k, k, &bag::cdr(&m)).unwrap();
+    }
+    assert!(BagWriter::create(&d).is_err(), "a bag never overwrites another");
+    w.finish().unwrap();
+    let path = d.join(bag::MCAP_FILE);
+    let full = std::fs::read(&path).unwrap();
+    let (all, damage) = bag::read_messages(&d).unwrap();
+    assert_eq!((all.len() as u64, damage), (n, None));
+    std::fs::write(&path, &full[..full.len() * 6 / 10]).unwrap();
+    std::fs::remove_file(d.join("metadata.yaml")).unwrap();
+    let (part, damage) = bag::read_messages(&d).unwrap();
+    let why = damage.expect("the cut is reported");
+    assert!(
+        why.contains(bag::MCAP_FILE) && why.contains(&format!("after {} intact", part.len())),
+        "{why}"
+    );
+    assert!(
+        part.len() as u64 >= n / 2 - 500 && (part.len() as u64) < n,
+        "{} of {n}",
+        part.len()
+    );
+    for (k, m) in part.iter().enumerate() {
+        let s: msg::LaserScan = bag::decode(&m.data).unwrap();
+        assert_eq!(s.ranges[0], k as f32, "messages come back in order, intact");
+    }
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
+        .arg("--reindex")
+        .arg(&d)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let meta = std::fs::read_to_string(d.join("metadata.yaml")).unwrap();
+    assert!(meta.contains(&format!("  message_count: {}\n", part.len())), "{meta}");
+    // Garbage is an error naming the file, not a panic.
+    std::fs::write(&path, b"not an mcap file at all").unwrap();
+    let e = bag::read_messages(&d).unwrap_err().to_string();
+    assert!(e.contains(bag::MCAP_FILE), "{e}");
+}

@@ -5,6 +5,8 @@
 //! car.toml` drives a ROS 2 car; `--serve-sim racing-oval` is the simulated car behind ROS 2
 //! topics. Each tick prints one `key=value` line, the run ends with a summary line.
 
+use agvrl_deploy::hardware::config::DriveMapping;
+use agvrl_deploy::record::{DriveBag, Recorded, Sensors, Setup};
 use agvrl_deploy::stats::{cpu_time_s, quantile, rss_mb};
 use agvrl_deploy::{DriveConfig, DriveLoop};
 use agvrl_envs::api::Vehicle;
@@ -15,7 +17,9 @@ use agvrl_run::PolicySettings;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use serde::Deserialize;
+use sha2::Digest;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// `--vehicle`.
@@ -87,6 +91,18 @@ struct Args {
     /// actions with the recorded ones (exit status 1 beyond --tolerance).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["trace", "serve_sim"])]
     check_trace: Option<PathBuf>,
+    /// Record the drive as a rosbag2 bag in directory DIR (MCAP; see docs/deploy.md):
+    /// sensor messages, commands, transforms, the URDF and per tick the policy's observation,
+    /// action and the safety filter's and watchdog's doings.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["check_trace", "serve_sim"])]
+    record: Option<PathBuf>,
+    /// Rebuild DIR/metadata.yaml of a bag from its MCAP file (a recording killed before it
+    /// wrote one), then exit.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["record", "check_trace", "serve_sim"])]
+    reindex: Option<PathBuf>,
+    /// Print every message of bag DIR as a JSON line (topic, type, log_ns, msg), then exit.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["record", "reindex", "check_trace", "serve_sim"])]
+    dump: Option<PathBuf>,
     /// Largest action difference --check-trace accepts.
     #[arg(long, default_value_t = 1e-4)]
     tolerance: f32,
@@ -141,6 +157,17 @@ fn run() -> Result<()> {
     if !(a.rate_hz > 0.0 && a.rate_hz.is_finite()) {
         bail!("--rate-hz must be positive");
     }
+    if let Some(dir) = &a.dump {
+        return dump(dir);
+    }
+    if let Some(dir) = &a.reindex {
+        let (s, damage) = agvrl_deploy::bag::reindex(dir)?;
+        if let Some(d) = damage {
+            eprintln!("warning: {d}");
+        }
+        println!("reindexed {} messages={}", dir.display(), s.messages());
+        return Ok(());
+    }
     let (src, env, env_cfg) = policy_and_env(&a)?;
     if let Some(sim_env) = &a.serve_sim {
         return serve_sim(&a, sim_env, &env_cfg);
@@ -159,9 +186,19 @@ fn run() -> Result<()> {
     };
     match a.vehicle {
         VehicleKind::Sim => {
-            let vehicle = make_vehicle(&env, &env_cfg)?;
+            let mut vehicle = make_vehicle(&env, &env_cfg)?;
             let task = make_task(&env, &env_cfg, vehicle.steering_limit_rad())?;
-            drive_loop(&a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?)
+            let Some(dir) = &a.record else {
+                return drive_loop(&a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?, None);
+            };
+            // The sensors the bag holds: those of the first frame (the loop resets again, to
+            // the same state).
+            let sensors = Sensors::of(&vehicle.reset(a.seed)?);
+            let mut mapping = DriveMapping::default();
+            mapping.for_trained_top_speed(env_cfg.sim.vehicle_model()?.top_speed_mps());
+            let bag = Arc::new(record_bag(dir, &src, &env, &env_cfg, sensors, mapping, true)?);
+            let v = Recorded::new(vehicle, bag.clone(), true);
+            drive_loop(&a, DriveLoop::new(v, task, policy, drive, a.seed)?, Some(bag))
         }
         VehicleKind::Ros2 => drive_ros2(&a, &env, &env_cfg, policy, drive),
     }
@@ -188,7 +225,7 @@ fn drive_ros2(a: &Args, env: &str, env_cfg: &EnvConfig, policy: Policy, drive: D
         None
     };
     let vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime, camera)?;
-    drive_loop(a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?)
+    drive_loop(a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?, None)
 }
 
 #[cfg(not(feature = "ros2"))]
@@ -196,14 +233,78 @@ fn drive_ros2(_: &Args, _: &str, _: &EnvConfig, _: Policy, _: DriveConfig) -> Re
     bail!("--vehicle ros2: this agvrl-drive was built without the `ros2` feature")
 }
 
-fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<()> {
+/// `--dump DIR`: every intact message as a JSON line; damage is a warning on stderr.
+fn dump(dir: &Path) -> Result<()> {
+    use std::io::Write;
+    let (msgs, damage) = agvrl_deploy::bag::read_messages(dir)?;
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    for m in &msgs {
+        let v = agvrl_deploy::record::decode_json(m)
+            .map_err(|e| anyhow::anyhow!("{}: a {} message on {}: {e}", dir.display(), m.ty, m.topic))?;
+        let row = serde_json::json!({"topic": m.topic, "type": m.ty, "log_ns": m.log_ns, "msg": v});
+        writeln!(out, "{row}")?;
+    }
+    out.flush()?;
+    if let Some(d) = damage {
+        eprintln!("warning: {d}");
+    }
+    Ok(())
+}
+
+/// A bag for the drive of `env` with the policy of `src`.
+fn record_bag(
+    dir: &Path,
+    src: &PolicySettings,
+    env: &str,
+    env_cfg: &EnvConfig,
+    sensors: Sensors,
+    drive: DriveMapping,
+    sim_time: bool,
+) -> Result<DriveBag> {
+    let model = env_cfg.sim.vehicle_model()?;
+    let urdf = agvrl_sim::assets::AssetSource::Embedded
+        .read(&format!("vehicles/{}.urdf", model.name))
+        .ok();
+    let policy_bytes = std::fs::read(&src.policy).with_context(|| format!("reading {}", src.policy.display()))?;
+    let hash: String = sha2::Sha256::digest(&policy_bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    let metadata = std::collections::BTreeMap::from([
+        ("policy".to_string(), src.policy.display().to_string()),
+        ("policy_sha256".to_string(), hash),
+        ("env".to_string(), env.to_string()),
+        ("env_config".to_string(), toml::to_string(env_cfg).unwrap_or_default()),
+        ("agvrl_drive".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+    ]);
+    let topics = agvrl_deploy::hardware::config::Topics::default();
+    let setup = Setup {
+        topics: &topics,
+        drive,
+        sensors,
+        lidar_b: model.lidar_b,
+        camera_b: model.camera_b,
+        urdf,
+        metadata,
+        sim_time,
+    };
+    Ok(DriveBag::create(dir, setup, 0.0)?)
+}
+
+fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Option<Arc<DriveBag>>) -> Result<()> {
     let (cpu0, t0) = (cpu_time_s(), Instant::now());
     let (mut k, mut events, mut terminations, mut filtered) = (0u64, 0u64, 0u64, 0u64);
     let mut infer_us = Vec::new();
+    let (mut late, mut tick_us, period_s) = (0u64, Vec::new(), 1.0 / a.rate_hz);
     let mut racing = None;
     let mut trace = a.trace.as_deref().map(TraceWriter::create).transpose()?;
     while a.steps == 0 || k < a.steps {
         let t = lp.tick()?;
+        if let Some(b) = &bag {
+            b.tick(&t);
+        }
+        late += u64::from(t.late_s > period_s);
+        tick_us.push(t.tick_us);
         if let (Some(w), Some((obs, action))) = (trace.as_mut(), &t.inference) {
             w.row(t.index, obs, action)?;
         }
@@ -239,6 +340,15 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<
     if let Some(w) = trace {
         w.finish()?;
     }
+    drop(lp);
+    let bagged = match bag.map(Arc::try_unwrap) {
+        Some(Ok(b)) => {
+            let s = b.finish()?;
+            format!(" bag_messages={}", s.messages())
+        }
+        Some(Err(_)) => bail!("the bag is still in use"),
+        None => String::new(),
+    };
     let cpu = match (cpu0, cpu_time_s()) {
         (Some(c0), Some(c1)) if wall_s > 0.0 => format!("{:.1}", 100.0 * (c1 - c0) / wall_s),
         _ => "na".into(),
@@ -252,9 +362,11 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>) -> Result<
         )
     });
     println!(
-        "summary ticks={k} events={events} terminations={terminations} filter_interventions={filtered}{laps} infer_us_p50={:.1} infer_us_p99={:.1} wall_s={wall_s:.2} cpu_pct={cpu} rss_mb={rss}",
+        "summary ticks={k} events={events} terminations={terminations} filter_interventions={filtered}{laps} infer_us_p50={:.1} infer_us_p99={:.1} late_ticks={late} tick_us_p99={:.1} tick_us_max={:.1} wall_s={wall_s:.2} cpu_pct={cpu} rss_mb={rss}{bagged}",
         quantile(&infer_us, 0.5),
-        quantile(&infer_us, 0.99)
+        quantile(&infer_us, 0.99),
+        quantile(&tick_us, 0.99),
+        tick_us.iter().copied().fold(0.0, f64::max)
     );
     Ok(())
 }

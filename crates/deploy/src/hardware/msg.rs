@@ -296,3 +296,62 @@ pub struct Image {
     #[serde(with = "serde_bytes")]
     pub data: Vec<u8>,
 }
+
+/// `geometry_msgs/Transform`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Transform {
+    /// Translation, metres.
+    pub translation: Vector3,
+    /// Rotation.
+    pub rotation: Quaternion,
+}
+
+/// `geometry_msgs/TransformStamped`: `child_frame_id`'s pose in `header.frame_id`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TransformStamped {
+    /// Header (frame_id: the parent frame).
+    pub header: Header,
+    /// The child frame.
+    pub child_frame_id: String,
+    /// The child's pose in the parent.
+    pub transform: Transform,
+}
+
+/// `tf2_msgs/TFMessage`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TFMessage {
+    /// Transforms.
+    pub transforms: Vec<TransformStamped>,
+}
+
+/// `std_msgs/String`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StdString {
+    /// The text.
+    pub data: String,
+}
+
+/// `agvrl_msgs/Tick`: one control tick of `agvrl-drive` (schema in `bag/ros2msg.txt`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Tick {
+    /// stamp: the sensor frame's stamp.
+    pub header: Header,
+    /// Tick number since start.
+    pub tick: u64,
+    /// The observation the policy saw (empty when the watchdog stopped the car).
+    pub observation: Vec<f32>,
+    /// The policy's raw action (empty when it did not run).
+    pub action: Vec<f32>,
+    /// Throttle sent, after the safety filter.
+    pub throttle: f64,
+    /// Steering angle sent, rad.
+    pub steering_rad: f64,
+    /// What the safety filter did.
+    pub intervention: String,
+    /// A watchdog event ("" when none).
+    pub event: String,
+    /// Checks, observation and inference, microseconds.
+    pub infer_us: f64,
+    /// How late the tick started after its deadline, seconds.
+    pub late_s: f64,
+}
