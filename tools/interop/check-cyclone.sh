@@ -18,7 +18,7 @@
 #
 # Limits: 12 runs on a 2-core x86_64 box with a cargo build loading both cores, car at 50 Hz,
 # the Cyclone config in cyclone_car.py (loopback, participant index auto):
-#   a) 150/150 commands received, events=0, sensor stamp to command receipt p50 7.8-14.0 ms,
+#   a) 150/150 commands received (and each is in agvrl-drive's --record bag), events=0, sensor stamp to command receipt p50 7.8-14.0 ms,
 #      max 15.2-24.0 ms;
 #   b) last scan to first zero command 91.7-97.4 ms (the watchdog's 2-period limit, 66.7 ms, is
 #      crossed on one of the next 30 Hz ticks: up to 100 ms), 2 non-zero commands after the last
@@ -87,8 +87,8 @@ scenario() {
   expect "$name" car_exit "$(cat "$TMP/$name.car.rc")" 'v == 0'
 }
 
-# a) Both directions: 150 ticks at 30 Hz against a car publishing at 50 Hz.
-scenario a $DOMAIN "--duration-s 7.5" "--steps 150"
+# a) Both directions: 150 ticks at 30 Hz against a car publishing at 50 Hz, recorded to a bag.
+scenario a $DOMAIN "--duration-s 7.5 --commands-out $TMP/a.commands" "--steps 150 --record $TMP/a.bag"
 A=$TMP/a
 expect a drive_exit "$(cat $A.rc)" 'v == 0'
 expect a ticks "$(kv $A.drive ticks)" 'v == 150'
@@ -99,6 +99,13 @@ expect a decode_errors "$(kv $A.car decode_errors)" 'v == 0'
 expect a fields_ok "$(kv $A.car fields_ok)" 'v == 1'
 # Each command carries the stamp of the sensor set it came from; the watchdog allows 66.7 ms.
 expect a stamp_to_receive_ms_max "$(kv $A.car stamp_to_receive_ms_max)" 'v < 100'
+# The bag's command topic is what the car received, float for float.
+"$BIN" --dump "$TMP/a.bag" >"$A.dump"
+"$PY" "$CAR" --compare-bag-dump "$TMP/a.commands" "$A.dump" >"$A.cmp"
+tr '\n' ' ' <"$A.cmp" | sed 's/^/  bag: /'
+echo
+expect a bag_commands "$(kv $A.cmp bag_commands)" 'v == 150'
+expect a car_commands_not_in_bag "$(kv $A.cmp car_commands_not_in_bag)" 'v == 0'
 
 # b) Stale stop and late subscriber: drive reader after 1.5 s, scans stop at 5 s.
 scenario b $((DOMAIN + 1)) "--duration-s 8 --drive-reader-delay-s 1.5 --scan-stop-after-s 5" "--steps 150"

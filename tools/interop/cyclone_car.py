@@ -218,6 +218,24 @@ class PrestampedImage:
             raise RuntimeError("writing an image failed")
 
 
+def compare_bag_dump(commands_path, dump_path):
+    """The car's received commands against the bag's /drive topic, in order, field for field
+    (both float32 on the wire: equal bits). Prints key=value lines; exit 1 on a difference."""
+    with open(commands_path) as f:
+        got = [json.loads(line) for line in f]
+    with open(dump_path) as f:
+        rows = [json.loads(line) for line in f]
+    bag = [r["msg"] for r in rows if r["topic"] == "/drive"]
+    bag = [(m["header"]["stamp"]["sec"] + m["header"]["stamp"]["nanosec"] * 1e-9, m["drive"]["speed"],
+            m["drive"]["steering_angle"]) for m in bag]
+    car = [(c["stamp_s"], c["speed"], c["steering"]) for c in got]
+    # The car's keep-last-1 reader may miss a command; every one it got is in the bag, in order.
+    it = iter(bag)
+    missing = sum(not any(abs(b[0] - c[0]) < 1e-6 and b[1:] == c[1:] for b in it) for c in car)
+    print(f"bag_commands={len(bag)}\ncar_commands={len(car)}\ncar_commands_not_in_bag={missing}")
+    return 0 if car and not missing and len(bag) >= len(car) else 1
+
+
 def verify_image_trace(a):
     """Check the camera part of each traced observation: depth / depth_max of the source pixel
     that the crop (centre window with the policy's vertical field of view and aspect) and the
@@ -288,6 +306,10 @@ def main():
     p.add_argument("--image-topic", default="/zed/zed_node/depth/depth_registered")
     p.add_argument("--image-size", default="672x376", help="WxH of the published image (ZED 2 VGA)")
     p.add_argument("--image-vfov-deg", type=float, default=70.0, help="its vertical field of view")
+    p.add_argument("--commands-out", metavar="FILE",
+                   help="write every command received as a JSON line (stamp_s, speed, steering)")
+    p.add_argument("--compare-bag-dump", nargs=2, metavar=("COMMANDS", "DUMP"),
+                   help="compare a --commands-out file with the /drive messages of `agvrl-drive --dump`")
     p.add_argument("--verify-image-trace", metavar="TRACE",
                    help="check agvrl-drive's --trace instead of running the car")
     p.add_argument("--policy-image", default="64x48", help="the policy camera's WxH")
@@ -296,6 +318,8 @@ def main():
     a = p.parse_args()
     if a.verify_image_trace:
         sys.exit(verify_image_trace(a))
+    if a.compare_bag_dump:
+        sys.exit(compare_bag_dump(*a.compare_bag_dump))
 
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -403,6 +427,10 @@ def main():
     with log.lock:
         cmds = list(log.cmds)
         decode_errors = log.decode_errors
+    if a.commands_out:
+        with open(a.commands_out, "w") as f:
+            for c in cmds:
+                f.write(json.dumps({"stamp_s": c.stamp_s, "speed": c.speed, "steering": c.steering}) + "\n")
     report(a, cmds, decode_errors, published_stamps, t0, reader_created_s, scans, last_scan_s, last_scan_stamp)
     if image_w is not None:
         print(f"images_published={images}")

@@ -26,6 +26,38 @@ pub const ODOM_FRAME: &str = "odom";
 /// Our tick topic.
 pub const TICK_TOPIC: &str = "/agvrl/tick";
 
+/// A sensor topic.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sensor {
+    /// LaserScan.
+    Scan,
+    /// Imu.
+    Imu,
+    /// Odometry.
+    Odom,
+    /// NavSatFix.
+    NavSat,
+    /// Image.
+    Image,
+}
+
+/// A message with a header stamp.
+pub trait Stamped {
+    /// The header stamp, seconds.
+    fn stamp_s(&self) -> f64;
+}
+
+macro_rules! stamped {
+    ($($t:ty),*) => {$(
+        impl Stamped for $t {
+            fn stamp_s(&self) -> f64 {
+                self.header.stamp.as_secs()
+            }
+        }
+    )*};
+}
+stamped!(msg::LaserScan, msg::Imu, msg::Odometry, msg::NavSatFix, msg::Image);
+
 /// Which sensors the vehicle delivers (topics are added for these).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Sensors {
@@ -204,6 +236,45 @@ impl DriveBag {
         if let Some(img) = &f.image {
             self.put(self.ix.image, t, &mapping::depth_image_msg(img, t, CAMERA_FRAME));
         }
+    }
+
+    /// Record a sensor message as it arrived (a ROS 2 car: every message, wall-clock receive
+    /// time; its header stamp is the publish time).
+    pub fn received<M: serde::Serialize + Stamped>(&self, which: Sensor, m: &M) {
+        let index = match which {
+            Sensor::Scan => self.ix.scan,
+            Sensor::Imu => self.ix.imu,
+            Sensor::Odom => self.ix.odom,
+            Sensor::NavSat => self.ix.navsat,
+            Sensor::Image => self.ix.image,
+        };
+        if let Some(i) = index {
+            let log = bag::ns(crate::run_loop::wall_clock_s());
+            self.rec.record(i, log, bag::ns(m.stamp_s()), bag::cdr(m));
+        }
+    }
+
+    /// Record an Odometry message as it arrived, and its pose as odom to base_link on `/tf`.
+    pub fn received_odom(&self, m: &msg::Odometry) {
+        self.received(Sensor::Odom, m);
+        let t = m.header.stamp.as_secs();
+        let p = m.pose.pose;
+        let tf = msg::TFMessage {
+            transforms: vec![msg::TransformStamped {
+                header: mapping::header(t, ODOM_FRAME),
+                child_frame_id: BASE_FRAME.into(),
+                transform: msg::Transform {
+                    translation: msg::Vector3 {
+                        x: p.position.x,
+                        y: p.position.y,
+                        z: p.position.z,
+                    },
+                    rotation: p.orientation,
+                },
+            }],
+        };
+        let log = bag::ns(crate::run_loop::wall_clock_s());
+        self.rec.record(self.ix.tf, log, bag::ns(t), bag::cdr(&tf));
     }
 
     /// Record a command sent on the drive topic, computed from the frame stamped `stamp_s`.

@@ -196,16 +196,30 @@ fn run() -> Result<()> {
             let sensors = Sensors::of(&vehicle.reset(a.seed)?);
             let mut mapping = DriveMapping::default();
             mapping.for_trained_top_speed(env_cfg.sim.vehicle_model()?.top_speed_mps());
-            let bag = Arc::new(record_bag(dir, &src, &env, &env_cfg, sensors, mapping, true)?);
+            let topics = agvrl_deploy::hardware::config::Topics::default();
+            let car = BagCar {
+                topics: &topics,
+                sensors,
+                drive: mapping,
+                sim_time: true,
+            };
+            let bag = Arc::new(record_bag(dir, &src, &env, &env_cfg, car)?);
             let v = Recorded::new(vehicle, bag.clone(), true);
             drive_loop(&a, DriveLoop::new(v, task, policy, drive, a.seed)?, Some(bag))
         }
-        VehicleKind::Ros2 => drive_ros2(&a, &env, &env_cfg, policy, drive),
+        VehicleKind::Ros2 => drive_ros2(&a, &src, &env, &env_cfg, policy, drive),
     }
 }
 
 #[cfg(feature = "ros2")]
-fn drive_ros2(a: &Args, env: &str, env_cfg: &EnvConfig, policy: Policy, drive: DriveConfig) -> Result<()> {
+fn drive_ros2(
+    a: &Args,
+    src: &PolicySettings,
+    env: &str,
+    env_cfg: &EnvConfig,
+    policy: Policy,
+    drive: DriveConfig,
+) -> Result<()> {
     let mut cfg = ros2_config(a)?;
     cfg.check_lidar(&env_cfg.sim.lidar)?;
     // Full throttle is the trained car's top speed unless the car's TOML says otherwise.
@@ -224,12 +238,39 @@ fn drive_ros2(a: &Args, env: &str, env_cfg: &EnvConfig, policy: Policy, drive: D
     } else {
         None
     };
-    let vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime, camera)?;
-    drive_loop(a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?, None)
+    let t = &cfg.topics;
+    let sensors = Sensors {
+        scan: true,
+        imu: !t.imu.is_empty(),
+        odom: !t.odom.is_empty(),
+        navsat: !t.navsat.is_empty(),
+        image: camera.is_some(),
+    };
+    let bag = match &a.record {
+        Some(dir) => {
+            let car = BagCar {
+                topics: t,
+                sensors,
+                drive: cfg.drive,
+                sim_time: false,
+            };
+            Some(Arc::new(record_bag(dir, src, env, env_cfg, car)?))
+        }
+        None => None,
+    };
+    let mut vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime, camera)?;
+    match bag {
+        Some(bag) => {
+            vehicle.record_into(bag.clone());
+            let v = Recorded::new(vehicle, bag.clone(), false);
+            drive_loop(a, DriveLoop::new(v, task, policy, drive, a.seed)?, Some(bag))
+        }
+        None => drive_loop(a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?, None),
+    }
 }
 
 #[cfg(not(feature = "ros2"))]
-fn drive_ros2(_: &Args, _: &str, _: &EnvConfig, _: Policy, _: DriveConfig) -> Result<()> {
+fn drive_ros2(_: &Args, _: &PolicySettings, _: &str, _: &EnvConfig, _: Policy, _: DriveConfig) -> Result<()> {
     bail!("--vehicle ros2: this agvrl-drive was built without the `ros2` feature")
 }
 
@@ -251,16 +292,22 @@ fn dump(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// A bag for the drive of `env` with the policy of `src`.
-fn record_bag(
-    dir: &Path,
-    src: &PolicySettings,
-    env: &str,
-    env_cfg: &EnvConfig,
+/// The car side of a recording: its topics, sensors and command scaling, and its clock.
+struct BagCar<'a> {
+    topics: &'a agvrl_deploy::hardware::config::Topics,
     sensors: Sensors,
     drive: DriveMapping,
     sim_time: bool,
-) -> Result<DriveBag> {
+}
+
+/// A bag for the drive of `env` with the policy of `src`.
+fn record_bag(dir: &Path, src: &PolicySettings, env: &str, env_cfg: &EnvConfig, car: BagCar<'_>) -> Result<DriveBag> {
+    let BagCar {
+        topics,
+        sensors,
+        drive,
+        sim_time,
+    } = car;
     let model = env_cfg.sim.vehicle_model()?;
     let urdf = agvrl_sim::assets::AssetSource::Embedded
         .read(&format!("vehicles/{}.urdf", model.name))
@@ -277,9 +324,8 @@ fn record_bag(
         ("env_config".to_string(), toml::to_string(env_cfg).unwrap_or_default()),
         ("agvrl_drive".to_string(), env!("CARGO_PKG_VERSION").to_string()),
     ]);
-    let topics = agvrl_deploy::hardware::config::Topics::default();
     let setup = Setup {
-        topics: &topics,
+        topics,
         drive,
         sensors,
         lidar_b: model.lidar_b,
@@ -288,7 +334,12 @@ fn record_bag(
         metadata,
         sim_time,
     };
-    Ok(DriveBag::create(dir, setup, 0.0)?)
+    let t0_s = if sim_time {
+        0.0
+    } else {
+        agvrl_deploy::run_loop::wall_clock_s()
+    };
+    Ok(DriveBag::create(dir, setup, t0_s)?)
 }
 
 fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Option<Arc<DriveBag>>) -> Result<()> {

@@ -17,6 +17,7 @@ use super::config::{Reliability, Ros2Config, TopicQos};
 use super::mapping::{self, scan_to_rays};
 use super::msg;
 use crate::DeployError;
+use crate::record::{DriveBag, Sensor};
 use agvrl_envs::api::{Control, EnvError, SensorFrame, Vehicle};
 use agvrl_sim::msg::CameraFrame;
 use agvrl_sim::sensors::CameraConfig;
@@ -25,6 +26,7 @@ use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile};
 use serde::de::DeserializeOwned;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 pub use ros2_client::{Publisher, Subscription};
@@ -123,17 +125,21 @@ pub(crate) fn publisher<M: serde::Serialize>(
     node.create_publisher(&t, Some(q)).map_err(|e| dds_err(name, e))
 }
 
-/// Take every waiting sample of `sub`; keep the newest in `latest`. Samples that fail to
-/// decode are counted, not fatal (one bad message must not stop the loop).
+/// Take every waiting sample of `sub`, showing each to `seen`; keep the newest in `latest`.
+/// Samples that fail to decode are counted, not fatal (one bad message must not stop the loop).
 pub(crate) fn drain<M: DeserializeOwned + 'static>(
     sub: &Option<Subscription<M>>,
     latest: &mut Option<M>,
     bad: &mut u64,
+    mut seen: impl FnMut(&M),
 ) {
     let Some(s) = sub else { return };
     loop {
         match s.take() {
-            Ok(Some((m, _))) => *latest = Some(m),
+            Ok(Some((m, _))) => {
+                seen(&m);
+                *latest = Some(m);
+            }
             Ok(None) => break,
             Err(_) => *bad += 1,
         }
@@ -174,6 +180,8 @@ pub struct Ros2Vehicle {
     last_stamp_s: f64,
     awaiting: bool,
     applied: Control,
+    /// Every message received also goes here.
+    bag: Option<Arc<DriveBag>>,
 }
 
 impl Ros2Vehicle {
@@ -235,7 +243,13 @@ impl Ros2Vehicle {
             last_stamp_s: f64::NEG_INFINITY,
             awaiting: false,
             applied: Control::default(),
+            bag: None,
         })
+    }
+
+    /// Record every message received from now on into `bag`, at its receive time.
+    pub fn record_into(&mut self, bag: Arc<DriveBag>) {
+        self.bag = Some(bag);
     }
 
     /// Messages that failed to decode so far.
@@ -271,12 +285,23 @@ impl Ros2Vehicle {
 
     fn drain(&mut self) {
         let b = &mut self.bad_messages;
-        drain(&self.scan, &mut self.latest.scan, b);
-        drain(&self.imu, &mut self.latest.imu, b);
-        drain(&self.odom, &mut self.latest.odom, b);
-        drain(&self.navsat, &mut self.latest.navsat, b);
+        let bag = self.bag.as_deref();
+        drain(&self.scan, &mut self.latest.scan, b, |m| {
+            bag.map_or((), |r| r.received(Sensor::Scan, m))
+        });
+        drain(&self.imu, &mut self.latest.imu, b, |m| {
+            bag.map_or((), |r| r.received(Sensor::Imu, m))
+        });
+        drain(&self.odom, &mut self.latest.odom, b, |m| {
+            bag.map_or((), |r| r.received_odom(m))
+        });
+        drain(&self.navsat, &mut self.latest.navsat, b, |m| {
+            bag.map_or((), |r| r.received(Sensor::NavSat, m))
+        });
         let mut img = None;
-        drain(&self.image, &mut img, b);
+        drain(&self.image, &mut img, b, |m| {
+            bag.map_or((), |r| r.received(Sensor::Image, m))
+        });
         // Only the newest image of a drain is decoded (a 1280x720 32FC1 is 3.7 MB).
         if let (Some(img), Some(cam)) = (img, &self.camera) {
             match mapping::depth_frame(&img, &self.cfg.camera, cam) {
