@@ -1,7 +1,7 @@
 //! rosbag2 bags: a directory holding `metadata.yaml` and one MCAP file, with ROS 2's
 //! conventions (profile `ros2`, `ros2msg` schemas, `cdr` messages with their encapsulation
-//! header, log time = receive time), so `ros2 bag`, Foxglove, rerun and Python's `rosbags` and
-//! `mcap` read them. No compression: the aarch64 build stays free of C libraries.
+//! header, log time = receive time), the layout ROS 2 tools read (checked with rerun and with
+//! Python's `rosbags` and `mcap`). No compression: the aarch64 build stays free of C libraries.
 //!
 //! The writer runs on a thread of its own ([`BagRecorder`]): the drive loop only hands over
 //! bytes, so a slow disk never delays a tick. Chunks of 1 MiB, flushed to the file at least once
