@@ -16,6 +16,7 @@
 pub mod bag;
 pub mod hardware;
 pub mod record;
+pub mod replay;
 pub mod run_loop;
 pub mod stats;
 

@@ -297,6 +297,8 @@ impl DriveBag {
             event: t.event.as_ref().map_or(String::new(), |e| format!("{e:?}")),
             infer_us: t.infer_us,
             late_s: t.late_s,
+            clock_s: t.now_s,
+            sensed_s: if self.sim_time { t.stamp_s } else { t.sensed_wall_s },
         };
         self.put(Some(self.ix.tick), t.stamp_s, &m);
     }

@@ -123,6 +123,11 @@ pub struct Tick {
     /// From the start of the tick to the command sent (sensing, inference, actuation),
     /// microseconds.
     pub tick_us: f64,
+    /// The watchdog's clock on this tick (frames' time: the wall clock in real time, the
+    /// loop's own clock in lockstep), seconds; a replay gives it back.
+    pub now_s: f64,
+    /// The wall clock when the frame was read, seconds since the epoch.
+    pub sensed_wall_s: f64,
     /// What the task says about the frame (a car without a map has no laps).
     pub racing: Option<RacingInfo>,
     /// The task's termination verdict on the frame (collision, too close, ...); the loop
@@ -225,6 +230,12 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
     /// One control period: sense, check, infer, actuate. The loop's clock advances by one
     /// period per tick (the vehicle's own time when it is simulated).
     pub fn tick(&mut self) -> Result<Tick, DeployError> {
+        self.tick_at(None)
+    }
+
+    /// A tick whose watchdog reads `now_s` instead of the loop's clock (a replay's recorded
+    /// clock).
+    pub fn tick_at(&mut self, now_s: Option<f64>) -> Result<Tick, DeployError> {
         let period = 1.0 / self.cfg.rate_hz;
         let started = Instant::now();
         let late_s = if self.cfg.realtime {
@@ -234,13 +245,14 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             0.0
         };
         let frame = self.vehicle.sense().map_err(vehicle_err)?;
+        let sensed_wall_s = wall_clock_s();
         // Timed from here: checks, observation and inference (not the vehicle's wait).
         let t0 = Instant::now();
-        let now_s = if self.cfg.realtime {
+        let now_s = now_s.unwrap_or(if self.cfg.realtime {
             wall_clock_s() - self.wall_offset_s
         } else {
             self.clock_s
-        };
+        });
         let checked = self.check(&frame, now_s);
         let fresh = checked.is_ok();
         let mut intervention = Intervention::None;
@@ -285,6 +297,8 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             infer_us,
             late_s,
             tick_us,
+            now_s,
+            sensed_wall_s,
             racing: outcome.as_ref().and_then(|o| o.racing.clone()),
             termination: outcome.and_then(|o| o.termination),
             inference,

@@ -441,6 +441,54 @@ mod ros2_loopback {
         assert!(rout.contains(" terminations=0") && !rout.contains(" laps=0 "), "{rout}");
     }
 
+    /// A drive over DDS recorded on the drive's side replays bit for bit: the same frames
+    /// (every message as received, each tick's own), the same watchdog clock, the same actions.
+    #[test]
+    fn a_ros2_drive_replays_from_its_bag_to_the_same_bits() {
+        let dir = scratch("ros2bag");
+        let bag = dir.path().join("car");
+        let policy = shipped_policy("racing-oval-camera");
+        let d = domain().to_string();
+        let bin = env!("CARGO_BIN_EXE_agvrl-drive");
+        let robot = std::process::Command::new(bin)
+            .arg("--policy")
+            .arg(&policy)
+            .args(["--serve-sim", "racing-oval", "--steps", "300", "--domain-id", &d])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let (ok, out, err) = drive_cli(&[
+            "--policy".as_ref(),
+            policy.as_os_str(),
+            "--vehicle".as_ref(),
+            "ros2".as_ref(),
+            "--steps".as_ref(),
+            "300".as_ref(),
+            "--domain-id".as_ref(),
+            d.as_ref(),
+            "--quiet".as_ref(),
+            "--record".as_ref(),
+            bag.as_os_str(),
+        ]);
+        robot.wait_with_output().unwrap();
+        assert!(ok, "{out}{err}");
+        let (ok, out, err) = drive_cli(&[
+            "--policy".as_ref(),
+            policy.as_os_str(),
+            "--replay".as_ref(),
+            bag.as_os_str(),
+            "--fast".as_ref(),
+            "--check".as_ref(),
+            "--quiet".as_ref(),
+            "--tolerance".as_ref(),
+            "0".as_ref(),
+        ]);
+        assert!(ok, "{out}{err}");
+        assert_eq!(kv(&out, "ticks"), 300.0, "{out}");
+        assert_eq!(kv(&out, "action_diff_max"), 0.0, "{out}");
+    }
+
     /// A 15 Hz camera against the 30 Hz loop in real time: an image counts `camera.max_lag_s`
     /// past its stamp, so frames between images are not stale (without that allowance a tick
     /// just before the next image sees one 67 ms old plus transport, over the 2-period limit).
@@ -817,4 +865,91 @@ fn a_killed_recording_leaves_a_readable_bag() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let meta = std::fs::read_to_string(d.join("metadata.yaml")).unwrap();
     assert!(meta.contains(&format!("  message_count: {}\n", msgs.len())), "{meta}");
+}
+
+/// Run agvrl-drive with `args`; (success, stdout, stderr).
+fn drive_cli(args: &[&std::ffi::OsStr]) -> (bool, String, String) {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// The `key=value` of a summary line.
+fn kv(out: &str, key: &str) -> f64 {
+    out.split_whitespace()
+        .find_map(|w| w.strip_prefix(&format!("{key}=")))
+        .unwrap_or_else(|| panic!("no {key} in {out}"))
+        .parse()
+        .unwrap()
+}
+
+/// `--replay --check` on a bag of the simulated car: the frames rebuilt from its messages
+/// (through the code a ROS 2 car's go through) give the recorded commands; a bag whose scans
+/// were changed is caught.
+#[test]
+fn a_replayed_bag_gives_the_recorded_commands_and_a_changed_scan_is_caught() {
+    use agvrl_deploy::bag::{self, BagWriter, Offered, Topic};
+    use agvrl_deploy::hardware::msg;
+    let dir = scratch("replay");
+    let (rec, changed) = (dir.path().join("rec"), dir.path().join("changed"));
+    let policy = shipped_policy("racing-oval-ppo");
+    let p = policy.as_os_str();
+    let (ok, _, err) = drive_cli(&[
+        "--policy".as_ref(),
+        p,
+        "--steps".as_ref(),
+        "300".as_ref(),
+        "--quiet".as_ref(),
+        "--record".as_ref(),
+        rec.as_os_str(),
+    ]);
+    assert!(ok, "{err}");
+    let replay = |bag: &std::path::Path| {
+        drive_cli(&[
+            "--policy".as_ref(),
+            p,
+            "--replay".as_ref(),
+            bag.as_os_str(),
+            "--fast".as_ref(),
+            "--check".as_ref(),
+            "--quiet".as_ref(),
+            "--tolerance".as_ref(),
+            "1e-4".as_ref(),
+        ])
+    };
+    let (ok, out, err) = replay(&rec);
+    assert!(ok, "{out}{err}");
+    assert_eq!(kv(&out, "ticks"), 300.0, "{out}");
+    assert_eq!(kv(&out, "events_differ"), 0.0, "{out}");
+    // Copy the bag with the ranges of the scans from tick 100 on halved.
+    let (msgs, _) = bag::read_messages(&rec).unwrap();
+    let mut w = BagWriter::create(&changed).unwrap();
+    let mut index = std::collections::HashMap::new();
+    for m in &msgs {
+        let i = *index.entry(m.topic.clone()).or_insert_with(|| {
+            w.add_topic(Topic {
+                name: m.topic.clone(),
+                ty: m.ty.clone(),
+                offered: Offered::Reliable,
+            })
+            .unwrap()
+        });
+        let mut data = m.data.clone();
+        if m.topic == "/scan" && m.log_ns > 100 * 33_333_333 {
+            let mut s: msg::LaserScan = bag::decode(&m.data).unwrap();
+            s.ranges.iter_mut().for_each(|r| *r *= 0.5);
+            data = bag::cdr(&s);
+        }
+        w.write(i, m.log_ns, m.publish_ns, &data).unwrap();
+    }
+    w.finish().unwrap();
+    let (ok, out, _) = replay(&changed);
+    assert!(!ok, "a changed scan must fail the check: {out}");
+    assert!(kv(&out, "action_diff_max") > 1e-3, "{out}");
 }

@@ -20,7 +20,7 @@ use serde::Deserialize;
 use sha2::Digest;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// `--vehicle`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -103,7 +103,18 @@ struct Args {
     /// Print every message of bag DIR as a JSON line (topic, type, log_ns, msg), then exit.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["record", "reindex", "check_trace", "serve_sim"])]
     dump: Option<PathBuf>,
-    /// Largest action difference --check-trace accepts.
+    /// Drive nothing: feed bag DIR (of --record) to the policy open loop, tick by tick as
+    /// recorded (the car's TOML of --config names its topics), at the recorded pace.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["record", "reindex", "dump", "check_trace", "serve_sim"])]
+    replay: Option<PathBuf>,
+    /// --replay as fast as possible.
+    #[arg(long, requires = "replay")]
+    fast: bool,
+    /// --replay: compare the actions and commands with the recorded ones (exit status 1 beyond
+    /// --tolerance, or when a tick's watchdog event differs).
+    #[arg(long, requires = "replay")]
+    check: bool,
+    /// Largest action difference --check-trace and --replay --check accept.
     #[arg(long, default_value_t = 1e-4)]
     tolerance: f32,
 }
@@ -178,6 +189,9 @@ fn run() -> Result<()> {
     let mut policy = src.load_policy()?;
     if let Some(trace) = &a.check_trace {
         return check_trace(&mut policy, trace, a.tolerance);
+    }
+    if let Some(dir) = &a.replay {
+        return replay(&a, dir, &env, &env_cfg, policy);
     }
     let drive = DriveConfig {
         rate_hz: a.rate_hz,
@@ -272,6 +286,93 @@ fn drive_ros2(
 #[cfg(not(feature = "ros2"))]
 fn drive_ros2(_: &Args, _: &PolicySettings, _: &str, _: &EnvConfig, _: Policy, _: DriveConfig) -> Result<()> {
     bail!("--vehicle ros2: this agvrl-drive was built without the `ros2` feature")
+}
+
+/// `--replay DIR [--fast] [--check]`.
+fn replay(a: &Args, dir: &Path, env: &str, env_cfg: &EnvConfig, policy: Policy) -> Result<()> {
+    let mut cfg = match &a.config {
+        Some(p) => agvrl_deploy::hardware::Ros2Config::load(p)?,
+        None => agvrl_deploy::hardware::Ros2Config::default(),
+    };
+    let _ = cfg
+        .drive
+        .for_trained_top_speed(env_cfg.sim.vehicle_model()?.top_speed_mps());
+    let task = make_task(env, env_cfg, cfg.drive.steering_limit_rad)?;
+    let camera = if task.needs().image {
+        env_cfg.sim.camera.clone()
+    } else {
+        None
+    };
+    let vehicle = agvrl_deploy::replay::Replay::open(dir, cfg, camera)?;
+    if let Some(d) = &vehicle.damage {
+        eprintln!("warning: {d}; replaying the intact part");
+    }
+    let recorded = vehicle.ticks().to_vec();
+    let drive = DriveConfig {
+        rate_hz: a.rate_hz,
+        realtime: false,
+        ..DriveConfig::default()
+    };
+    let mut lp = DriveLoop::new(vehicle, task, policy, drive, a.seed)?;
+    let (t0, clock0) = (Instant::now(), recorded[0].clock_s);
+    let (mut action_diff, mut control_diff, mut event_diff) = (Vec::new(), Vec::new(), 0u64);
+    for rec in &recorded {
+        if !a.fast {
+            let due = Duration::from_secs_f64((rec.clock_s - clock0).max(0.0));
+            if let Some(rest) = due.checked_sub(t0.elapsed()) {
+                std::thread::sleep(rest);
+            }
+        }
+        let t = lp.tick_at(Some(rec.clock_s))?;
+        let action = t.inference.as_ref().map(|(_, act)| act.clone()).unwrap_or_default();
+        if action.len() == rec.action.len() {
+            let d = action
+                .iter()
+                .zip(&rec.action)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max);
+            action_diff.push(d as f64);
+        } else {
+            event_diff += 1;
+        }
+        control_diff.push(
+            (t.control.throttle - rec.throttle)
+                .abs()
+                .max((t.control.steering_rad - rec.steering_rad).abs()),
+        );
+        let recorded_event = !rec.event.is_empty();
+        event_diff += u64::from(t.event.is_some() != recorded_event);
+        if !a.quiet {
+            let ev = t.event.as_ref().map(|e| format!(" event={e:?}")).unwrap_or_default();
+            println!(
+                "tick={} throttle={:.3} steering_rad={:.3} recorded_throttle={:.3} recorded_steering_rad={:.3}{ev}",
+                t.index, t.control.throttle, t.control.steering_rad, rec.throttle, rec.steering_rad
+            );
+        }
+    }
+    let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+    let bad = lp.vehicle().bad_messages();
+    println!(
+        "replay ticks={} events_differ={event_diff} action_diff_max={:e} action_diff_p99={:e} control_diff_max={:e} \
+         control_diff_p99={:e} bad_messages={bad} wall_s={:.2}",
+        recorded.len(),
+        max(&action_diff),
+        quantile(&action_diff, 0.99),
+        max(&control_diff),
+        quantile(&control_diff, 0.99),
+        t0.elapsed().as_secs_f64()
+    );
+    if a.check {
+        let worst = max(&action_diff).max(max(&control_diff));
+        if event_diff > 0 || worst > a.tolerance as f64 {
+            bail!(
+                "the replay differs from the recording: {event_diff} ticks' watchdog events, largest difference {worst:e} \
+                 (tolerance {:e})",
+                a.tolerance
+            );
+        }
+    }
+    Ok(())
 }
 
 /// `--dump DIR`: every intact message as a JSON line; damage is a warning on stderr.

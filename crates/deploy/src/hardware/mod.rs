@@ -2,6 +2,7 @@
 //! (always built, unit-tested); the DDS transport is behind the `ros2` feature.
 
 pub mod config;
+pub mod frames;
 pub mod mapping;
 pub mod msg;
 #[cfg(feature = "ros2")]

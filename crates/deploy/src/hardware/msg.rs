@@ -354,4 +354,8 @@ pub struct Tick {
     pub infer_us: f64,
     /// How late the tick started after its deadline, seconds.
     pub late_s: f64,
+    /// The watchdog's clock on this tick, seconds.
+    pub clock_s: f64,
+    /// When the tick read its frame, on the bag's log clock, seconds.
+    pub sensed_s: f64,
 }

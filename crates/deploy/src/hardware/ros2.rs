@@ -14,12 +14,12 @@
 //! lockstep wait takes no such allowance.
 
 use super::config::{Reliability, Ros2Config, TopicQos};
-use super::mapping::{self, scan_to_rays};
+use super::frames::FrameBuilder;
+use super::mapping;
 use super::msg;
 use crate::DeployError;
 use crate::record::{DriveBag, Sensor};
 use agvrl_envs::api::{Control, EnvError, SensorFrame, Vehicle};
-use agvrl_sim::msg::CameraFrame;
 use agvrl_sim::sensors::CameraConfig;
 use ros2_client::dds::rustdds::Topic;
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
@@ -146,18 +146,6 @@ pub(crate) fn drain<M: DeserializeOwned + 'static>(
     }
 }
 
-#[derive(Default)]
-struct Latest {
-    scan: Option<msg::LaserScan>,
-    imu: Option<msg::Imu>,
-    odom: Option<msg::Odometry>,
-    navsat: Option<msg::NavSatFix>,
-    /// The newest image that decoded, as the policy camera's frame.
-    image: Option<(msg::Header, CameraFrame)>,
-    /// Why the newest image that did not decode was refused.
-    image_error: Option<String>,
-}
-
 /// A car (or the sim-backed robot) over ROS 2.
 pub struct Ros2Vehicle {
     cfg: Ros2Config,
@@ -170,12 +158,11 @@ pub struct Ros2Vehicle {
     odom: Option<Subscription<msg::Odometry>>,
     navsat: Option<Subscription<msg::NavSatFix>>,
     image: Option<Subscription<msg::Image>>,
-    /// The policy's camera (images are cropped and resized to it).
-    camera: Option<CameraConfig>,
     drive: Publisher<msg::AckermannDriveStamped>,
     poll: Poll,
     events: Events,
-    latest: Latest,
+    /// The newest messages, and the frame they make.
+    frames: FrameBuilder,
     bad_messages: u64,
     last_stamp_s: f64,
     awaiting: bool,
@@ -224,6 +211,7 @@ impl Ros2Vehicle {
         if let Some(s) = image.as_mut() {
             reg.register(s, Token(4), Interest::READABLE).map_err(io)?;
         }
+        let frames = FrameBuilder::new(cfg.clone(), camera);
         Ok(Self {
             cfg,
             lockstep,
@@ -234,11 +222,10 @@ impl Ros2Vehicle {
             odom,
             navsat,
             image,
-            camera,
+            frames,
             drive,
             poll,
             events: Events::with_capacity(16),
-            latest: Latest::default(),
             bad_messages: 0,
             last_stamp_s: f64::NEG_INFINITY,
             awaiting: false,
@@ -252,9 +239,9 @@ impl Ros2Vehicle {
         self.bag = Some(bag);
     }
 
-    /// Messages that failed to decode so far.
+    /// Messages that failed to decode so far (images that could not be used included).
     pub fn bad_messages(&self) -> u64 {
-        self.bad_messages
+        self.bad_messages + self.frames.bad_images()
     }
 
     /// Readers of the drive topic that discovery has found so far.
@@ -286,53 +273,37 @@ impl Ros2Vehicle {
     fn drain(&mut self) {
         let b = &mut self.bad_messages;
         let bag = self.bag.as_deref();
-        drain(&self.scan, &mut self.latest.scan, b, |m| {
+        let f = &mut self.frames;
+        let (mut scan, mut imu, mut odom, mut navsat, mut img) = (None, None, None, None, None);
+        drain(&self.scan, &mut scan, b, |m| {
             bag.map_or((), |r| r.received(Sensor::Scan, m))
         });
-        drain(&self.imu, &mut self.latest.imu, b, |m| {
+        drain(&self.imu, &mut imu, b, |m| {
             bag.map_or((), |r| r.received(Sensor::Imu, m))
         });
-        drain(&self.odom, &mut self.latest.odom, b, |m| {
-            bag.map_or((), |r| r.received_odom(m))
-        });
-        drain(&self.navsat, &mut self.latest.navsat, b, |m| {
+        drain(&self.odom, &mut odom, b, |m| bag.map_or((), |r| r.received_odom(m)));
+        drain(&self.navsat, &mut navsat, b, |m| {
             bag.map_or((), |r| r.received(Sensor::NavSat, m))
         });
-        let mut img = None;
         drain(&self.image, &mut img, b, |m| {
             bag.map_or((), |r| r.received(Sensor::Image, m))
         });
-        // Only the newest image of a drain is decoded (a 1280x720 32FC1 is 3.7 MB).
-        if let (Some(img), Some(cam)) = (img, &self.camera) {
-            match mapping::depth_frame(&img, &self.cfg.camera, cam) {
-                Ok(f) => self.latest.image = Some((img.header, f)),
-                Err(e) => {
-                    self.bad_messages += 1;
-                    self.latest.image_error = Some(e);
-                }
-            }
+        if let Some(m) = scan {
+            f.scan(m);
         }
-    }
-
-    /// The oldest stamp of the subscribed topics, an image's `image_lag_s` later than its own
-    /// (None: one has sent nothing yet).
-    fn stamps(&self, image_lag_s: f64) -> Option<f64> {
-        let l = &self.latest;
-        let s = |on: bool, h: Option<&msg::Header>| -> Option<f64> {
-            if on {
-                h.map(|h| h.stamp.as_secs())
-            } else {
-                Some(f64::INFINITY)
-            }
-        };
-        let all = [
-            s(self.scan.is_some(), l.scan.as_ref().map(|m| &m.header))?,
-            s(self.imu.is_some(), l.imu.as_ref().map(|m| &m.header))?,
-            s(self.odom.is_some(), l.odom.as_ref().map(|m| &m.header))?,
-            s(self.navsat.is_some(), l.navsat.as_ref().map(|m| &m.header))?,
-            s(self.image.is_some(), l.image.as_ref().map(|m| &m.0))? + image_lag_s,
-        ];
-        Some(all.into_iter().fold(f64::INFINITY, f64::min))
+        if let Some(m) = imu {
+            f.imu(m);
+        }
+        if let Some(m) = odom {
+            f.odom(m);
+        }
+        if let Some(m) = navsat {
+            f.navsat(m);
+        }
+        // Only the newest image of a drain is decoded (a 1280x720 32FC1 is 3.7 MB).
+        if let Some(m) = img {
+            f.image(&m);
+        }
     }
 
     /// Wait until every subscribed topic has a message stamped after `after_s`, or `timeout`.
@@ -340,7 +311,7 @@ impl Ros2Vehicle {
         let deadline = Instant::now() + timeout;
         loop {
             self.drain();
-            if self.stamps(0.0).is_some_and(|t| t > after_s) {
+            if self.frames.stamps(0.0).is_some_and(|t| t > after_s) {
                 return true;
             }
             let left = deadline.saturating_duration_since(Instant::now());
@@ -353,22 +324,7 @@ impl Ros2Vehicle {
     }
 
     fn frame(&self) -> SensorFrame {
-        let l = &self.latest;
-        let odom_ready = self.odom.is_none() || l.odom.is_some();
-        SensorFrame {
-            stamp_s: self.stamps(self.cfg.camera.max_lag_s).unwrap_or(f64::NEG_INFINITY),
-            scan: l.scan.as_ref().map(|s| scan_to_rays(s, &self.cfg.scan)),
-            imu: l
-                .imu
-                .as_ref()
-                .filter(|_| odom_ready)
-                .map(|i| mapping::imu_reading(i, l.odom.as_ref())),
-            gps: (l.odom.is_some() || l.navsat.is_some())
-                .then(|| mapping::gps_reading(l.odom.as_ref(), l.navsat.as_ref())),
-            image: l.image.as_ref().map(|(_, f)| f.clone()),
-            contact: None,
-            applied: self.applied,
-        }
+        self.frames.frame(self.applied)
     }
 }
 
@@ -382,7 +338,7 @@ impl Vehicle for Ros2Vehicle {
         if !self.wait_newer(f64::NEG_INFINITY, timeout) {
             let t = &self.cfg.topics;
             let image = if self.image.is_some() { t.image.as_str() } else { "" };
-            let refused = match &self.latest.image_error {
+            let refused = match self.frames.image_error() {
                 Some(e) => format!("; images on {} were refused: {e}", t.image),
                 None => String::new(),
             };
@@ -440,7 +396,7 @@ impl Vehicle for Ros2Vehicle {
             // The set in hand may be as old as the wait for the subscriber: start from a newer
             // one (a car whose sensors stopped meanwhile starts stale, and is stopped). In
             // lockstep the robot re-sends its set unchanged until the first command.
-            let before = self.stamps(0.0).unwrap_or(f64::NEG_INFINITY);
+            let before = self.frames.stamps(0.0).unwrap_or(f64::NEG_INFINITY);
             let left = timeout
                 .saturating_sub(t0.elapsed())
                 .max(Duration::from_secs_f64(self.cfg.fresh_timeout_s));

@@ -1,0 +1,167 @@
+//! ROS 2 messages to the `SensorFrame` a task reads: the newest message of each subscribed
+//! topic, mapped as the car's TOML says. The ROS 2 vehicle (live) and the bag replay share it,
+//! so a replayed car log gives the frames the car gave.
+
+use super::config::Ros2Config;
+use super::mapping::{self, scan_to_rays};
+use super::msg;
+use agvrl_envs::api::{Control, SensorFrame};
+use agvrl_sim::msg::CameraFrame;
+use agvrl_sim::sensors::CameraConfig;
+
+/// Which topics feed the frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Subscribed {
+    /// LaserScan.
+    pub scan: bool,
+    /// Imu.
+    pub imu: bool,
+    /// Odometry.
+    pub odom: bool,
+    /// NavSatFix.
+    pub navsat: bool,
+    /// The depth Image.
+    pub image: bool,
+}
+
+/// The newest message of each topic, and the frame they make.
+pub struct FrameBuilder {
+    cfg: Ros2Config,
+    camera: Option<CameraConfig>,
+    on: Subscribed,
+    scan: Option<msg::LaserScan>,
+    imu: Option<msg::Imu>,
+    odom: Option<msg::Odometry>,
+    navsat: Option<msg::NavSatFix>,
+    /// The newest image that decoded, as the policy camera's frame.
+    image: Option<(msg::Header, CameraFrame)>,
+    /// Why the newest image that could not be used was refused.
+    image_error: Option<String>,
+    /// Images refused so far.
+    bad_images: u64,
+}
+
+impl FrameBuilder {
+    /// Frames from the topics of `cfg` (an empty name is not subscribed), and a depth image
+    /// cut to `camera` when the policy sees one.
+    pub fn new(cfg: Ros2Config, camera: Option<CameraConfig>) -> Self {
+        let t = &cfg.topics;
+        let on = Subscribed {
+            scan: !t.scan.is_empty(),
+            imu: !t.imu.is_empty(),
+            odom: !t.odom.is_empty(),
+            navsat: !t.navsat.is_empty(),
+            image: camera.is_some() && !t.image.is_empty(),
+        };
+        Self {
+            cfg,
+            camera,
+            on,
+            scan: None,
+            imu: None,
+            odom: None,
+            navsat: None,
+            image: None,
+            image_error: None,
+            bad_images: 0,
+        }
+    }
+
+    /// The topics that feed the frame.
+    pub fn subscribed(&self) -> Subscribed {
+        self.on
+    }
+
+    /// The car's settings.
+    pub fn cfg(&self) -> &Ros2Config {
+        &self.cfg
+    }
+
+    /// The policy camera images are cut to.
+    pub fn camera(&self) -> Option<&CameraConfig> {
+        self.camera.as_ref()
+    }
+
+    /// A LaserScan arrived.
+    pub fn scan(&mut self, m: msg::LaserScan) {
+        self.scan = Some(m);
+    }
+
+    /// An Imu arrived.
+    pub fn imu(&mut self, m: msg::Imu) {
+        self.imu = Some(m);
+    }
+
+    /// An Odometry arrived.
+    pub fn odom(&mut self, m: msg::Odometry) {
+        self.odom = Some(m);
+    }
+
+    /// A NavSatFix arrived.
+    pub fn navsat(&mut self, m: msg::NavSatFix) {
+        self.navsat = Some(m);
+    }
+
+    /// A depth image arrived: decoded and cut to the policy camera, or refused (counted, the
+    /// reason kept).
+    pub fn image(&mut self, m: &msg::Image) {
+        let Some(cam) = &self.camera else { return };
+        match mapping::depth_frame(m, &self.cfg.camera, cam) {
+            Ok(f) => self.image = Some((m.header.clone(), f)),
+            Err(e) => {
+                self.bad_images += 1;
+                self.image_error = Some(e);
+            }
+        }
+    }
+
+    /// Images refused so far.
+    pub fn bad_images(&self) -> u64 {
+        self.bad_images
+    }
+
+    /// Why the newest refused image was refused.
+    pub fn image_error(&self) -> Option<&str> {
+        self.image_error.as_deref()
+    }
+
+    /// The oldest stamp of the subscribed topics, an image's `image_lag_s` later than its own
+    /// (None: one has sent nothing yet).
+    pub fn stamps(&self, image_lag_s: f64) -> Option<f64> {
+        let s = |on: bool, h: Option<&msg::Header>| -> Option<f64> {
+            if on {
+                h.map(|h| h.stamp.as_secs())
+            } else {
+                Some(f64::INFINITY)
+            }
+        };
+        let all = [
+            s(self.on.scan, self.scan.as_ref().map(|m| &m.header))?,
+            s(self.on.imu, self.imu.as_ref().map(|m| &m.header))?,
+            s(self.on.odom, self.odom.as_ref().map(|m| &m.header))?,
+            s(self.on.navsat, self.navsat.as_ref().map(|m| &m.header))?,
+            s(self.on.image, self.image.as_ref().map(|m| &m.0))? + image_lag_s,
+        ];
+        Some(all.into_iter().fold(f64::INFINITY, f64::min))
+    }
+
+    /// The frame of the newest messages; its stamp is their oldest (an image `camera.max_lag_s`
+    /// later than its own), `applied` the control in force.
+    pub fn frame(&self, applied: Control) -> SensorFrame {
+        let odom_ready = !self.on.odom || self.odom.is_some();
+        SensorFrame {
+            stamp_s: self.stamps(self.cfg.camera.max_lag_s).unwrap_or(f64::NEG_INFINITY),
+            scan: self.scan.as_ref().map(|s| scan_to_rays(s, &self.cfg.scan)),
+            imu: self
+                .imu
+                .as_ref()
+                .filter(|_| odom_ready)
+                .map(|i| mapping::imu_reading(i, self.odom.as_ref())),
+            gps: (self.odom.is_some() || self.navsat.is_some())
+                .then(|| mapping::gps_reading(self.odom.as_ref(), self.navsat.as_ref())),
+            image: self.image.as_ref().map(|(_, f)| f.clone()),
+            contact: None,
+            applied,
+        }
+    }
+}

@@ -1,0 +1,165 @@
+//! `agvrl-drive --replay DIR`: a recorded bag fed back through the `Vehicle` seam, open loop.
+//! Each tick's frame is made, by the code a ROS 2 car's frames go through
+//! ([`FrameBuilder`]), of the sensor messages logged up to the time that tick read its frame
+//! (`/agvrl/tick`'s `sensed_s`), and the watchdog reads the recorded clock, so the same binary
+//! on the same data gives the same commands; the commands go nowhere.
+
+use crate::DeployError;
+use crate::bag::{self, BagMessage};
+use crate::hardware::config::Ros2Config;
+use crate::hardware::frames::FrameBuilder;
+use crate::hardware::{mapping, msg};
+use agvrl_envs::api::{Control, EnvError, SensorFrame, Vehicle};
+use agvrl_sim::sensors::CameraConfig;
+use std::path::Path;
+
+/// A bag as a vehicle.
+pub struct Replay {
+    frames: FrameBuilder,
+    /// Sensor messages in log order: (log time, topic kind, payload).
+    msgs: Vec<(u64, Kind, Vec<u8>)>,
+    next_msg: usize,
+    ticks: Vec<msg::Tick>,
+    /// Ticks sensed so far.
+    k: usize,
+    applied: Control,
+    /// Messages that did not decode (skipped).
+    bad: u64,
+    /// Where the bag stopped being readable, if it did.
+    pub damage: Option<String>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Scan,
+    Imu,
+    Odom,
+    NavSat,
+    Image,
+}
+
+impl Replay {
+    /// Open bag `dir` with the car's settings `cfg` (its topic names and mappings) and the
+    /// policy's camera.
+    pub fn open(dir: &Path, cfg: Ros2Config, camera: Option<CameraConfig>) -> Result<Self, DeployError> {
+        let (all, damage) = bag::read_messages(dir)?;
+        let t = &cfg.topics;
+        let kind = |m: &BagMessage| -> Option<Kind> {
+            let n = m.topic.as_str();
+            [
+                (&t.scan, Kind::Scan),
+                (&t.imu, Kind::Imu),
+                (&t.odom, Kind::Odom),
+                (&t.navsat, Kind::NavSat),
+                (&t.image, Kind::Image),
+            ]
+            .into_iter()
+            .find(|(name, _)| !name.is_empty() && *name == n)
+            .map(|(_, k)| k)
+        };
+        let mut ticks = Vec::new();
+        let mut msgs = Vec::new();
+        let mut bad = 0;
+        for m in all {
+            if m.topic == crate::record::TICK_TOPIC {
+                match bag::decode::<msg::Tick>(&m.data) {
+                    Ok(t) => ticks.push(t),
+                    Err(_) => bad += 1,
+                }
+            } else if let Some(k) = kind(&m) {
+                msgs.push((m.log_ns, k, m.data));
+            }
+        }
+        if ticks.is_empty() {
+            return Err(DeployError::Bag(format!(
+                "{}: no {} messages: not a bag of agvrl-drive --record{}",
+                dir.display(),
+                crate::record::TICK_TOPIC,
+                damage.as_ref().map_or(String::new(), |d| format!(" ({d})"))
+            )));
+        }
+        // Stable: messages logged at the same time keep their file order.
+        msgs.sort_by_key(|(log, _, _)| *log);
+        ticks.sort_by_key(|t| t.tick);
+        Ok(Self {
+            frames: FrameBuilder::new(cfg, camera),
+            msgs,
+            next_msg: 0,
+            ticks,
+            k: 0,
+            applied: Control::default(),
+            bad,
+            damage,
+        })
+    }
+
+    /// The recorded ticks.
+    pub fn ticks(&self) -> &[msg::Tick] {
+        &self.ticks
+    }
+
+    /// Messages that did not decode so far (skipped, as a live car skips them).
+    pub fn bad_messages(&self) -> u64 {
+        self.bad + self.frames.bad_images()
+    }
+
+    /// The recorded watchdog clock of the next tick (None past the last one).
+    pub fn next_clock_s(&self) -> Option<f64> {
+        self.ticks.get(self.k).map(|t| t.clock_s)
+    }
+
+    /// Feed the messages logged at or before `sensed_s`.
+    fn feed(&mut self, sensed_s: f64) {
+        let until = bag::ns(sensed_s);
+        while let Some((log, kind, data)) = self.msgs.get(self.next_msg) {
+            if *log > until {
+                break;
+            }
+            let ok = match kind {
+                Kind::Scan => bag::decode(data).map(|m| self.frames.scan(m)),
+                Kind::Imu => bag::decode(data).map(|m| self.frames.imu(m)),
+                Kind::Odom => bag::decode(data).map(|m| self.frames.odom(m)),
+                Kind::NavSat => bag::decode(data).map(|m| self.frames.navsat(m)),
+                Kind::Image => bag::decode::<msg::Image>(data).map(|m| self.frames.image(&m)),
+            };
+            self.bad += u64::from(ok.is_err());
+            self.next_msg += 1;
+        }
+    }
+}
+
+impl Vehicle for Replay {
+    /// The frame of the first tick.
+    fn reset(&mut self, _seed: u64) -> Result<SensorFrame, EnvError> {
+        self.k = 0;
+        self.next_msg = 0;
+        self.frames = FrameBuilder::new(self.frames.cfg().clone(), self.frames.camera().cloned());
+        self.applied = Control::default();
+        let first = self.ticks[0].sensed_s;
+        self.feed(first);
+        Ok(self.frames.frame(self.applied))
+    }
+
+    fn actuate(&mut self, control: Control) -> Result<(), EnvError> {
+        self.applied = mapping::clip(control, &self.frames.cfg().drive);
+        Ok(())
+    }
+
+    fn sense(&mut self) -> Result<SensorFrame, EnvError> {
+        let Some(t) = self.ticks.get(self.k) else {
+            return Err(EnvError::Vehicle("the bag has no more ticks".into()));
+        };
+        let sensed = t.sensed_s;
+        self.k += 1;
+        self.feed(sensed);
+        Ok(self.frames.frame(self.applied))
+    }
+
+    fn control_period_s(&self) -> f64 {
+        1.0 / 30.0
+    }
+
+    fn steering_limit_rad(&self) -> f64 {
+        self.frames.cfg().drive.steering_limit_rad
+    }
+}
