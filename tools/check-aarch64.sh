@@ -28,7 +28,7 @@ field() { # field KEY LINE
 }
 # The summary without what depends on the machine's speed.
 steady() {
-  sed -E 's/ (infer_us_p50|infer_us_p99|wall_s|cpu_pct|rss_mb)=[^ ]+//g' <<< "$1"
+  sed -E 's/ (infer_us_p50|infer_us_p99|tick_us_p99|tick_us_max|wall_s|cpu_pct|rss_mb)=[^ ]+//g' <<< "$1"
 }
 
 # readelf (binutils, there with gcc): the machine, and no program interpreter (static).
