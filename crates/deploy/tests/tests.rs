@@ -403,36 +403,76 @@ mod ros2_loopback {
         });
     }
 
+    /// `agvrl-drive --serve-sim racing-oval` and `agvrl-drive --vehicle ros2 ARGS` with
+    /// `policy` for `ticks` lockstep ticks on a domain of their own (sensors reliable, as the
+    /// library tests' `ros_cfg`): (drive ok, drive stdout + stderr, robot stdout). A robot still
+    /// waiting 30 s after the drive ended is killed, so a lost command fails instead of hanging.
+    fn serve_and_drive(policy: &std::path::Path, ticks: u64, args: &[&std::ffi::OsStr]) -> (bool, String, String) {
+        let dir = scratch("car");
+        let car = dir.path().join("car.toml");
+        std::fs::write(&car, "[qos.sensors]\nreliability = \"reliable\"\ndepth = 1\n").unwrap();
+        let (d, n) = (domain().to_string(), ticks.to_string());
+        let bin = env!("CARGO_BIN_EXE_agvrl-drive");
+        let mut robot = std::process::Command::new(bin)
+            .arg("--policy")
+            .arg(policy)
+            .args([
+                "--serve-sim",
+                "racing-oval",
+                "--steps",
+                &n,
+                "--domain-id",
+                &d,
+                "--config",
+            ])
+            .arg(&car)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let drive = std::process::Command::new(bin)
+            .arg("--policy")
+            .arg(policy)
+            .args([
+                "--vehicle",
+                "ros2",
+                "--steps",
+                &n,
+                "--domain-id",
+                &d,
+                "--quiet",
+                "--config",
+            ])
+            .arg(&car)
+            .args(args)
+            .output()
+            .unwrap();
+        let t0 = std::time::Instant::now();
+        while robot.try_wait().unwrap().is_none() && t0.elapsed().as_secs() < 30 {
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let _ = robot.kill();
+        let robot = robot.wait_with_output().unwrap();
+        let out = format!(
+            "{}{}",
+            String::from_utf8_lossy(&drive.stdout),
+            String::from_utf8_lossy(&drive.stderr)
+        );
+        (
+            drive.status.success(),
+            out,
+            String::from_utf8_lossy(&robot.stdout).into_owned(),
+        )
+    }
+
     /// The camera-only policy over DDS, both sides the `agvrl-drive` binary: the robot
     /// publishes its camera's depth as a 32FC1 Image, the drive decodes it to the policy's
     /// frame; a lap, no collision, no watchdog event.
     #[test]
     fn the_camera_policy_laps_the_oval_over_dds_from_depth_images() {
-        let policy = shipped_policy("racing-oval-camera");
-        let d = domain().to_string();
-        let ticks = "1200"; // 40 s; a lap takes about 31 s
-        let bin = env!("CARGO_BIN_EXE_agvrl-drive");
-        let robot = std::process::Command::new(bin)
-            .arg("--policy")
-            .arg(&policy)
-            .args(["--serve-sim", "racing-oval", "--steps", ticks, "--domain-id", &d])
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let drive = std::process::Command::new(bin)
-            .arg("--policy")
-            .arg(&policy)
-            .args(["--vehicle", "ros2", "--steps", ticks, "--domain-id", &d, "--quiet"])
-            .output()
-            .unwrap();
-        let robot = robot.wait_with_output().unwrap();
-        let (out, rout) = (
-            String::from_utf8_lossy(&drive.stdout),
-            String::from_utf8_lossy(&robot.stdout),
-        );
-        assert!(drive.status.success(), "{}", String::from_utf8_lossy(&drive.stderr));
-        assert!(robot.status.success(), "{}", String::from_utf8_lossy(&robot.stderr));
+        // 40 s; a lap takes about 31 s.
+        let (ok, out, rout) = serve_and_drive(&shipped_policy("racing-oval-camera"), 1200, &[]);
+        assert!(ok, "{out}");
         assert!(out.contains("summary ticks=1200 events=0 terminations=0 "), "{out}");
         assert!(
             rout.contains("summary ticks=1200 ") && rout.contains(" commands=1200 "),
@@ -448,31 +488,8 @@ mod ros2_loopback {
         let dir = scratch("ros2bag");
         let bag = dir.path().join("car");
         let policy = shipped_policy("racing-oval-camera");
-        let d = domain().to_string();
-        let bin = env!("CARGO_BIN_EXE_agvrl-drive");
-        let robot = std::process::Command::new(bin)
-            .arg("--policy")
-            .arg(&policy)
-            .args(["--serve-sim", "racing-oval", "--steps", "300", "--domain-id", &d])
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap();
-        let (ok, out, err) = drive_cli(&[
-            "--policy".as_ref(),
-            policy.as_os_str(),
-            "--vehicle".as_ref(),
-            "ros2".as_ref(),
-            "--steps".as_ref(),
-            "300".as_ref(),
-            "--domain-id".as_ref(),
-            d.as_ref(),
-            "--quiet".as_ref(),
-            "--record".as_ref(),
-            bag.as_os_str(),
-        ]);
-        robot.wait_with_output().unwrap();
-        assert!(ok, "{out}{err}");
+        let (ok, out, _) = serve_and_drive(&policy, 300, &["--record".as_ref(), bag.as_os_str()]);
+        assert!(ok, "{out}");
         let (ok, out, err) = drive_cli(&[
             "--policy".as_ref(),
             policy.as_os_str(),
