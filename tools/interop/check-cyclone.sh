@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Interop check of agvrl-drive (RustDDS) against Eclipse Cyclone DDS (PyPI `cyclonedds`)
-# playing the car (tools/interop/cyclone_car.py), in three scenarios on random DDS domains:
+# playing the car (tools/interop/cyclone_car.py), in six scenarios on random DDS domains:
 #   a) 5 s of real-time driving: the car decodes every command field, the loop sees no event;
 #   b) the drive reader joins 1.5 s late and the scans stop: the first command is fresh and
 #      the car is told to stop within 3 control periods plus DDS latency of the last scan;
