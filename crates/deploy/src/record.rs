@@ -10,7 +10,6 @@ use crate::hardware::config::{DriveMapping, Topics};
 use crate::hardware::{mapping, msg};
 use crate::{DeployError, Tick};
 use agvrl_envs::api::{Control, EnvError, MapInfo, SensorFrame, Vehicle};
-use agvrl_sim::msg::GpsReading;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
@@ -226,8 +225,9 @@ impl DriveBag {
         if let Some(i) = &f.imu {
             self.put(self.ix.imu, t, &mapping::imu_msg(i, t, &self.frame_id));
             if let Some(g) = &f.gps {
-                self.put(self.ix.odom, t, &mapping::odom_msg(g, i, t, &self.frame_id));
-                self.put(Some(self.ix.tf), t, &odom_tf(g, i, t));
+                let o = mapping::odom_msg(g, i, t, &self.frame_id);
+                self.put(self.ix.odom, t, &o);
+                self.put(Some(self.ix.tf), t, &odom_tf(&o));
             }
         }
         if let Some(geo) = f.gps.as_ref().and_then(|g| g.geodetic) {
@@ -257,24 +257,9 @@ impl DriveBag {
     /// Record an Odometry message as it arrived, and its pose as odom to base_link on `/tf`.
     pub fn received_odom(&self, m: &msg::Odometry) {
         self.received(Sensor::Odom, m);
-        let t = m.header.stamp.as_secs();
-        let p = m.pose.pose;
-        let tf = msg::TFMessage {
-            transforms: vec![msg::TransformStamped {
-                header: mapping::header(t, ODOM_FRAME),
-                child_frame_id: BASE_FRAME.into(),
-                transform: msg::Transform {
-                    translation: msg::Vector3 {
-                        x: p.position.x,
-                        y: p.position.y,
-                        z: p.position.z,
-                    },
-                    rotation: p.orientation,
-                },
-            }],
-        };
         let log = bag::ns(crate::run_loop::wall_clock_s());
-        self.rec.record(self.ix.tf, log, bag::ns(t), bag::cdr(&tf));
+        let publish = bag::ns(m.header.stamp.as_secs());
+        self.rec.record(self.ix.tf, log, publish, bag::cdr(&odom_tf(m)));
     }
 
     /// Record a command sent on the drive topic, computed from the frame stamped `stamp_s`.
@@ -309,13 +294,12 @@ impl DriveBag {
     }
 }
 
-/// odom to base_link from the pose fix and the IMU's orientation.
-fn odom_tf(g: &GpsReading, i: &agvrl_sim::msg::ImuReading, stamp_s: f64) -> msg::TFMessage {
-    let o = mapping::odom_msg(g, i, stamp_s, BASE_FRAME);
+/// odom to base_link: the pose of an Odometry message.
+fn odom_tf(o: &msg::Odometry) -> msg::TFMessage {
     let p = o.pose.pose;
     msg::TFMessage {
         transforms: vec![msg::TransformStamped {
-            header: mapping::header(stamp_s, ODOM_FRAME),
+            header: mapping::header(o.header.stamp.as_secs(), ODOM_FRAME),
             child_frame_id: BASE_FRAME.into(),
             transform: msg::Transform {
                 translation: msg::Vector3 {

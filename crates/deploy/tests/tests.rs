@@ -826,13 +826,7 @@ fn a_truncated_bag_yields_its_intact_messages_and_reindexes() {
         let s: msg::LaserScan = bag::decode(&m.data).unwrap();
         assert_eq!(s.ranges[0], k as f32, "messages come back in order, intact");
     }
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
-        .arg("--reindex")
-        .arg(&d)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let meta = std::fs::read_to_string(d.join("metadata.yaml")).unwrap();
+    let meta = reindex(&d);
     assert!(meta.contains(&format!("  message_count: {}\n", part.len())), "{meta}");
     // Garbage is an error naming the file, not a panic.
     std::fs::write(&path, b"not an mcap file at all").unwrap();
@@ -874,14 +868,15 @@ fn a_killed_recording_leaves_a_readable_bag() {
     for m in &msgs {
         agvrl_deploy::record::decode_json(m).unwrap_or_else(|e| panic!("{} {}: {e}", m.topic, m.log_ns));
     }
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
-        .arg("--reindex")
-        .arg(&d)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let meta = std::fs::read_to_string(d.join("metadata.yaml")).unwrap();
+    let meta = reindex(&d);
     assert!(meta.contains(&format!("  message_count: {}\n", msgs.len())), "{meta}");
+}
+
+/// `agvrl-drive --reindex DIR`, then DIR's new metadata.yaml.
+fn reindex(d: &std::path::Path) -> String {
+    let (ok, _, err) = drive_cli(&["--reindex".as_ref(), d.as_os_str()]);
+    assert!(ok, "{err}");
+    std::fs::read_to_string(d.join("metadata.yaml")).unwrap()
 }
 
 /// Run agvrl-drive with `args`; (success, stdout, stderr).
