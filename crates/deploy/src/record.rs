@@ -7,6 +7,7 @@
 
 use crate::bag::{self, BagRecorder, BagSummary, BagWriter, Offered, Topic};
 use crate::hardware::config::{DriveMapping, Topics};
+use crate::hardware::frames::Subscribed;
 use crate::hardware::{mapping, msg};
 use crate::{DeployError, Tick};
 use agvrl_envs::api::{Control, EnvError, MapInfo, SensorFrame, Vehicle};
@@ -57,34 +58,6 @@ macro_rules! stamped {
 }
 stamped!(msg::LaserScan, msg::Imu, msg::Odometry, msg::NavSatFix, msg::Image);
 
-/// Which sensors the vehicle delivers (topics are added for these).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Sensors {
-    /// LaserScan.
-    pub scan: bool,
-    /// Imu.
-    pub imu: bool,
-    /// Odometry.
-    pub odom: bool,
-    /// NavSatFix.
-    pub navsat: bool,
-    /// Depth Image.
-    pub image: bool,
-}
-
-impl Sensors {
-    /// The sensors present in `f`.
-    pub fn of(f: &SensorFrame) -> Self {
-        Self {
-            scan: f.scan.is_some(),
-            imu: f.imu.is_some(),
-            odom: f.imu.is_some() && f.gps.is_some(),
-            navsat: f.gps.as_ref().is_some_and(|g| g.geodetic.is_some()),
-            image: f.image.is_some(),
-        }
-    }
-}
-
 /// What a recording needs to know of the car.
 pub struct Setup<'a> {
     /// Topic names (the car's TOML).
@@ -92,7 +65,7 @@ pub struct Setup<'a> {
     /// The command scaling (throttle to speed) of the drive topic.
     pub drive: DriveMapping,
     /// Sensors to record.
-    pub sensors: Sensors,
+    pub sensors: Subscribed,
     /// The car's LiDAR and camera mounts in base_link.
     pub lidar_b: rapier3d::prelude::Pose,
     /// The camera mount, when there is one.

@@ -490,17 +490,7 @@ mod ros2_loopback {
         let policy = shipped_policy("racing-oval-camera");
         let (ok, out, _) = serve_and_drive(&policy, 300, &["--record".as_ref(), bag.as_os_str()]);
         assert!(ok, "{out}");
-        let (ok, out, err) = drive_cli(&[
-            "--policy".as_ref(),
-            policy.as_os_str(),
-            "--replay".as_ref(),
-            bag.as_os_str(),
-            "--fast".as_ref(),
-            "--check".as_ref(),
-            "--quiet".as_ref(),
-            "--tolerance".as_ref(),
-            "0".as_ref(),
-        ]);
+        let (ok, out, err) = replay_check(&policy, &bag);
         assert!(ok, "{out}{err}");
         assert_eq!(kv(&out, "ticks"), 300.0, "{out}");
         assert_eq!(kv(&out, "action_diff_max"), 0.0, "{out}");
@@ -892,6 +882,22 @@ fn drive_cli(args: &[&std::ffi::OsStr]) -> (bool, String, String) {
     )
 }
 
+/// `agvrl-drive --policy POLICY --replay BAG --fast --check --tolerance 0`: the same bits on the
+/// CPU that recorded.
+fn replay_check(policy: &std::path::Path, bag: &std::path::Path) -> (bool, String, String) {
+    drive_cli(&[
+        "--policy".as_ref(),
+        policy.as_os_str(),
+        "--replay".as_ref(),
+        bag.as_os_str(),
+        "--fast".as_ref(),
+        "--check".as_ref(),
+        "--quiet".as_ref(),
+        "--tolerance".as_ref(),
+        "0".as_ref(),
+    ])
+}
+
 /// The `key=value` of a summary line.
 fn kv(out: &str, key: &str) -> f64 {
     out.split_whitespace()
@@ -922,19 +928,7 @@ fn a_replayed_bag_gives_the_recorded_commands_and_a_changed_scan_is_caught() {
         rec.as_os_str(),
     ]);
     assert!(ok, "{err}");
-    let replay = |bag: &std::path::Path| {
-        drive_cli(&[
-            "--policy".as_ref(),
-            p,
-            "--replay".as_ref(),
-            bag.as_os_str(),
-            "--fast".as_ref(),
-            "--check".as_ref(),
-            "--quiet".as_ref(),
-            "--tolerance".as_ref(),
-            "0".as_ref(),
-        ])
-    };
+    let replay = |bag: &std::path::Path| replay_check(&policy, bag);
     let (ok, out, err) = replay(&rec);
     assert!(ok, "{out}{err}");
     assert_eq!(kv(&out, "ticks"), 300.0, "{out}");

@@ -6,7 +6,8 @@
 //! topics. Each tick prints one `key=value` line, the run ends with a summary line.
 
 use agvrl_deploy::hardware::config::DriveMapping;
-use agvrl_deploy::record::{DriveBag, Recorded, Sensors, Setup};
+use agvrl_deploy::hardware::frames::Subscribed;
+use agvrl_deploy::record::{DriveBag, Recorded, Setup};
 use agvrl_deploy::stats::{cpu_time_s, quantile, rss_mb};
 use agvrl_deploy::{DriveConfig, DriveLoop};
 use agvrl_envs::api::Vehicle;
@@ -207,7 +208,7 @@ fn run() -> Result<()> {
             };
             // The sensors the bag holds: those of the first frame (the loop resets again, to
             // the same state).
-            let sensors = Sensors::of(&vehicle.reset(a.seed)?);
+            let sensors = Subscribed::of_frame(&vehicle.reset(a.seed)?);
             let mut mapping = DriveMapping::default();
             mapping.for_trained_top_speed(env_cfg.sim.vehicle_model()?.top_speed_mps());
             let topics = agvrl_deploy::hardware::config::Topics::default();
@@ -253,13 +254,7 @@ fn drive_ros2(
         None
     };
     let t = &cfg.topics;
-    let sensors = Sensors {
-        scan: true,
-        imu: !t.imu.is_empty(),
-        odom: !t.odom.is_empty(),
-        navsat: !t.navsat.is_empty(),
-        image: camera.is_some(),
-    };
+    let sensors = Subscribed::of_topics(t, camera.is_some());
     let bag = match &a.record {
         Some(dir) => {
             let car = BagCar {
@@ -396,7 +391,7 @@ fn dump(dir: &Path) -> Result<()> {
 /// The car side of a recording: its topics, sensors and command scaling, and its clock.
 struct BagCar<'a> {
     topics: &'a agvrl_deploy::hardware::config::Topics,
-    sensors: Sensors,
+    sensors: Subscribed,
     drive: DriveMapping,
     sim_time: bool,
 }

@@ -2,7 +2,7 @@
 //! topic, mapped as the car's TOML says. The ROS 2 vehicle (live) and the bag replay share it,
 //! so a replayed car log gives the frames the car gave.
 
-use super::config::Ros2Config;
+use super::config::{Ros2Config, Topics};
 use super::mapping::{self, scan_to_rays};
 use super::msg;
 use agvrl_envs::api::{Control, SensorFrame};
@@ -22,6 +22,31 @@ pub struct Subscribed {
     pub navsat: bool,
     /// The depth Image.
     pub image: bool,
+}
+
+impl Subscribed {
+    /// The topics of `t` that are named (an empty name is not subscribed), and the image when
+    /// the policy sees one.
+    pub fn of_topics(t: &Topics, camera: bool) -> Self {
+        Self {
+            scan: !t.scan.is_empty(),
+            imu: !t.imu.is_empty(),
+            odom: !t.odom.is_empty(),
+            navsat: !t.navsat.is_empty(),
+            image: camera && !t.image.is_empty(),
+        }
+    }
+
+    /// The sensors a simulated frame carries, as the topics a car would publish them on.
+    pub fn of_frame(f: &SensorFrame) -> Self {
+        Self {
+            scan: f.scan.is_some(),
+            imu: f.imu.is_some(),
+            odom: f.imu.is_some() && f.gps.is_some(),
+            navsat: f.gps.as_ref().is_some_and(|g| g.geodetic.is_some()),
+            image: f.image.is_some(),
+        }
+    }
 }
 
 /// The newest message of each topic, and the frame they make.
@@ -45,14 +70,7 @@ impl FrameBuilder {
     /// Frames from the topics of `cfg` (an empty name is not subscribed), and a depth image
     /// cut to `camera` when the policy sees one.
     pub fn new(cfg: Ros2Config, camera: Option<CameraConfig>) -> Self {
-        let t = &cfg.topics;
-        let on = Subscribed {
-            scan: !t.scan.is_empty(),
-            imu: !t.imu.is_empty(),
-            odom: !t.odom.is_empty(),
-            navsat: !t.navsat.is_empty(),
-            image: camera.is_some() && !t.image.is_empty(),
-        };
+        let on = Subscribed::of_topics(&cfg.topics, camera.is_some());
         Self {
             cfg,
             camera,
