@@ -1,7 +1,7 @@
 //! Driving episodes for evaluation and viewing, with a look into the simulator at every step
 //! (pose, scan, camera) for plots and rerun recordings.
 
-use agvrl_envs::task::Task;
+use agvrl_envs::task::{Intervention, Task};
 use agvrl_envs::wrappers::TimeLimit;
 use agvrl_envs::{EnvConfig, Info, SensorFrame, SimCar, Step, TaskEnv, Vehicle, make, make_sim_car, make_task};
 use agvrl_sim::Sim;
@@ -46,6 +46,19 @@ pub struct StepView<'a> {
     pub terminated: bool,
     /// The step's info (`None` right after reset).
     pub info: Option<&'a Info>,
+    /// What the driver saw and did for this step (`None` right after reset, and for drivers
+    /// without observations, as the planner).
+    pub acted: Option<&'a Acted>,
+    /// What the safety filter did to this step's control.
+    pub intervention: Intervention,
+}
+
+/// The observation a driver acted on, its action, and how long it took.
+#[derive(Clone, Debug, Default)]
+pub struct Acted {
+    pub observation: Vec<f32>,
+    pub action: Vec<f32>,
+    pub act_us: f64,
 }
 
 /// Called at every step of every episode.
@@ -53,7 +66,14 @@ pub type Observer<'a> = dyn FnMut(&StepView<'_>) -> Result<()> + 'a;
 
 /// Report the current state of `env` to `obs`.
 /// `st` is the step taken (`None` right after reset, `step` 0).
-pub fn observe(env: &SimEnv, obs: &mut Observer<'_>, episode: usize, step: u64, st: Option<&Step>) -> Result<()> {
+pub fn observe(
+    env: &SimEnv,
+    obs: &mut Observer<'_>,
+    episode: usize,
+    step: u64,
+    st: Option<&Step>,
+    acted: Option<&Acted>,
+) -> Result<()> {
     let inner = env.inner();
     if let Some(frame) = inner.last_frame() {
         let sim = inner.vehicle().sim();
@@ -66,6 +86,12 @@ pub fn observe(env: &SimEnv, obs: &mut Observer<'_>, episode: usize, step: u64, 
             done: st.is_some_and(|s| s.done()),
             terminated: st.is_some_and(|s| s.terminated),
             info: st.map(|s| &s.info),
+            acted: acted.filter(|_| st.is_some()),
+            intervention: if st.is_some() {
+                inner.task().intervention()
+            } else {
+                Intervention::None
+            },
         })?;
     }
     Ok(())
@@ -109,5 +135,19 @@ pub fn drive(
     act: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
     obs: &mut Observer<'_>,
 ) -> Result<(f64, Step)> {
-    agvrl_rl::eval::run_episode(env, seed, act, |env, k, st| observe(env, obs, episode, k, st))
+    let last = std::cell::RefCell::new(Acted::default());
+    let timed = |o: &[f32]| {
+        let t0 = std::time::Instant::now();
+        let action = act(o)?;
+        let act_us = t0.elapsed().as_secs_f64() * 1e6;
+        let mut l = last.borrow_mut();
+        l.observation.clear();
+        l.observation.extend_from_slice(o);
+        l.action.clone_from(&action);
+        l.act_us = act_us;
+        Ok(action)
+    };
+    agvrl_rl::eval::run_episode(env, seed, timed, |env, k, st| {
+        observe(env, obs, episode, k, st, Some(&last.borrow()))
+    })
 }

@@ -2,6 +2,7 @@
 //! trajectory plot and recording (training runs it at the end too).
 
 use crate::episode::{Observer, RandomActions, StepView, drive, make_sim_env};
+use crate::eval_bag::EpisodeBags;
 use crate::planner;
 use crate::plots::{self, Path2};
 use crate::viz::{self, Recorder};
@@ -87,6 +88,10 @@ pub struct EvalArgs {
     /// Stream the episodes to a rerun viewer started from `rerun` on your PATH.
     #[arg(long)]
     pub spawn_viewer: bool,
+    /// Record every episode as a rosbag2 bag, DIR/episode-000 ... (the topics of `agvrl-drive
+    /// --record`, in simulated time; `agvrl-drive --replay` and the ROS 2 tools read them).
+    #[arg(long, value_name = "DIR")]
+    pub record: Option<PathBuf>,
     /// Also draw the evaluated paths over the map into this PNG.
     #[arg(long, value_name = "FILE.png")]
     pub plot: Option<PathBuf>,
@@ -404,6 +409,8 @@ pub(crate) struct Watch {
     pub(crate) rec_episodes: usize,
     /// Draw only the paths of episodes below this index.
     pub(crate) plot_episodes: usize,
+    /// One bag per episode.
+    pub(crate) bags: Option<EpisodeBags>,
 }
 
 impl Watch {
@@ -428,6 +435,9 @@ impl Watch {
             && let Some(r) = &mut self.rec
         {
             r.step(v)?;
+        }
+        if let Some(b) = &mut self.bags {
+            b.see(v)?;
         }
         Ok(())
     }
@@ -497,6 +507,13 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             env_cfg.sim.camera.as_ref(),
         )?);
     }
+    if let Some(dir) = &a.record {
+        if agvrl_envs::registry::scene_of(&env_id).is_none() {
+            bail!("--record needs a vehicle env, not {env_id}");
+        }
+        let file = policy.as_ref().map(|_| src.policy.as_path());
+        watch.bags = Some(EpisodeBags::new(dir, file, &env_id, &env_cfg)?);
+    }
     let driver = match (&mut policy, a.planner) {
         (Some(p), _) => Driver::Policy(p),
         (None, Some(kind)) => Driver::Planner(kind),
@@ -541,6 +558,15 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         && let Some(p) = r.finish()?
     {
         println!("rrd={}", p.display());
+    }
+    if let Some(b) = watch.bags.take() {
+        let written = b.finish()?;
+        let messages: u64 = written.iter().map(|(_, n)| n).sum();
+        if let Some(d) = &a.record {
+            println!("bags={}", d.display());
+        }
+        println!("bag_episodes={}", written.len());
+        println!("bag_messages={messages}");
     }
     if let Some(p) = &a.plot {
         let algo = src

@@ -8,6 +8,7 @@ pub mod config;
 #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
 pub mod episode;
 pub mod eval;
+pub mod eval_bag;
 pub mod planner;
 pub mod plots;
 pub mod policy_file;

@@ -373,7 +373,7 @@ pub fn drive(
         seed,
         |_| Ok::<_, anyhow::Error>(next.borrow().clone()),
         |env, k, st| {
-            observe(env, obs, episode, k, st)?;
+            observe(env, obs, episode, k, st, None)?;
             let mut p = planner.borrow_mut();
             if k == 0 {
                 *p = Some(CoveragePlanner::new(env, knowledge)?);

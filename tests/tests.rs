@@ -645,6 +645,91 @@ mod cli {
         );
     }
 
+    /// `agvrl eval --record`: one bag per episode with the topics of `agvrl-drive --record` in
+    /// simulated time; the drive loop replaying a bag gives the evaluated actions and commands
+    /// bit for bit (same CPU), with the safety filter in the loop.
+    #[test]
+    fn eval_bags_replay_through_the_drive_loop_to_the_evaluated_actions() {
+        use agvrl_deploy::bag;
+        use agvrl_deploy::hardware::msg;
+        let policy = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/policies/search.agvrl");
+        let d = tmp("evalbag");
+        let bags = d.path().join("bags");
+        let o = agvrl(&[
+            "eval",
+            "--policy",
+            policy.to_str().unwrap(),
+            "--env",
+            "search-urban-20",
+            "--layouts",
+            "procedural",
+            "--episodes",
+            "2",
+            "--max-steps",
+            "300",
+            "--record",
+            bags.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let out = stdout(&o);
+        assert_eq!(key(&out, "bag_episodes"), "2", "{out}");
+        let mut settings = agvrl_run::PolicySettings::resolve(None, Some(&policy), &[]).unwrap();
+        let env_cfg = settings.eval_env_config();
+        let (mut messages, mut filtered, mut first_odom) = (0, 0, Vec::new());
+        for k in 0..2 {
+            let dir = bags.join(format!("episode-{k:03}"));
+            let (msgs, damage) = bag::read_messages(&dir).unwrap();
+            assert_eq!(damage, None);
+            messages += msgs.len();
+            let count = |t: &str| msgs.iter().filter(|m| m.topic == t).count();
+            // The reset's frame and one per step; a command and a tick per step.
+            assert_eq!([count("/scan"), count("/odom"), count("/tf")], [301; 3], "episode {k}");
+            assert_eq!([count("/drive"), count("/agvrl/tick")], [300, 300], "episode {k}");
+            let odom: msg::Odometry = bag::decode(&msgs.iter().find(|m| m.topic == "/odom").unwrap().data).unwrap();
+            first_odom.push(odom.pose.pose.position.x);
+            let mut r = agvrl_deploy::replay::Replayer::open(
+                &dir,
+                None,
+                "search-urban-20",
+                &env_cfg,
+                settings.load_policy().unwrap(),
+                30.0,
+                0,
+            )
+            .unwrap();
+            let mut ticks = 0;
+            while let Some((rec, t)) = r.step().unwrap() {
+                let (_, action) = t.inference.as_ref().unwrap();
+                assert_eq!(action, &rec.action, "episode {k} tick {}", rec.tick);
+                assert_eq!(
+                    (t.control.throttle, t.control.steering_rad),
+                    (rec.throttle, rec.steering_rad)
+                );
+                assert_eq!(format!("{:?}", t.intervention).to_lowercase(), rec.intervention);
+                filtered += usize::from(rec.intervention != "none");
+                ticks += 1;
+            }
+            assert_eq!(ticks, 300);
+            assert_eq!(r.diff.events, 0);
+        }
+        assert_eq!(key(&out, "bag_messages"), messages.to_string());
+        assert_ne!(first_odom[0], first_odom[1], "each episode its own start");
+        // Among new buildings the filter corrects some controls: the replay covers them.
+        assert!(filtered > 0, "no filtered control to replay");
+        let again = agvrl(&[
+            "eval",
+            "--policy",
+            policy.to_str().unwrap(),
+            "--record",
+            bags.to_str().unwrap(),
+        ]);
+        assert!(
+            !again.status.success() && stderr(&again).contains("not empty"),
+            "{}",
+            stderr(&again)
+        );
+    }
+
     #[test]
     fn the_map_aware_planner_covers_more_than_random_actions_on_the_same_car_and_episodes() {
         let policy = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/policies/search.agvrl");

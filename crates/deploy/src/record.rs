@@ -286,6 +286,75 @@ fn odom_tf(o: &msg::Odometry) -> msg::TFMessage {
     }
 }
 
+/// The car side of a recording: its topics, sensors and command scaling, and its clock.
+pub struct BagCar<'a> {
+    /// Topic names.
+    pub topics: &'a Topics,
+    /// Sensors to record.
+    pub sensors: Subscribed,
+    /// The command scaling of the drive topic.
+    pub drive: DriveMapping,
+    /// Simulated time (log time = stamp, the bag starts at 0) rather than the wall clock.
+    pub sim_time: bool,
+}
+
+/// Create bag `dir` for a drive of `env` (settings `env_cfg`) by the policy file `policy`
+/// (`None`: another driver, as `agvrl eval --random`): the car's URDF, mounts, and in the
+/// metadata the policy file's SHA-256 and the settings.
+pub fn for_policy(
+    dir: &Path,
+    policy: Option<&Path>,
+    env: &str,
+    env_cfg: &agvrl_envs::EnvConfig,
+    car: BagCar<'_>,
+) -> Result<DriveBag, DeployError> {
+    use sha2::Digest;
+    let model = env_cfg
+        .sim
+        .vehicle_model()
+        .map_err(|e| DeployError::Config(format!("the env's vehicle: {e}")))?;
+    let urdf = agvrl_sim::assets::AssetSource::Embedded
+        .read(&format!("vehicles/{}.urdf", model.name))
+        .ok();
+    let (name, hash) = match policy {
+        Some(p) => {
+            let bytes = std::fs::read(p).map_err(|source| DeployError::Io {
+                path: p.to_path_buf(),
+                source,
+            })?;
+            let hash = sha2::Sha256::digest(&bytes)
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect();
+            (p.display().to_string(), hash)
+        }
+        None => ("none".to_string(), String::new()),
+    };
+    let metadata = BTreeMap::from([
+        ("policy".to_string(), name),
+        ("policy_sha256".to_string(), hash),
+        ("env".to_string(), env.to_string()),
+        ("env_config".to_string(), toml::to_string(env_cfg).unwrap_or_default()),
+        ("agvrl_drive".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+    ]);
+    let setup = Setup {
+        topics: car.topics,
+        drive: car.drive,
+        sensors: car.sensors,
+        lidar_b: model.lidar_b,
+        camera_b: model.camera_b,
+        urdf,
+        metadata,
+        sim_time: car.sim_time,
+    };
+    let t0_s = if car.sim_time {
+        0.0
+    } else {
+        crate::run_loop::wall_clock_s()
+    };
+    DriveBag::create(dir, setup, t0_s)
+}
+
 /// A vehicle whose frames and commands go into a bag as well (`frames`: record the frames'
 /// sensors, for a simulated car; a ROS 2 car's messages are recorded as they arrive).
 pub struct Recorded<V> {

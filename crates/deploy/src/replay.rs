@@ -4,12 +4,15 @@
 //! (`/agvrl/tick`'s `sensed_s`), and the watchdog reads the recorded clock, so the same binary
 //! on the same data gives the same commands; the commands go nowhere.
 
-use crate::DeployError;
 use crate::bag::{self, BagMessage};
 use crate::hardware::config::Ros2Config;
 use crate::hardware::frames::FrameBuilder;
 use crate::hardware::{mapping, msg};
+use crate::{DeployError, DriveConfig, DriveLoop, Tick};
+use agvrl_envs::EnvConfig;
 use agvrl_envs::api::{Control, EnvError, SensorFrame, Vehicle};
+use agvrl_envs::task::Task;
+use agvrl_rl::Policy;
 use agvrl_sim::sensors::CameraConfig;
 use std::path::Path;
 
@@ -161,5 +164,123 @@ impl Vehicle for Replay {
 
     fn steering_limit_rad(&self) -> f64 {
         self.frames.cfg().drive.steering_limit_rad
+    }
+}
+
+/// A bag driven by a policy through [`DriveLoop`], tick by tick, each replayed tick beside the
+/// recorded one.
+pub struct Replayer {
+    lp: DriveLoop<Replay, Box<dyn Task>>,
+    recorded: Vec<msg::Tick>,
+    next: usize,
+    /// The differences so far.
+    pub diff: ReplayDiff,
+}
+
+/// How far replayed ticks are from the recorded ones.
+#[derive(Clone, Debug, Default)]
+pub struct ReplayDiff {
+    /// Per tick with an action both times: the largest |difference| of an action element.
+    pub action: Vec<f64>,
+    /// Per tick: the largest |difference| of throttle or steering sent.
+    pub control: Vec<f64>,
+    /// Ticks whose watchdog event (or whether the policy acted) differs.
+    pub events: u64,
+}
+
+impl ReplayDiff {
+    fn add(&mut self, rec: &msg::Tick, t: &Tick) {
+        let action = t.inference.as_ref().map_or(&[][..], |(_, a)| a.as_slice());
+        if action.len() == rec.action.len() {
+            let d = action
+                .iter()
+                .zip(&rec.action)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max);
+            self.action.push(d as f64);
+        } else {
+            self.events += 1;
+        }
+        self.control.push(
+            (t.control.throttle - rec.throttle)
+                .abs()
+                .max((t.control.steering_rad - rec.steering_rad).abs()),
+        );
+        let recorded_event = !rec.event.is_empty();
+        self.events += u64::from(t.event.is_some() != recorded_event);
+    }
+
+    /// The largest action or control difference.
+    pub fn worst(&self) -> f64 {
+        self.action.iter().chain(&self.control).copied().fold(0.0, f64::max)
+    }
+}
+
+impl Replayer {
+    /// Replay bag `dir` with the policy of env `env` (settings `env_cfg`). `cfg` is the car's
+    /// TOML (its topics and mappings); without one, the scans are taken to have the policy's
+    /// own rays (a bag of `agvrl-drive` or `agvrl eval`).
+    pub fn open(
+        dir: &Path,
+        cfg: Option<Ros2Config>,
+        env: &str,
+        env_cfg: &EnvConfig,
+        policy: Policy,
+        rate_hz: f64,
+        seed: u64,
+    ) -> Result<Self, DeployError> {
+        let lidar = &env_cfg.sim.lidar;
+        let mut cfg = cfg.unwrap_or_else(|| {
+            let mut c = Ros2Config::default();
+            c.scan = c.scan.with_rays_of(lidar);
+            c
+        });
+        cfg.check_lidar(lidar)?;
+        let model = env_cfg
+            .sim
+            .vehicle_model()
+            .map_err(|e| DeployError::Config(format!("the env's vehicle: {e}")))?;
+        let _ = cfg.drive.for_trained_top_speed(model.top_speed_mps());
+        let task = agvrl_envs::make_task(env, env_cfg, cfg.drive.steering_limit_rad)?;
+        let camera = if task.needs().image {
+            env_cfg.sim.camera.clone()
+        } else {
+            None
+        };
+        let vehicle = Replay::open(dir, cfg, camera)?;
+        let recorded = vehicle.ticks().to_vec();
+        let drive = DriveConfig {
+            rate_hz,
+            realtime: false,
+            ..DriveConfig::default()
+        };
+        Ok(Self {
+            lp: DriveLoop::new(vehicle, task, policy, drive, seed)?,
+            recorded,
+            next: 0,
+            diff: ReplayDiff::default(),
+        })
+    }
+
+    /// The bag as read (its damage, bad messages).
+    pub fn vehicle(&self) -> &Replay {
+        self.lp.vehicle()
+    }
+
+    /// The recorded ticks.
+    pub fn recorded(&self) -> &[msg::Tick] {
+        &self.recorded
+    }
+
+    /// Replay the next recorded tick (its watchdog reads the recorded clock): the recorded tick
+    /// and the replayed one; `None` after the last.
+    pub fn step(&mut self) -> Result<Option<(&msg::Tick, Tick)>, DeployError> {
+        let Some(rec) = self.recorded.get(self.next) else {
+            return Ok(None);
+        };
+        let t = self.lp.tick_at(Some(rec.clock_s))?;
+        self.diff.add(rec, &t);
+        self.next += 1;
+        Ok(Some((rec, t)))
     }
 }

@@ -7,7 +7,7 @@
 
 use agvrl_deploy::hardware::config::DriveMapping;
 use agvrl_deploy::hardware::frames::Subscribed;
-use agvrl_deploy::record::{DriveBag, Recorded, Setup};
+use agvrl_deploy::record::{self, BagCar, DriveBag, Recorded};
 use agvrl_deploy::stats::{cpu_time_s, quantile, rss_mb};
 use agvrl_deploy::{DriveConfig, DriveLoop};
 use agvrl_envs::api::Vehicle;
@@ -18,7 +18,6 @@ use agvrl_run::PolicySettings;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use serde::Deserialize;
-use sha2::Digest;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -218,7 +217,7 @@ fn run() -> Result<()> {
                 drive: mapping,
                 sim_time: true,
             };
-            let bag = Arc::new(record_bag(dir, &src, &env, &env_cfg, car)?);
+            let bag = Arc::new(record::for_policy(dir, Some(&src.policy), &env, &env_cfg, car)?);
             let v = Recorded::new(vehicle, bag.clone(), true);
             drive_loop(&a, DriveLoop::new(v, task, policy, drive, a.seed)?, Some(bag))
         }
@@ -263,7 +262,7 @@ fn drive_ros2(
                 drive: cfg.drive,
                 sim_time: false,
             };
-            Some(Arc::new(record_bag(dir, src, env, env_cfg, car)?))
+            Some(Arc::new(record::for_policy(dir, Some(&src.policy), env, env_cfg, car)?))
         }
         None => None,
     };
@@ -285,58 +284,28 @@ fn drive_ros2(_: &Args, _: &PolicySettings, _: &str, _: &EnvConfig, _: Policy, _
 
 /// `--replay DIR [--fast] [--check]`.
 fn replay(a: &Args, dir: &Path, env: &str, env_cfg: &EnvConfig, policy: Policy) -> Result<()> {
-    let mut cfg = match &a.config {
-        Some(p) => agvrl_deploy::hardware::Ros2Config::load(p)?,
-        None => agvrl_deploy::hardware::Ros2Config::default(),
-    };
-    let _ = cfg
-        .drive
-        .for_trained_top_speed(env_cfg.sim.vehicle_model()?.top_speed_mps());
-    let task = make_task(env, env_cfg, cfg.drive.steering_limit_rad)?;
-    let camera = if task.needs().image {
-        env_cfg.sim.camera.clone()
-    } else {
-        None
-    };
-    let vehicle = agvrl_deploy::replay::Replay::open(dir, cfg, camera)?;
-    if let Some(d) = &vehicle.damage {
+    let cfg = a
+        .config
+        .as_deref()
+        .map(agvrl_deploy::hardware::Ros2Config::load)
+        .transpose()?;
+    let mut r = agvrl_deploy::replay::Replayer::open(dir, cfg, env, env_cfg, policy, a.rate_hz, a.seed)?;
+    if let Some(d) = &r.vehicle().damage {
         eprintln!("warning: {d}; replaying the intact part");
     }
-    let recorded = vehicle.ticks().to_vec();
-    let drive = DriveConfig {
-        rate_hz: a.rate_hz,
-        realtime: false,
-        ..DriveConfig::default()
-    };
-    let mut lp = DriveLoop::new(vehicle, task, policy, drive, a.seed)?;
-    let (t0, clock0) = (Instant::now(), recorded[0].clock_s);
-    let (mut action_diff, mut control_diff, mut event_diff) = (Vec::new(), Vec::new(), 0u64);
-    for rec in &recorded {
-        if !a.fast {
-            let due = Duration::from_secs_f64((rec.clock_s - clock0).max(0.0));
+    let (t0, clock0) = (Instant::now(), r.recorded()[0].clock_s);
+    let mut ticks = 0;
+    loop {
+        if !a.fast
+            && let Some(clock) = r.vehicle().next_clock_s()
+        {
+            let due = Duration::from_secs_f64((clock - clock0).max(0.0));
             if let Some(rest) = due.checked_sub(t0.elapsed()) {
                 std::thread::sleep(rest);
             }
         }
-        let t = lp.tick_at(Some(rec.clock_s))?;
-        let action = t.inference.as_ref().map(|(_, act)| act.clone()).unwrap_or_default();
-        if action.len() == rec.action.len() {
-            let d = action
-                .iter()
-                .zip(&rec.action)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0f32, f32::max);
-            action_diff.push(d as f64);
-        } else {
-            event_diff += 1;
-        }
-        control_diff.push(
-            (t.control.throttle - rec.throttle)
-                .abs()
-                .max((t.control.steering_rad - rec.steering_rad).abs()),
-        );
-        let recorded_event = !rec.event.is_empty();
-        event_diff += u64::from(t.event.is_some() != recorded_event);
+        let Some((rec, t)) = r.step()? else { break };
+        ticks += 1;
         if !a.quiet {
             let ev = t.event.as_ref().map(|e| format!(" event={e:?}")).unwrap_or_default();
             println!(
@@ -345,27 +314,27 @@ fn replay(a: &Args, dir: &Path, env: &str, env_cfg: &EnvConfig, policy: Policy) 
             );
         }
     }
+    let d = &r.diff;
     let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
-    let bad = lp.vehicle().bad_messages();
     println!(
-        "replay ticks={} events_differ={event_diff} action_diff_max={:e} action_diff_p99={:e} control_diff_max={:e} \
-         control_diff_p99={:e} bad_messages={bad} wall_s={:.2}",
-        recorded.len(),
-        max(&action_diff),
-        quantile(&action_diff, 0.99),
-        max(&control_diff),
-        quantile(&control_diff, 0.99),
+        "replay ticks={ticks} events_differ={} action_diff_max={:e} action_diff_p99={:e} control_diff_max={:e} \
+         control_diff_p99={:e} bad_messages={} wall_s={:.2}",
+        d.events,
+        max(&d.action),
+        quantile(&d.action, 0.99),
+        max(&d.control),
+        quantile(&d.control, 0.99),
+        r.vehicle().bad_messages(),
         t0.elapsed().as_secs_f64()
     );
-    if a.check {
-        let worst = max(&action_diff).max(max(&control_diff));
-        if event_diff > 0 || worst > a.tolerance as f64 {
-            bail!(
-                "the replay differs from the recording: {event_diff} ticks' watchdog events, largest difference {worst:e} \
-                 (tolerance {:e})",
-                a.tolerance
-            );
-        }
+    if a.check && (d.events > 0 || d.worst() > a.tolerance as f64) {
+        bail!(
+            "the replay differs from the recording: {} ticks' watchdog events, largest difference {:e} \
+             (tolerance {:e})",
+            d.events,
+            d.worst(),
+            a.tolerance
+        );
     }
     Ok(())
 }
@@ -386,56 +355,6 @@ fn dump(dir: &Path) -> Result<()> {
         eprintln!("warning: {d}");
     }
     Ok(())
-}
-
-/// The car side of a recording: its topics, sensors and command scaling, and its clock.
-struct BagCar<'a> {
-    topics: &'a agvrl_deploy::hardware::config::Topics,
-    sensors: Subscribed,
-    drive: DriveMapping,
-    sim_time: bool,
-}
-
-/// A bag for the drive of `env` with the policy of `src`.
-fn record_bag(dir: &Path, src: &PolicySettings, env: &str, env_cfg: &EnvConfig, car: BagCar<'_>) -> Result<DriveBag> {
-    let BagCar {
-        topics,
-        sensors,
-        drive,
-        sim_time,
-    } = car;
-    let model = env_cfg.sim.vehicle_model()?;
-    let urdf = agvrl_sim::assets::AssetSource::Embedded
-        .read(&format!("vehicles/{}.urdf", model.name))
-        .ok();
-    let policy_bytes = std::fs::read(&src.policy).with_context(|| format!("reading {}", src.policy.display()))?;
-    let hash: String = sha2::Sha256::digest(&policy_bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect();
-    let metadata = std::collections::BTreeMap::from([
-        ("policy".to_string(), src.policy.display().to_string()),
-        ("policy_sha256".to_string(), hash),
-        ("env".to_string(), env.to_string()),
-        ("env_config".to_string(), toml::to_string(env_cfg).unwrap_or_default()),
-        ("agvrl_drive".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-    ]);
-    let setup = Setup {
-        topics,
-        drive,
-        sensors,
-        lidar_b: model.lidar_b,
-        camera_b: model.camera_b,
-        urdf,
-        metadata,
-        sim_time,
-    };
-    let t0_s = if sim_time {
-        0.0
-    } else {
-        agvrl_deploy::run_loop::wall_clock_s()
-    };
-    Ok(DriveBag::create(dir, setup, t0_s)?)
 }
 
 fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Option<Arc<DriveBag>>) -> Result<()> {

@@ -173,6 +173,20 @@ impl Default for ScanMapping {
     }
 }
 
+impl ScanMapping {
+    /// The rays of `lidar` (a policy's own LiDAR), other settings as `self`.
+    pub fn with_rays_of(self, lidar: &agvrl_sim::sensors::LidarConfig) -> Self {
+        let (a0, inc) = lidar.angles();
+        Self {
+            angle_min_rad: a0,
+            angle_max_rad: a0 + inc * (lidar.n_rays.max(1) - 1) as f32,
+            n_rays: lidar.n_rays,
+            range_max_m: lidar.range_max_m,
+            ..self
+        }
+    }
+}
+
 /// A depth image to the policy's camera frame: the centre window with the policy camera's
 /// vertical field of view and aspect ratio (square pixels), resized by nearest pixel to its
 /// size. A pixel without a reading (NaN, 0 in 16UC1, -inf: nearer than the camera's minimum
