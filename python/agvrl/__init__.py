@@ -5,12 +5,14 @@ and the Rust trainer.
     env = agvrl.make("racing-oval")                 # a gymnasium.Env
     envs = agvrl.make_vec("racing-oval", 8)         # a gymnasium.vector.VectorEnv (Rust VecEnv)
     policy = agvrl.Policy.load("runs/x/policy.agvrl")
+    r = agvrl.replay("drive", "runs/x/policy.agvrl")   # a recorded bag through the policy
     run = agvrl.train("configs/default.toml")       # same run directory as `agvrl train`
 
 Importing the package registers every env with Gymnasium as ``agvrl/<id>-v0``.
 """
 
 from agvrl._core import TERMINATION_CAUSES, env_ids as _env_ids
+from agvrl.bag import Bag, Replay, read_bag, replay
 from agvrl.env import AgvrlEnv, make
 from agvrl.policy import Policy
 from agvrl.training import RunResult, train
@@ -42,9 +44,13 @@ __all__ = [
     "TERMINATION_CAUSES",
     "AgvrlEnv",
     "AgvrlVectorEnv",
+    "Bag",
     "Policy",
+    "Replay",
     "RunResult",
     "make",
     "make_vec",
+    "read_bag",
+    "replay",
     "train",
 ]

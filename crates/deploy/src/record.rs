@@ -418,23 +418,44 @@ impl<V: Vehicle> Vehicle for Recorded<V> {
     }
 }
 
+/// What to do with a decoded bag message: its typed value handed over as `serde::Serialize`.
+pub trait Decoded {
+    /// The result.
+    type Out;
+    /// Turn message `m` into the result.
+    fn decoded<M: serde::Serialize>(self, m: &M) -> Result<Self::Out, String>;
+}
+
+/// Decode bag message `m` by its ROS type and hand it to `to`; an error for a type without a
+/// decoder here or bytes that do not decode.
+pub fn decode_into<D: Decoded>(m: &bag::BagMessage, to: D) -> Result<D::Out, String> {
+    fn d<M: serde::de::DeserializeOwned + serde::Serialize, D: Decoded>(data: &[u8], to: D) -> Result<D::Out, String> {
+        to.decoded(&bag::decode::<M>(data)?)
+    }
+    let b = &m.data;
+    match m.ty.as_str() {
+        "sensor_msgs/msg/LaserScan" => d::<msg::LaserScan, D>(b, to),
+        "sensor_msgs/msg/Imu" => d::<msg::Imu, D>(b, to),
+        "nav_msgs/msg/Odometry" => d::<msg::Odometry, D>(b, to),
+        "sensor_msgs/msg/NavSatFix" => d::<msg::NavSatFix, D>(b, to),
+        "sensor_msgs/msg/Image" => d::<msg::Image, D>(b, to),
+        "ackermann_msgs/msg/AckermannDriveStamped" => d::<msg::AckermannDriveStamped, D>(b, to),
+        "tf2_msgs/msg/TFMessage" => d::<msg::TFMessage, D>(b, to),
+        "std_msgs/msg/String" => d::<msg::StdString, D>(b, to),
+        "agvrl_msgs/msg/Tick" => d::<msg::Tick, D>(b, to),
+        other => Err(format!("no decoder for {other}")),
+    }
+}
+
 /// A bag message decoded by its ROS type, as JSON (field names as in the `.msg` files), for
 /// `agvrl-drive --dump` and comparisons with other readers.
 pub fn decode_json(m: &bag::BagMessage) -> Result<serde_json::Value, String> {
-    fn j<M: serde::de::DeserializeOwned + serde::Serialize>(data: &[u8]) -> Result<serde_json::Value, String> {
-        serde_json::to_value(bag::decode::<M>(data)?).map_err(|e| e.to_string())
+    struct Json;
+    impl Decoded for Json {
+        type Out = serde_json::Value;
+        fn decoded<M: serde::Serialize>(self, m: &M) -> Result<serde_json::Value, String> {
+            serde_json::to_value(m).map_err(|e| e.to_string())
+        }
     }
-    let d = &m.data;
-    match m.ty.as_str() {
-        "sensor_msgs/msg/LaserScan" => j::<msg::LaserScan>(d),
-        "sensor_msgs/msg/Imu" => j::<msg::Imu>(d),
-        "nav_msgs/msg/Odometry" => j::<msg::Odometry>(d),
-        "sensor_msgs/msg/NavSatFix" => j::<msg::NavSatFix>(d),
-        "sensor_msgs/msg/Image" => j::<msg::Image>(d),
-        "ackermann_msgs/msg/AckermannDriveStamped" => j::<msg::AckermannDriveStamped>(d),
-        "tf2_msgs/msg/TFMessage" => j::<msg::TFMessage>(d),
-        "std_msgs/msg/String" => j::<msg::StdString>(d),
-        "agvrl_msgs/msg/Tick" => j::<msg::Tick>(d),
-        other => Err(format!("no decoder for {other}")),
-    }
+    decode_into(m, Json)
 }

@@ -6,7 +6,7 @@
 
 use crate::bag::{self, BagMessage};
 use crate::hardware::config::Ros2Config;
-use crate::hardware::frames::FrameBuilder;
+use crate::hardware::frames::{FrameBuilder, Subscribed};
 use crate::hardware::{mapping, msg};
 use crate::{DeployError, DriveConfig, DriveLoop, Tick};
 use agvrl_envs::EnvConfig;
@@ -23,6 +23,12 @@ pub struct Replay {
     msgs: Vec<(u64, Kind, Vec<u8>)>,
     next_msg: usize,
     ticks: Vec<msg::Tick>,
+    /// When each tick read its frame, on the log clock, ns.
+    sensed_ns: Vec<u64>,
+    /// Whether the ticks are the bag's own (`/agvrl/tick`) rather than made for a bag of
+    /// another stack.
+    recorded: bool,
+    period_s: f64,
     /// Ticks sensed so far.
     k: usize,
     applied: Control,
@@ -30,6 +36,9 @@ pub struct Replay {
     bad: u64,
     /// Where the bag stopped being readable, if it did.
     pub damage: Option<String>,
+    /// Log-clock jumps in file order (backwards, or forwards by over a second): replayed in
+    /// log-time order, as they were received, but worth a look.
+    pub clock_jumps: Vec<String>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,8 +52,11 @@ enum Kind {
 
 impl Replay {
     /// Open bag `dir` with the car's settings `cfg` (its topic names and mappings) and the
-    /// policy's camera.
-    pub fn open(dir: &Path, cfg: Ros2Config, camera: Option<CameraConfig>) -> Result<Self, DeployError> {
+    /// policy's camera. A bag without `/agvrl/tick` (a car log of another stack) is replayed as
+    /// a live car at `rate_hz` would have read it: the first tick when every subscribed sensor
+    /// has spoken (a live car's first complete frame), then one a period until the last sensor
+    /// message, each reading what was logged (received) by then.
+    pub fn open(dir: &Path, cfg: Ros2Config, camera: Option<CameraConfig>, rate_hz: f64) -> Result<Self, DeployError> {
         let (all, damage) = bag::read_messages(dir)?;
         let t = &cfg.topics;
         let kind = |m: &BagMessage| -> Option<Kind> {
@@ -63,6 +75,19 @@ impl Replay {
         let mut ticks = Vec::new();
         let mut msgs = Vec::new();
         let mut bad = 0;
+        let mut clock_jumps = Vec::new();
+        for w in all.windows(2) {
+            let (a, b) = (w[0].log_ns, w[1].log_ns);
+            if b + 1_000_000 < a || b > a + 1_000_000_000 {
+                clock_jumps.push(format!(
+                    "the log clock jumps {:+.3} s from {} to {} ({})",
+                    (b as f64 - a as f64) * 1e-9,
+                    w[0].topic,
+                    w[1].topic,
+                    if b < a { "backwards" } else { "forwards" }
+                ));
+            }
+        }
         for m in all {
             if m.topic == crate::record::TICK_TOPIC {
                 match bag::decode::<msg::Tick>(&m.data) {
@@ -73,32 +98,51 @@ impl Replay {
                 msgs.push((m.log_ns, k, m.data));
             }
         }
-        if ticks.is_empty() {
-            return Err(DeployError::Bag(format!(
-                "{}: no {} messages: not a bag of agvrl-drive --record{}",
-                dir.display(),
-                crate::record::TICK_TOPIC,
-                damage.as_ref().map_or(String::new(), |d| format!(" ({d})"))
-            )));
-        }
         // Stable: messages logged at the same time keep their file order.
         msgs.sort_by_key(|(log, _, _)| *log);
         ticks.sort_by_key(|t| t.tick);
+        let frames = FrameBuilder::new(cfg, camera);
+        let recorded = !ticks.is_empty();
+        let sensed_ns = if recorded {
+            ticks.iter().map(|t| bag::ns(t.sensed_s)).collect()
+        } else {
+            let grid = tick_grid(dir, &msgs, frames.subscribed(), rate_hz)?;
+            ticks = grid
+                .iter()
+                .enumerate()
+                .map(|(k, &ns)| msg::Tick {
+                    tick: k as u64,
+                    clock_s: ns as f64 * 1e-9,
+                    sensed_s: ns as f64 * 1e-9,
+                    ..msg::Tick::default()
+                })
+                .collect();
+            grid
+        };
         Ok(Self {
-            frames: FrameBuilder::new(cfg, camera),
+            frames,
             msgs,
             next_msg: 0,
             ticks,
+            sensed_ns,
+            recorded,
+            period_s: 1.0 / rate_hz,
             k: 0,
             applied: Control::default(),
             bad,
             damage,
+            clock_jumps,
         })
     }
 
-    /// The recorded ticks.
+    /// The recorded ticks (for a bag of another stack, the ticks made for it: clocks only).
     pub fn ticks(&self) -> &[msg::Tick] {
         &self.ticks
+    }
+
+    /// Whether the ticks are the bag's own, with the commands to check a replay against.
+    pub fn recorded(&self) -> bool {
+        self.recorded
     }
 
     /// Messages that did not decode so far (skipped, as a live car skips them).
@@ -111,9 +155,8 @@ impl Replay {
         self.ticks.get(self.k).map(|t| t.clock_s)
     }
 
-    /// Feed the messages logged at or before `sensed_s`.
-    fn feed(&mut self, sensed_s: f64) {
-        let until = bag::ns(sensed_s);
+    /// Feed the messages logged at or before `until` (ns).
+    fn feed(&mut self, until: u64) {
         while let Some((log, kind, data)) = self.msgs.get(self.next_msg) {
             if *log > until {
                 break;
@@ -131,6 +174,38 @@ impl Replay {
     }
 }
 
+/// Tick times for a bag without ticks: from the first log time by which every subscribed
+/// sensor has a message to the last sensor message, one a period (ns, exact).
+fn tick_grid(dir: &Path, msgs: &[(u64, Kind, Vec<u8>)], on: Subscribed, rate_hz: f64) -> Result<Vec<u64>, DeployError> {
+    let wanted = [
+        (on.scan, Kind::Scan, "scan"),
+        (on.imu, Kind::Imu, "imu"),
+        (on.odom, Kind::Odom, "odom"),
+        (on.navsat, Kind::NavSat, "navsat"),
+        (on.image, Kind::Image, "image"),
+    ];
+    let mut start = 0;
+    for (_, kind, name) in wanted.iter().filter(|w| w.0) {
+        let first = msgs.iter().find(|m| m.1 == *kind).map(|m| m.0).ok_or_else(|| {
+            DeployError::Bag(format!(
+                "{}: no /agvrl/tick (not a bag of agvrl), and no message on the topic of `topics.{name}`: a live car \
+                 would never start (name the car's topics with --config, or leave the topic empty)",
+                dir.display()
+            ))
+        })?;
+        start = start.max(first);
+    }
+    let end = msgs.last().map_or(start, |m| m.0);
+    if !(rate_hz.is_finite() && rate_hz > 0.0) {
+        return Err(DeployError::Config(format!("rate {rate_hz} Hz")));
+    }
+    let period_ns = 1e9 / rate_hz;
+    Ok((0..)
+        .map(|k: u64| start + (k as f64 * period_ns).round() as u64)
+        .take_while(|&t| t <= end)
+        .collect())
+}
+
 impl Vehicle for Replay {
     /// The frame of the first tick.
     fn reset(&mut self, _seed: u64) -> Result<SensorFrame, EnvError> {
@@ -138,8 +213,7 @@ impl Vehicle for Replay {
         self.next_msg = 0;
         self.frames = FrameBuilder::new(self.frames.cfg().clone(), self.frames.camera().cloned());
         self.applied = Control::default();
-        let first = self.ticks[0].sensed_s;
-        self.feed(first);
+        self.feed(self.sensed_ns[0]);
         Ok(self.frames.frame(self.applied))
     }
 
@@ -149,17 +223,16 @@ impl Vehicle for Replay {
     }
 
     fn sense(&mut self) -> Result<SensorFrame, EnvError> {
-        let Some(t) = self.ticks.get(self.k) else {
+        let Some(&sensed) = self.sensed_ns.get(self.k) else {
             return Err(EnvError::Vehicle("the bag has no more ticks".into()));
         };
-        let sensed = t.sensed_s;
         self.k += 1;
         self.feed(sensed);
         Ok(self.frames.frame(self.applied))
     }
 
     fn control_period_s(&self) -> f64 {
-        1.0 / 30.0
+        self.period_s
     }
 
     fn steering_limit_rad(&self) -> f64 {
@@ -247,7 +320,7 @@ impl Replayer {
         } else {
             None
         };
-        let vehicle = Replay::open(dir, cfg, camera)?;
+        let vehicle = Replay::open(dir, cfg, camera, rate_hz)?;
         let recorded = vehicle.ticks().to_vec();
         let drive = DriveConfig {
             rate_hz,
@@ -279,7 +352,9 @@ impl Replayer {
             return Ok(None);
         };
         let t = self.lp.tick_at(Some(rec.clock_s))?;
-        self.diff.add(rec, &t);
+        if self.lp.vehicle().recorded() {
+            self.diff.add(rec, &t);
+        }
         self.next += 1;
         Ok(Some((rec, t)))
     }

@@ -824,6 +824,73 @@ fn a_truncated_bag_yields_its_intact_messages_and_reindexes() {
     assert!(e.contains(bag::MCAP_FILE), "{e}");
 }
 
+/// A bag of another stack (its MCAP file named `<bag>_0.mcap`, no `/agvrl/tick`) is found and
+/// reindexed under its own file name; a directory without an MCAP file, or with several (a split
+/// bag), is refused by name; a log clock that jumps back or ahead is named, not a panic.
+#[test]
+fn foreign_bags_are_found_by_their_mcap_file_and_clock_jumps_are_named() {
+    use agvrl_deploy::bag::{self, BagWriter, Offered, Topic};
+    use agvrl_deploy::hardware::{Ros2Config, msg};
+    let dir = scratch("foreign");
+    let d = dir.path().join("carlog");
+    let mut w = BagWriter::create(&d).unwrap();
+    let topic = |name: &str, ty: &str| Topic {
+        name: name.into(),
+        ty: ty.into(),
+        offered: Offered::Sensor,
+    };
+    let scan = w.add_topic(topic("/scan", "sensor_msgs/msg/LaserScan")).unwrap();
+    let imu = w.add_topic(topic("/imu", "sensor_msgs/msg/Imu")).unwrap();
+    let odom = w.add_topic(topic("/odom", "nav_msgs/msg/Odometry")).unwrap();
+    // 1 s at 30 Hz, then the clock steps back 0.5 s, then ahead 3 s.
+    let t0 = 1_764_000_000_000_000_000u64;
+    let times: Vec<u64> = (0..30)
+        .map(|k| t0 + k * 33_333_333)
+        .chain([t0 + 500_000_000, t0 + 3_500_000_000])
+        .collect();
+    for &t in &times {
+        let header = agvrl_deploy::hardware::mapping::header(t as f64 * 1e-9, "laser");
+        let s = msg::LaserScan {
+            header: header.clone(),
+            ranges: vec![2.0; 100],
+            ..msg::LaserScan::default()
+        };
+        w.write(scan, t, t, &bag::cdr(&s)).unwrap();
+        let i = msg::Imu {
+            header: header.clone(),
+            ..msg::Imu::default()
+        };
+        w.write(imu, t, t, &bag::cdr(&i)).unwrap();
+        let o = msg::Odometry {
+            header,
+            ..msg::Odometry::default()
+        };
+        w.write(odom, t, t, &bag::cdr(&o)).unwrap();
+    }
+    w.finish().unwrap();
+    std::fs::rename(d.join(bag::MCAP_FILE), d.join("carlog_0.mcap")).unwrap();
+    std::fs::remove_file(d.join("metadata.yaml")).unwrap();
+    assert_eq!(bag::mcap_file(&d).unwrap(), d.join("carlog_0.mcap"));
+    let (s, damage) = bag::reindex(&d).unwrap();
+    assert_eq!((s.messages(), damage), (3 * 32, None));
+    let meta = std::fs::read_to_string(d.join("metadata.yaml")).unwrap();
+    assert!(meta.contains("- path: carlog_0.mcap"), "{meta}");
+    let r = agvrl_deploy::replay::Replay::open(&d, Ros2Config::default(), None, 30.0).unwrap();
+    assert!(!r.recorded());
+    assert_eq!(r.clock_jumps.len(), 2, "{:?}", r.clock_jumps);
+    assert!(r.clock_jumps[0].contains("backwards") && r.clock_jumps[1].contains("forwards"));
+    // Ticks on the log clock from the first complete frame to the last message.
+    assert_eq!(r.ticks().len(), 106, "3.5 s at 30 Hz");
+    // No MCAP file, or two: refused by name.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let e = bag::read_messages(&empty).unwrap_err().to_string();
+    assert!(e.contains("no .mcap file") && e.contains("empty"), "{e}");
+    std::fs::copy(d.join("carlog_0.mcap"), d.join("carlog_1.mcap")).unwrap();
+    let e = bag::read_messages(&d).unwrap_err().to_string();
+    assert!(e.contains("split bag") && e.contains("carlog_1.mcap"), "{e}");
+}
+
 /// A recording killed mid-drive (SIGKILL: no summary, no metadata.yaml) leaves a bag whose
 /// flushed chunks read back whole, and `--reindex` gives it a metadata.yaml.
 #[test]

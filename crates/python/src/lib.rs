@@ -646,6 +646,145 @@ fn bench_rust(
     })
 }
 
+/// A decoded bag message as Python objects.
+struct ToPy<'py>(Python<'py>);
+
+impl<'py> agvrl_deploy::record::Decoded for ToPy<'py> {
+    type Out = Bound<'py, PyAny>;
+    fn decoded<M: serde::Serialize>(self, m: &M) -> Result<Bound<'py, PyAny>, String> {
+        pythonize::pythonize(self.0, m).map_err(|e| e.to_string())
+    }
+}
+
+/// Every intact message of bag `path` as `(topic, type, log_ns, message)`, the message decoded
+/// to dicts, lists, floats and bytes (the raw CDR bytes for a type without a decoder here),
+/// and the damage found (`None` for an intact bag). A message that does not decode raises
+/// `ValueError` naming it.
+#[pyfunction]
+fn bag_messages<'py>(py: Python<'py>, path: PathBuf) -> PyResult<(Bound<'py, PyList>, Option<String>)> {
+    guard(|| {
+        let (msgs, damage) = py
+            .detach(|| agvrl_deploy::bag::read_messages(&path))
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let out = PyList::empty(py);
+        for m in &msgs {
+            let value = match agvrl_deploy::record::decode_into(m, ToPy(py)) {
+                Ok(v) => v,
+                Err(e) if e.starts_with("no decoder") => pyo3::types::PyBytes::new(py, &m.data).into_any(),
+                Err(e) => {
+                    return Err(PyValueError::new_err(format!(
+                        "{}: a {} message on {} logged at {} ns: {e}",
+                        path.display(),
+                        m.ty,
+                        m.topic,
+                        m.log_ns
+                    )));
+                }
+            };
+            out.append((m.topic.as_str(), m.ty.as_str(), m.log_ns, value))?;
+        }
+        Ok((out, damage))
+    })
+}
+
+/// Replay bag `path` through the policy file `policy` (settings embedded in it, `overrides`
+/// as `agvrl train --set`), as `agvrl-drive --replay` does; `config` is the car's TOML of a
+/// car log. Returns a dict of numpy arrays, one row per recorded tick: the replayed
+/// observation, action (NaN rows where the watchdog stopped the car), throttle and steering,
+/// beside the recorded ones, plus the watchdog events and the bag's damage.
+#[pyfunction]
+#[pyo3(signature = (path, policy, config=None, overrides=Vec::new(), seed=0))]
+fn replay_bag<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    policy: PathBuf,
+    config: Option<PathBuf>,
+    overrides: Vec<String>,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    guard(|| {
+        let value_err = |e: String| PyValueError::new_err(e);
+        let rows = py.detach(|| -> Result<_, String> {
+            let mut src = agvrl_run::PolicySettings::resolve(None, Some(&policy), &overrides)
+                .map_err(|e| agvrl_run::error_line(&e))?;
+            let loaded = src.load_policy().map_err(|e| agvrl_run::error_line(&e))?;
+            let env = src.env_id(None).map_err(|e| agvrl_run::error_line(&e))?;
+            let cfg = config
+                .as_deref()
+                .map(agvrl_deploy::hardware::Ros2Config::load)
+                .transpose()
+                .map_err(|e| e.to_string())?;
+            let mut r =
+                agvrl_deploy::replay::Replayer::open(&path, cfg, &env, &src.eval_env_config(), loaded, 30.0, seed)
+                    .map_err(|e| format!("{}: {}", path.display(), agvrl_run::error_line(&e)))?;
+            let mut rows = Vec::new();
+            while let Some((rec, t)) = r.step().map_err(|e| agvrl_run::error_line(&e))? {
+                rows.push((rec.clone(), t));
+            }
+            Ok((rows, r.vehicle().damage.clone(), r.vehicle().bad_messages()))
+        });
+        let (rows, damage, bad) = rows.map_err(value_err)?;
+        let n = rows.len();
+        let width = |f: &dyn Fn(&(agvrl_deploy::hardware::msg::Tick, agvrl_deploy::Tick)) -> usize| {
+            rows.iter().map(f).max().unwrap_or(0)
+        };
+        let (n_obs, n_act) = (
+            width(&|(r, t)| t.inference.as_ref().map_or(r.observation.len(), |(o, _)| o.len())),
+            width(&|(r, t)| t.inference.as_ref().map_or(r.action.len(), |(_, a)| a.len())),
+        );
+        let table = |w: usize, row: &dyn Fn(usize) -> Option<Vec<f32>>| {
+            let mut a = Array2::<f32>::from_elem((n, w), f32::NAN);
+            for k in 0..n {
+                if let Some(v) = row(k).filter(|v| v.len() == w) {
+                    a.row_mut(k).assign(&numpy::ndarray::ArrayView1::from(&v[..]));
+                }
+            }
+            a.into_pyarray(py)
+        };
+        let d = PyDict::new(py);
+        let col = |f: &dyn Fn(&agvrl_deploy::hardware::msg::Tick, &agvrl_deploy::Tick) -> f64| {
+            rows.iter().map(|(r, t)| f(r, t)).collect::<Vec<f64>>().into_pyarray(py)
+        };
+        d.set_item(
+            "tick",
+            rows.iter().map(|(r, _)| r.tick).collect::<Vec<u64>>().into_pyarray(py),
+        )?;
+        d.set_item("clock_s", col(&|r, _| r.clock_s))?;
+        d.set_item("stamp_s", col(&|_, t| t.stamp_s))?;
+        d.set_item(
+            "observation",
+            table(n_obs, &|k| rows[k].1.inference.as_ref().map(|(o, _)| o.clone())),
+        )?;
+        d.set_item(
+            "action",
+            table(n_act, &|k| rows[k].1.inference.as_ref().map(|(_, a)| a.clone())),
+        )?;
+        d.set_item("throttle", col(&|_, t| t.control.throttle))?;
+        d.set_item("steering_rad", col(&|_, t| t.control.steering_rad))?;
+        let events: Vec<String> = rows
+            .iter()
+            .map(|(_, t)| t.event.as_ref().map_or(String::new(), |e| format!("{e:?}")))
+            .collect();
+        d.set_item("event", events)?;
+        // A tick the watchdog stopped recorded no observation and no action.
+        let recorded = |v: &Vec<f32>| (!v.is_empty()).then(|| v.clone());
+        d.set_item(
+            "recorded_observation",
+            table(n_obs, &|k| recorded(&rows[k].0.observation)),
+        )?;
+        d.set_item("recorded_action", table(n_act, &|k| recorded(&rows[k].0.action)))?;
+        d.set_item("recorded_throttle", col(&|r, _| r.throttle))?;
+        d.set_item("recorded_steering_rad", col(&|r, _| r.steering_rad))?;
+        d.set_item(
+            "recorded_event",
+            rows.iter().map(|(r, _)| r.event.clone()).collect::<Vec<_>>(),
+        )?;
+        d.set_item("bad_messages", bad)?;
+        d.set_item("damage", damage)?;
+        Ok(d)
+    })
+}
+
 /// Panic in Rust, with the GIL released, and raise what Python sees: the tests' check that no
 /// panic crosses the boundary (every entry point goes through the same `guard`).
 #[pyfunction]
@@ -675,6 +814,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(bench_rust, m)?)?;
     m.add_function(wrap_pyfunction!(env_ids, m)?)?;
     m.add_function(wrap_pyfunction!(cli, m)?)?;
+    m.add_function(wrap_pyfunction!(bag_messages, m)?)?;
+    m.add_function(wrap_pyfunction!(replay_bag, m)?)?;
     m.add_function(wrap_pyfunction!(_panic_for_test, m)?)?;
     m.add("TERMINATION_CAUSES", info::CAUSES.to_vec())?;
     Ok(())

@@ -212,13 +212,14 @@ impl BagWriter {
     /// Write the summary and `metadata.yaml`.
     pub fn finish(mut self) -> Result<BagSummary, DeployError> {
         self.mcap.finish().map_err(|e| mcap_err(&self.path, e))?;
-        write_metadata_yaml(&self.dir, &self.summary)?;
+        write_metadata_yaml(&self.dir, MCAP_FILE, &self.summary)?;
         Ok(self.summary)
     }
 }
 
-/// rosbag2's `metadata.yaml` (version 9) for `s`, written to a temp file and renamed.
-pub fn write_metadata_yaml(dir: &Path, s: &BagSummary) -> Result<(), DeployError> {
+/// rosbag2's `metadata.yaml` (version 9) for `s` in MCAP file `file` (a name in `dir`),
+/// written to a temp file and renamed.
+pub fn write_metadata_yaml(dir: &Path, file: &str, s: &BagSummary) -> Result<(), DeployError> {
     let (start, end) = s.span_ns.unwrap_or((0, 0));
     let mut y = format!(
         "rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n  duration:\n    nanoseconds: {}\n  \
@@ -235,8 +236,8 @@ pub fn write_metadata_yaml(dir: &Path, s: &BagSummary) -> Result<(), DeployError
         );
     }
     y += &format!(
-        "  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:\n    - {MCAP_FILE}\n  files:\n    \
-         - path: {MCAP_FILE}\n      starting_time:\n        nanoseconds_since_epoch: {start}\n      duration:\n        \
+        "  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:\n    - {file}\n  files:\n    \
+         - path: {file}\n      starting_time:\n        nanoseconds_since_epoch: {start}\n      duration:\n        \
          nanoseconds: {}\n      message_count: {}\n  custom_data: ~\n  ros_distro: jazzy\n",
         end - start,
         s.messages()
@@ -262,10 +263,47 @@ pub struct BagMessage {
     pub data: Vec<u8>,
 }
 
-/// Every intact message of `dir`'s MCAP file, in file order. A file cut short (a killed
-/// recording) yields every message before the damage and says where it stopped.
+/// The MCAP file of bag `dir`: ours (`drive_0.mcap`), else the one `.mcap` file there (a bag
+/// of `ros2 bag record` or rosbags, `<name>_0.mcap`); `dir` may also be the file itself. A split
+/// bag (several files) is refused by name.
+pub fn mcap_file(dir: &Path) -> Result<PathBuf, DeployError> {
+    if dir.is_file() {
+        return Ok(dir.to_path_buf());
+    }
+    let ours = dir.join(MCAP_FILE);
+    if ours.exists() {
+        return Ok(ours);
+    }
+    let mut found: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| io_err(dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .collect();
+    found.sort();
+    match found.len() {
+        0 => Err(DeployError::Bag(format!(
+            "{}: no .mcap file: not a bag with MCAP storage",
+            dir.display()
+        ))),
+        1 => Ok(found.remove(0)),
+        _ => Err(DeployError::Bag(format!(
+            "{}: {} .mcap files (a split bag); give one file: {}",
+            dir.display(),
+            found.len(),
+            found
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))),
+    }
+}
+
+/// Every intact message of bag `dir`'s MCAP file ([`mcap_file`]), in file order. A file cut
+/// short (a killed recording) yields every message before the damage and says where it
+/// stopped.
 pub fn read_messages(dir: &Path) -> Result<(Vec<BagMessage>, Option<String>), DeployError> {
-    let path = dir.join(MCAP_FILE);
+    let path = mcap_file(dir)?;
     let bytes = std::fs::read(&path).map_err(|e| io_err(&path, e))?;
     if !bytes.starts_with(mcap::MAGIC) {
         return Err(DeployError::Bag(format!(
@@ -297,7 +335,12 @@ pub fn read_messages(dir: &Path) -> Result<(Vec<BagMessage>, Option<String>), De
 /// Rebuild `dir/metadata.yaml` from its MCAP file (a recording that was killed before it
 /// wrote one); returns the summary and where the file stopped being readable, if it did.
 pub fn reindex(dir: &Path) -> Result<(BagSummary, Option<String>), DeployError> {
-    let (msgs, damage) = read_messages(dir)?;
+    let file = mcap_file(dir)?;
+    let dir = file.parent().unwrap_or(Path::new("."));
+    let name = file
+        .file_name()
+        .map_or(MCAP_FILE.into(), |n| n.to_string_lossy().into_owned());
+    let (msgs, damage) = read_messages(&file)?;
     let mut s = BagSummary::default();
     for m in &msgs {
         let i = match s.counts.iter().position(|(t, _)| t.name == m.topic) {
@@ -323,7 +366,7 @@ pub fn reindex(dir: &Path) -> Result<(BagSummary, Option<String>), DeployError> 
         let (a, b) = s.span_ns.get_or_insert((m.log_ns, m.log_ns));
         (*a, *b) = ((*a).min(m.log_ns), (*b).max(m.log_ns));
     }
-    write_metadata_yaml(dir, &s)?;
+    write_metadata_yaml(dir, &name, &s)?;
     Ok((s, damage))
 }
 

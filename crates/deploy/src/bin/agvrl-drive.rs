@@ -293,8 +293,26 @@ fn replay(a: &Args, dir: &Path, env: &str, env_cfg: &EnvConfig, policy: Policy) 
     if let Some(d) = &r.vehicle().damage {
         eprintln!("warning: {d}; replaying the intact part");
     }
+    for j in r.vehicle().clock_jumps.iter().take(5) {
+        eprintln!("warning: {}: {j}", dir.display());
+    }
+    let recorded = r.vehicle().recorded();
+    if !recorded {
+        if a.check {
+            bail!(
+                "{}: no /agvrl/tick, so no recorded commands to check against (a car log of another stack replays \
+                 without --check: the watchdog's events and the policy's commands)",
+                dir.display()
+            );
+        }
+        eprintln!(
+            "{}: no /agvrl/tick: ticking at {} Hz on the log clock, as a live car would have read it",
+            dir.display(),
+            a.rate_hz
+        );
+    }
     let (t0, clock0) = (Instant::now(), r.recorded()[0].clock_s);
-    let mut ticks = 0;
+    let (mut ticks, mut events) = (0, 0);
     loop {
         if !a.fast
             && let Some(clock) = r.vehicle().next_clock_s()
@@ -306,18 +324,27 @@ fn replay(a: &Args, dir: &Path, env: &str, env_cfg: &EnvConfig, policy: Policy) 
         }
         let Some((rec, t)) = r.step()? else { break };
         ticks += 1;
+        events += u64::from(t.event.is_some());
         if !a.quiet {
             let ev = t.event.as_ref().map(|e| format!(" event={e:?}")).unwrap_or_default();
+            let was = if recorded {
+                format!(
+                    " recorded_throttle={:.3} recorded_steering_rad={:.3}",
+                    rec.throttle, rec.steering_rad
+                )
+            } else {
+                String::new()
+            };
             println!(
-                "tick={} throttle={:.3} steering_rad={:.3} recorded_throttle={:.3} recorded_steering_rad={:.3}{ev}",
-                t.index, t.control.throttle, t.control.steering_rad, rec.throttle, rec.steering_rad
+                "tick={} clock_s={:.3} throttle={:.3} steering_rad={:.3}{was}{ev}",
+                t.index, rec.clock_s, t.control.throttle, t.control.steering_rad
             );
         }
     }
     let d = &r.diff;
     let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
     println!(
-        "replay ticks={ticks} events_differ={} action_diff_max={:e} action_diff_p99={:e} control_diff_max={:e} \
+        "replay ticks={ticks} events={events} events_differ={} action_diff_max={:e} action_diff_p99={:e} control_diff_max={:e} \
          control_diff_p99={:e} bad_messages={} wall_s={:.2}",
         d.events,
         max(&d.action),
