@@ -12,7 +12,7 @@ use std::path::PathBuf;
 #[derive(Args)]
 pub struct ViewArgs {
     /// Environment id (see `agvrl envs`; default: the policy's).
-    #[arg(long, required_unless_present_any = ["run", "policy"])]
+    #[arg(long, required_unless_present_any = ["run", "policy", "bag"])]
     pub env: Option<String>,
     /// Drive with this policy file (default: uniform random actions), with its own settings
     /// (see `agvrl eval --policy`).
@@ -40,10 +40,34 @@ pub struct ViewArgs {
     /// segmentation images.
     #[arg(long)]
     pub camera: bool,
+    /// Draw a recorded bag instead of driving (`agvrl-drive --record`, `agvrl eval --record`,
+    /// or a car log with MCAP storage): pose, path, LiDAR, depth image, commands and events
+    /// (default file: view-bag.rrd).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["env", "policy", "run", "camera", "steps"])]
+    pub bag: Option<PathBuf>,
 }
 
 /// Drive one episode (policy or random actions) into rerun.
 pub fn view(a: ViewArgs) -> Result<()> {
+    if let Some(dir) = &a.bag {
+        let sink = viz::sink_of(a.rerun.as_deref(), a.spawn_viewer)
+            .unwrap_or_else(|| Sink::File(PathBuf::from("view-bag.rrd")));
+        let (file, v) = viz::bag(sink, dir)?;
+        if let Some(d) = &v.damage {
+            eprintln!("warning: {d}; drew the intact part");
+        }
+        println!("bag={}", dir.display());
+        println!("scans={}", v.scans);
+        println!("poses={}", v.poses);
+        println!("images={}", v.images);
+        println!("ticks={}", v.ticks);
+        println!("skipped={}", v.skipped);
+        if let Some(p) = file {
+            println!("rrd={}", p.display());
+            eprintln!("open it with: rerun {}", p.display());
+        }
+        return Ok(());
+    }
     let (env_id, mut env_cfg, src) = if a.run.is_some() || a.policy.is_some() {
         let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
         (src.env_id(a.env.as_deref())?, src.eval_env_config(), Some(src))

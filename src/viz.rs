@@ -377,3 +377,176 @@ impl Recorder {
 
 /// Whether recordings can be made.
 pub const ENABLED: bool = true;
+
+/// What `agvrl view --bag` put into the recording.
+#[derive(Debug, Default)]
+pub struct BagView {
+    /// Scans, poses, images, ticks drawn.
+    pub scans: u64,
+    pub poses: u64,
+    pub images: u64,
+    pub ticks: u64,
+    /// Messages of topics with nothing to draw (the raw MCAP in rerun shows what it knows).
+    pub skipped: u64,
+    /// Where the bag stopped being readable, if it did.
+    pub damage: Option<String>,
+}
+
+/// A rosbag2 bag (`agvrl-drive --record`, `agvrl eval --record`, or a car log) as a recording:
+/// the car's pose from Odometry, its path, the LiDAR scan placed by `/tf_static` (red hits, green
+/// misses, as live recordings), the depth image, and the commands, actions, speed and the
+/// watchdog's and filter's events on a `bag_time` timeline (from the first message). rerun reads
+/// the raw MCAP too, but draws no LaserScan, Odometry or our ticks.
+pub fn bag(sink: Sink, dir: &std::path::Path) -> Result<(Option<PathBuf>, BagView)> {
+    use agvrl_deploy::bag::{decode, read_messages};
+    use agvrl_deploy::hardware::msg;
+    let (msgs, damage) = read_messages(dir)?;
+    let has_image = msgs.iter().any(|m| m.ty == "sensor_msgs/msg/Image");
+    let name = format!("bag {}", dir.display());
+    let cam = has_image.then(|| agvrl_sim::sensors::CameraConfig {
+        depth_only: true,
+        ..Default::default()
+    });
+    let r = Recorder::new(sink, &name, cam.as_ref())?;
+    let rec = &r.rec;
+    let mut v = BagView {
+        damage,
+        ..BagView::default()
+    };
+    let t0 = msgs.iter().map(|m| m.log_ns).min().unwrap_or(0);
+    let mut trail: Vec<[f32; 3]> = Vec::new();
+    let f = |x: f64| x as f32;
+    for m in &msgs {
+        rec.set_duration_secs("bag_time", m.log_ns.saturating_sub(t0) as f64 * 1e-9);
+        let bad = |e: String| anyhow::anyhow!("{}: a {} message on {}: {e}", dir.display(), m.ty, m.topic);
+        match m.ty.as_str() {
+            "tf2_msgs/msg/TFMessage" if m.topic == "/tf_static" => {
+                let tf: msg::TFMessage = decode(&m.data).map_err(bad)?;
+                for t in &tf.transforms {
+                    let (p, q) = (t.transform.translation, t.transform.rotation);
+                    rec.log_static(
+                        format!("world/vehicle/{}", t.child_frame_id),
+                        &rerun::Transform3D::from_translation_rotation(
+                            [f(p.x), f(p.y), f(p.z)],
+                            rerun::Quaternion::from_xyzw([f(q.x), f(q.y), f(q.z), f(q.w)]),
+                        ),
+                    )?;
+                }
+            }
+            "nav_msgs/msg/Odometry" => {
+                let o: msg::Odometry = decode(&m.data).map_err(bad)?;
+                let (p, q) = (o.pose.pose.position, o.pose.pose.orientation);
+                rec.log(
+                    "world/vehicle",
+                    &rerun::Transform3D::from_translation_rotation(
+                        [f(p.x), f(p.y), f(p.z)],
+                        rerun::Quaternion::from_xyzw([f(q.x), f(q.y), f(q.z), f(q.w)]),
+                    ),
+                )?;
+                rec.log("plots/speed_mps", &rerun::Scalars::single(o.twist.twist.linear.x))?;
+                trail.push([f(p.x), f(p.y), 0.02]);
+                if v.poses.is_multiple_of(15) {
+                    rec.log(
+                        "world/trajectory",
+                        &rerun::LineStrips3D::new([trail.clone()]).with_colors([rerun::Color::from_rgb(255, 200, 0)]),
+                    )?;
+                }
+                v.poses += 1;
+            }
+            "sensor_msgs/msg/LaserScan" => {
+                let s: msg::LaserScan = decode(&m.data).map_err(bad)?;
+                let frame = if s.header.frame_id.is_empty() {
+                    "laser".to_string()
+                } else {
+                    s.header.frame_id.clone()
+                };
+                let (mut ends, mut hit, mut min) = (Vec::new(), Vec::new(), f32::INFINITY);
+                for (k, &r) in s.ranges.iter().enumerate() {
+                    let a = s.angle_min + k as f32 * s.angle_increment;
+                    let h = r.is_finite() && r >= s.range_min && r < s.range_max;
+                    let d = if h { r } else { s.range_max };
+                    if h {
+                        min = min.min(r);
+                    }
+                    ends.push([d * a.cos(), d * a.sin(), 0.0]);
+                    hit.push(h);
+                }
+                let red = rerun::Color::from_rgb(255, 40, 40);
+                let colors = hit
+                    .iter()
+                    .map(|&h| if h { red } else { rerun::Color::from_rgb(40, 220, 40) });
+                let base = format!("world/vehicle/{frame}");
+                rec.log(
+                    format!("{base}/rays"),
+                    &rerun::LineStrips3D::new(ends.iter().map(|e| [[0.0, 0.0, 0.0], *e]))
+                        .with_colors(colors)
+                        .with_radii([0.004]),
+                )?;
+                let hits = ends.iter().zip(&hit).filter(|(_, h)| **h).map(|(e, _)| *e);
+                rec.log(
+                    format!("{base}/scan"),
+                    &rerun::Points3D::new(hits).with_radii([0.03]).with_colors([red]),
+                )?;
+                if min.is_finite() {
+                    rec.log("plots/min_range_m", &rerun::Scalars::single(min as f64))?;
+                }
+                v.scans += 1;
+            }
+            "sensor_msgs/msg/Image" => {
+                let i: msg::Image = decode(&m.data).map_err(bad)?;
+                let res = [i.width, i.height];
+                let rows = i.height as usize * i.step as usize;
+                let packed = |px: usize| -> Option<Vec<u8>> {
+                    let row = i.width as usize * px;
+                    (i.is_bigendian == 0 && i.data.len() >= rows && i.step as usize >= row).then(|| {
+                        i.data
+                            .chunks(i.step.max(1) as usize)
+                            .take(i.height as usize)
+                            .flat_map(|r| r[..row].iter().copied())
+                            .collect()
+                    })
+                };
+                use rerun::datatypes::ChannelDatatype as C;
+                let image = match i.encoding.as_str() {
+                    "32FC1" => packed(4).map(|b| rerun::DepthImage::from_data_type_and_bytes(b, res, C::F32).with_meter(1.0)),
+                    "16UC1" => packed(2).map(|b| rerun::DepthImage::from_data_type_and_bytes(b, res, C::U16).with_meter(1000.0)),
+                    _ => None,
+                };
+                match image {
+                    Some(img) => {
+                        rec.log("camera/depth", &img)?;
+                        v.images += 1;
+                    }
+                    None => v.skipped += 1,
+                }
+            }
+            "agvrl_msgs/msg/Tick" => {
+                let t: msg::Tick = decode(&m.data).map_err(bad)?;
+                rec.log("plots/throttle", &rerun::Scalars::single(t.throttle))?;
+                rec.log("plots/steering_rad", &rerun::Scalars::single(t.steering_rad))?;
+                for (k, a) in t.action.iter().enumerate() {
+                    rec.log(format!("plots/action/{k}"), &rerun::Scalars::single(*a as f64))?;
+                }
+                if !t.event.is_empty() {
+                    rec.log(
+                        "log",
+                        &rerun::TextLog::new(format!("tick {}: watchdog {}", t.tick, t.event))
+                            .with_level(rerun::TextLogLevel::WARN),
+                    )?;
+                }
+                if !matches!(t.intervention.as_str(), "" | "none") {
+                    rec.log("log", &rerun::TextLog::new(format!("tick {}: filter {}", t.tick, t.intervention)))?;
+                }
+                v.ticks += 1;
+            }
+            _ => v.skipped += 1,
+        }
+    }
+    if trail.len() > 1 {
+        rec.log(
+            "world/trajectory",
+            &rerun::LineStrips3D::new([trail]).with_colors([rerun::Color::from_rgb(255, 200, 0)]),
+        )?;
+    }
+    Ok((r.finish()?, v))
+}
