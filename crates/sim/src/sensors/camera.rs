@@ -178,6 +178,16 @@ struct Grid {
     cells: Vec<Vec<u32>>,
 }
 
+impl Grid {
+    fn cell(&self, i: i32, j: i32) -> &[u32] {
+        &self.cells[(i * self.ny + j) as usize]
+    }
+
+    fn contains(&self, i: i32, j: i32) -> bool {
+        (i as u32) < self.nx as u32 && (j as u32) < self.ny as u32
+    }
+}
+
 struct Decal {
     centre: [f32; 2],
     axis: [f32; 2],
@@ -206,6 +216,17 @@ fn crosses_box(o: Vector, inv: Vector, aabb: &Aabb, max_t: f32) -> bool {
 fn floor_i(x: f32) -> i32 {
     let i = x as i32;
     if (i as f32) > x { i - 1 } else { i }
+}
+
+/// What every ray of a frame shares: the eye and its grid cell (computed once a frame).
+struct Eye {
+    o: Vector,
+    /// The eye's grid cell.
+    cell: [i32; 2],
+    /// Distance to the next cell boundary in grid units, towards + and towards -, per axis.
+    frac_pos: [f32; 2],
+    frac_neg: [f32; 2],
+    inside: bool,
 }
 
 /// A renderer bound to one scene.
@@ -329,6 +350,7 @@ impl Camera {
         };
         let n = w * h;
         let mut depth = vec![0f32; n];
+        let eye_g = self.eye(eye);
         let frame = |rgb, segmentation, depth_m| CameraFrame {
             width: self.cfg.width,
             height: self.cfg.height,
@@ -337,10 +359,17 @@ impl Camera {
             segmentation,
         };
         if self.cfg.depth_only {
+            // `ray` with its per-column and per-row terms computed once (the same operations).
+            let across: Vec<Vector> = (0..w)
+                .map(|u| fwd + right * ((2.0 * (u as f32 + 0.5) / w as f32 - 1.0) * tan_x))
+                .collect();
             depth.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
-                for (u, z) in row.iter_mut().enumerate() {
-                    let (d, len) = ray(u, v);
-                    let (t, _, _) = self.nearest(statics, eye, d, self.cfg.far_m * len);
+                let rise = up * ((1.0 - 2.0 * (v as f32 + 0.5) / h as f32) * tan_y);
+                for (z, a) in row.iter_mut().zip(&across) {
+                    let dir = *a + rise;
+                    let len = dir.length();
+                    let d = dir / len;
+                    let (t, _, _) = self.nearest(statics, &eye_g, d, self.cfg.far_m * len);
                     *z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
                 }
             });
@@ -360,7 +389,7 @@ impl Camera {
             .for_each(|(v, (((rgb_row, depth_row), seg_row), cls_row))| {
                 for u in 0..w {
                     let (d, len) = ray(u, v);
-                    let (t, color, id, c) = self.shade(statics, eye, d, self.cfg.far_m * len);
+                    let (t, color, id, c) = self.shade(statics, &eye_g, d, self.cfg.far_m * len);
                     let z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
                     depth_row[u] = z;
                     seg_row[u] = id;
@@ -378,7 +407,8 @@ impl Camera {
 
     /// The first surface along `o + t d` (`d` unit) before `max_t`: its distance, the static
     /// entry hit and its normal, or whether it is the ground.
-    fn nearest(&self, statics: &StaticIndex, o: Vector, d: Vector, max_t: f32) -> (f32, Option<(usize, Vector)>, bool) {
+    fn nearest(&self, statics: &StaticIndex, eye: &Eye, d: Vector, max_t: f32) -> (f32, Option<(usize, Vector)>, bool) {
+        let o = eye.o;
         // The ground plane bounds the walk.
         let mut best = max_t;
         let mut hit: Option<(usize, Vector)> = None;
@@ -396,13 +426,14 @@ impl Camera {
         if d.z > 1e-6 {
             reach = reach.min(((self.top_z - o.z) / d.z).max(0.0));
         }
-        let inv = slab_recip(d);
+        // Only rays that meet an entry need the slabs' reciprocals.
+        let mut inv = None;
         // The last entries tested: one that missed misses in every further cell (the reach only
         // shrinks), and a long wall spans many cells.
         let mut seen = [u32::MAX; 8];
         let mut next = 0;
         self.walk(
-            o,
+            eye,
             d,
             &mut reach,
             |k, t_max| {
@@ -413,6 +444,7 @@ impl Camera {
                 next += 1;
                 let e = &statics.entries[k as usize];
                 // The box first: most rays pass above or beside most of a cell's entries.
+                let inv = *inv.get_or_insert_with(|| slab_recip(d));
                 if !crosses_box(o, inv, &e.aabb, t_max) {
                     return None;
                 }
@@ -427,9 +459,10 @@ impl Camera {
     }
 
     /// (distance, colour, object id + 1, class) of the first surface along `o + t d`.
-    fn shade(&self, statics: &StaticIndex, o: Vector, d: Vector, max_t: f32) -> (f32, [f32; 3], u32, u8) {
+    fn shade(&self, statics: &StaticIndex, eye: &Eye, d: Vector, max_t: f32) -> (f32, [f32; 3], u32, u8) {
         let sun = Vector::from_array(SUN).normalize();
-        let (best, hit, ground) = self.nearest(statics, o, d, max_t);
+        let o = eye.o;
+        let (best, hit, ground) = self.nearest(statics, eye, d, max_t);
         if let Some((k, n)) = hit {
             let e = &statics.entries[k];
             let lambert = 0.35 + 0.65 * n.dot(sun).max(0.0);
@@ -453,19 +486,35 @@ impl Camera {
         (max_t, SKY_RGB, 0, class::SKY)
     }
 
+    /// The eye at `o`: its grid cell and the distances to the cell's boundaries, as `walk`
+    /// would compute them for every ray.
+    fn eye(&self, o: Vector) -> Eye {
+        let g = &self.grid;
+        let (px, py) = ((o.x - g.origin[0]) / g.cell, (o.y - g.origin[1]) / g.cell);
+        let (i, j) = (floor_i(px), floor_i(py));
+        let (fx, fy) = (floor_i(px) as f32, floor_i(py) as f32);
+        Eye {
+            o,
+            cell: [i, j],
+            frac_pos: [fx + 1.0 - px, fy + 1.0 - py],
+            frac_neg: [px - fx, py - fy],
+            inside: (0..g.nx).contains(&i) && (0..g.ny).contains(&j),
+        }
+    }
+
     /// Visit the grid cells along the ray's ground track, nearest first, testing their entries;
     /// stops once the nearest hit lies before the next cell.
     fn walk(
         &self,
-        o: Vector,
+        eye: &Eye,
         d: Vector,
         best: &mut f32,
         mut test: impl FnMut(u32, f32) -> Option<(f32, Vector, usize)>,
         hit: &mut Option<(usize, Vector)>,
     ) {
         let g = &self.grid;
-        let (px, py) = ((o.x - g.origin[0]) / g.cell, (o.y - g.origin[1]) / g.cell);
-        let (mut i, mut j) = (floor_i(px), floor_i(py));
+        let o = eye.o;
+        let [mut i, mut j] = eye.cell;
         let step_i = if d.x > 0.0 { 1 } else { -1 };
         let step_j = if d.y > 0.0 { 1 } else { -1 };
         let inv_x = if d.x.abs() > 1e-9 {
@@ -482,10 +531,11 @@ impl Camera {
             let f = floor_i(p) as f32;
             if s > 0 { f + 1.0 - p } else { p - f }
         };
-        let mut t_x = frac(px, step_i) * inv_x;
-        let mut t_y = frac(py, step_j) * inv_y;
+        let pick = |k: usize, s: i32| if s > 0 { eye.frac_pos[k] } else { eye.frac_neg[k] };
+        let mut t_x = pick(0, step_i) * inv_x;
+        let mut t_y = pick(1, step_j) * inv_y;
         // A camera outside the grid: jump to where the ray enters it.
-        if !(0..g.nx).contains(&i) || !(0..g.ny).contains(&j) {
+        if !eye.inside {
             let lo = Vector::new(g.origin[0], g.origin[1], f32::MIN);
             let hi = Vector::new(
                 g.origin[0] + g.nx as f32 * g.cell,
@@ -506,8 +556,8 @@ impl Camera {
             t_x = enter + frac(qx, step_i) * inv_x;
             t_y = enter + frac(qy, step_j) * inv_y;
         }
-        while (0..g.nx).contains(&i) && (0..g.ny).contains(&j) {
-            for &k in &g.cells[(i * g.ny + j) as usize] {
+        while g.contains(i, j) {
+            for &k in g.cell(i, j) {
                 if let Some((t, n, idx)) = test(k, *best)
                     && t < *best
                 {
