@@ -508,8 +508,11 @@ pub fn bag(sink: Sink, dir: &std::path::Path) -> Result<(Option<PathBuf>, BagVie
                 };
                 use rerun::datatypes::ChannelDatatype as C;
                 let image = match i.encoding.as_str() {
-                    "32FC1" => packed(4).map(|b| rerun::DepthImage::from_data_type_and_bytes(b, res, C::F32).with_meter(1.0)),
-                    "16UC1" => packed(2).map(|b| rerun::DepthImage::from_data_type_and_bytes(b, res, C::U16).with_meter(1000.0)),
+                    "32FC1" => {
+                        packed(4).map(|b| rerun::DepthImage::from_data_type_and_bytes(b, res, C::F32).with_meter(1.0))
+                    }
+                    "16UC1" => packed(2)
+                        .map(|b| rerun::DepthImage::from_data_type_and_bytes(b, res, C::U16).with_meter(1000.0)),
                     _ => None,
                 };
                 match image {
@@ -535,7 +538,10 @@ pub fn bag(sink: Sink, dir: &std::path::Path) -> Result<(Option<PathBuf>, BagVie
                     )?;
                 }
                 if !matches!(t.intervention.as_str(), "" | "none") {
-                    rec.log("log", &rerun::TextLog::new(format!("tick {}: filter {}", t.tick, t.intervention)))?;
+                    rec.log(
+                        "log",
+                        &rerun::TextLog::new(format!("tick {}: filter {}", t.tick, t.intervention)),
+                    )?;
                 }
                 v.ticks += 1;
             }

@@ -3,6 +3,7 @@ through the policy as a live car would have read it: the watchdog stops the car 
 ticks where the newest frame is stale (gaps, a sensor that stops) or holds a NaN range,
 checked against the rule recomputed here from the script."""
 
+import json
 import math
 import subprocess
 
@@ -60,6 +61,14 @@ def write_car_log(path):
             "/imu": w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=ts),
             "/odom": w.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=ts),
         }
+        # A topic agvrl has no decoder for: read around, never fatal.
+        battery = w.add_connection("/battery", "sensor_msgs/msg/BatteryState", typestore=ts)
+        b = T["sensor_msgs/msg/BatteryState"](
+            header=header(T0, "base_link"), voltage=7.4, temperature=30.0, current=-1.0, charge=1.0, capacity=2.0,
+            design_capacity=2.0, percentage=0.5, power_supply_status=2, power_supply_health=1,
+            power_supply_technology=3, present=True, cell_voltage=np.zeros(2, dtype=np.float32),
+            cell_temperature=np.zeros(2, dtype=np.float32), location="", serial_number="")
+        w.write(battery, T0 + 1, ts.serialize_cdr(b, b.__msgtype__))
         for log, stamp, topic, k in schedule():
             x = 0.5 * (stamp - T0) * 1e-9  # driving ahead at 0.5 m/s
             if topic == "/scan":
@@ -145,6 +154,13 @@ def test_a_rosbags_car_log_replays_and_the_watchdog_reacts_as_live(bins, root, t
     summary = dict(kv.split("=", 1) for kv in run.stdout.split() if "=" in kv)
     assert int(summary["ticks"]) == len(want)
     assert int(summary["events"]) == sum(1 for w in want if w)
+    # The topic without a decoder: a row with its size, a warning, not an error.
+    dump = subprocess.run([bins / "agvrl-drive", "--dump", bag], capture_output=True, text=True)
+    assert dump.returncode == 0, dump.stderr
+    battery = [json.loads(line) for line in dump.stdout.splitlines() if '"/battery"' in line]
+    assert len(battery) == 1 and battery[0]["msg"] is None and battery[0]["bytes"] > 0
+    assert "1 messages of types without a decoder" in dump.stderr
+    assert isinstance(r.bag.messages["/battery"][0], bytes)
     check = subprocess.run([bins / "agvrl-drive", "--policy", policy, "--replay", bag, "--fast", "--check"],
                            capture_output=True, text=True)
     assert check.returncode != 0 and "no recorded commands" in check.stderr, check.stderr

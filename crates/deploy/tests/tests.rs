@@ -891,6 +891,100 @@ fn foreign_bags_are_found_by_their_mcap_file_and_clock_jumps_are_named() {
     assert!(e.contains("split bag") && e.contains("carlog_1.mcap"), "{e}");
 }
 
+/// `--dump` of a bag with a message that does not decode: every message is a row (that one with
+/// `"msg": null` and the reason), the bad one is named by index, topic and log time, and the
+/// exit status says a message did not decode; `--replay` skips it and counts it. (A topic of a
+/// schema without a decoder: python/tests/test_car_log_replay.py.)
+#[test]
+fn a_bag_with_a_bad_message_dumps_every_row_and_replays() {
+    use agvrl_deploy::bag::{self, BagWriter, Offered, Topic};
+    use agvrl_deploy::hardware::msg;
+    let dir = scratch("unknown");
+    let d = dir.path().join("b");
+    let (ok, _, err) = drive_cli(&[
+        "--policy".as_ref(),
+        shipped_policy("racing-oval-ppo").as_os_str(),
+        "--steps".as_ref(),
+        "30".as_ref(),
+        "--quiet".as_ref(),
+        "--record".as_ref(),
+        d.as_os_str(),
+    ]);
+    assert!(ok, "{err}");
+    let (msgs, _) = bag::read_messages(&d).unwrap();
+    let copy = dir.path().join("c");
+    let mut w = BagWriter::create(&copy).unwrap();
+    let mut index = std::collections::HashMap::new();
+    let mut add = |w: &mut BagWriter, name: &str, ty: &str| {
+        *index.entry(name.to_string()).or_insert_with(|| {
+            w.add_topic(Topic {
+                name: name.into(),
+                ty: ty.into(),
+                offered: Offered::Reliable,
+            })
+            .unwrap()
+        })
+    };
+    let mut bad_at = 0;
+    for (k, m) in msgs.iter().enumerate() {
+        let i = add(&mut w, &m.topic, &m.ty);
+        // The tenth scan's bytes cut in half: it no longer decodes.
+        let data = if m.topic == "/scan" && bad_at == 0 && k > 60 {
+            bad_at = m.log_ns;
+            m.data[..m.data.len() / 2].to_vec()
+        } else {
+            m.data.clone()
+        };
+        w.write(i, m.log_ns, m.publish_ns, &data).unwrap();
+    }
+    w.finish().unwrap();
+    let (ok, out, err) = drive_cli(&["--dump".as_ref(), copy.as_os_str()]);
+    assert!(!ok, "a message that does not decode fails the dump");
+    let rows: Vec<serde_json::Value> = out.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(rows.len(), msgs.len(), "every message is a row");
+    let nulls: Vec<&serde_json::Value> = rows.iter().filter(|r| r["msg"].is_null()).collect();
+    assert_eq!(nulls.len(), 1, "{nulls:?}");
+    assert_eq!(nulls[0]["topic"], "/scan");
+    assert!(
+        err.contains(&format!("log time {bad_at} ns")) && err.contains("/scan"),
+        "{err}"
+    );
+    let (ok, out, err) = drive_cli(&[
+        "--policy".as_ref(),
+        shipped_policy("racing-oval-ppo").as_os_str(),
+        "--replay".as_ref(),
+        copy.as_os_str(),
+        "--fast".as_ref(),
+        "--quiet".as_ref(),
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(kv(&out, "bad_messages"), 1.0, "{out}");
+}
+
+/// A drive whose stdout is closed early (`agvrl-drive ... | head -1`) drives on to the end and
+/// exits cleanly: printing never panics the control loop.
+#[test]
+fn a_closed_stdout_does_not_stop_the_drive() {
+    use std::io::BufRead;
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
+        .arg("--policy")
+        .arg(shipped_policy("racing-oval-ppo"))
+        .args(["--steps", "600"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    assert!(first.starts_with("tick="), "{first}");
+    // The reader is dropped here: later lines meet a closed pipe.
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success() && !err.contains("panicked"), "{err}");
+}
+
 /// A recording killed mid-drive (SIGKILL: no summary, no metadata.yaml) leaves a bag whose
 /// flushed chunks read back whole, and `--reindex` gives it a metadata.yaml.
 #[test]

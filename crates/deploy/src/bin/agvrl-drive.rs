@@ -22,6 +22,15 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// `println!` that never panics: a closed stdout (`agvrl-drive ... | head`) must not stop the
+/// control loop; the lines are lost, the drive goes on.
+macro_rules! out {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($t)*);
+    }};
+}
+
 /// `--vehicle`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum VehicleKind {
@@ -176,7 +185,7 @@ fn run() -> Result<()> {
         if let Some(d) = damage {
             eprintln!("warning: {d}");
         }
-        println!("reindexed {} messages={}", dir.display(), s.messages());
+        out!("reindexed {} messages={}", dir.display(), s.messages());
         return Ok(());
     }
     let (src, env, env_cfg) = policy_and_env(&a)?;
@@ -335,15 +344,18 @@ fn replay(a: &Args, dir: &Path, env: &str, env_cfg: &EnvConfig, policy: Policy) 
             } else {
                 String::new()
             };
-            println!(
+            out!(
                 "tick={} clock_s={:.3} throttle={:.3} steering_rad={:.3}{was}{ev}",
-                t.index, rec.clock_s, t.control.throttle, t.control.steering_rad
+                t.index,
+                rec.clock_s,
+                t.control.throttle,
+                t.control.steering_rad
             );
         }
     }
     let d = &r.diff;
     let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
-    println!(
+    out!(
         "replay ticks={ticks} events={events} events_differ={} action_diff_max={:e} action_diff_p99={:e} control_diff_max={:e} \
          control_diff_p99={:e} bad_messages={} wall_s={:.2}",
         d.events,
@@ -371,15 +383,43 @@ fn dump(dir: &Path) -> Result<()> {
     use std::io::Write;
     let (msgs, damage) = agvrl_deploy::bag::read_messages(dir)?;
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
-    for m in &msgs {
-        let v = agvrl_deploy::record::decode_json(m)
-            .map_err(|e| anyhow::anyhow!("{}: a {} message on {}: {e}", dir.display(), m.ty, m.topic))?;
-        let row = serde_json::json!({"topic": m.topic, "type": m.ty, "log_ns": m.log_ns, "msg": v});
-        writeln!(out, "{row}")?;
+    let (mut unknown, mut bad) = (0u64, 0u64);
+    for (i, m) in msgs.iter().enumerate() {
+        let row = match agvrl_deploy::record::decode_json(m) {
+            Ok(v) => serde_json::json!({"topic": m.topic, "type": m.ty, "log_ns": m.log_ns, "msg": v}),
+            // Kept as a row: a topic of another schema, or a message that does not decode.
+            Err(e) => {
+                if e.starts_with("no decoder") {
+                    unknown += 1;
+                } else {
+                    bad += 1;
+                    eprintln!(
+                        "warning: {}: message {i} ({} on {}, log time {} ns): {e}",
+                        dir.display(),
+                        m.ty,
+                        m.topic,
+                        m.log_ns
+                    );
+                }
+                serde_json::json!({"topic": m.topic, "type": m.ty, "log_ns": m.log_ns, "msg": null, "bytes": m.data.len(), "error": e})
+            }
+        };
+        // A closed stdout (`| head`) ends the dump quietly.
+        if writeln!(out, "{row}").is_err() {
+            return Ok(());
+        }
     }
-    out.flush()?;
+    let _ = out.flush();
+    if unknown > 0 {
+        eprintln!(
+            "warning: {unknown} messages of types without a decoder here (\"msg\": null, their size in \"bytes\")"
+        );
+    }
     if let Some(d) = damage {
         eprintln!("warning: {d}");
+    }
+    if bad > 0 {
+        bail!("{}: {bad} messages did not decode (rows with \"error\")", dir.display());
     }
     Ok(())
 }
@@ -423,9 +463,13 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Optio
                 .as_ref()
                 .map(|r| format!(" laps={}", r.laps))
                 .unwrap_or_default();
-            println!(
+            out!(
                 "tick={} stamp_s={:.3} throttle={:.3} steering_rad={:.3} infer_us={:.1}{laps}{filter}{ev}{term}",
-                t.index, t.stamp_s, t.control.throttle, t.control.steering_rad, t.infer_us
+                t.index,
+                t.stamp_s,
+                t.control.throttle,
+                t.control.steering_rad,
+                t.infer_us
             );
         }
     }
@@ -454,7 +498,7 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Optio
             r.best_lap_s.map_or("na".into(), |b| format!("{b:.2}"))
         )
     });
-    println!(
+    out!(
         "summary ticks={k} events={events} terminations={terminations} filter_interventions={filtered}{laps} infer_us_p50={:.1} infer_us_p99={:.1} late_ticks={late} tick_us_p99={:.1} tick_us_max={:.1} wall_s={wall_s:.2} cpu_pct={cpu} rss_mb={rss}{bagged}",
         quantile(&infer_us, 0.5),
         quantile(&infer_us, 0.99),
@@ -536,7 +580,7 @@ fn check_trace(policy: &mut Policy, path: &Path, tolerance: f32) -> Result<()> {
     if rows == 0 {
         bail!("{}: no trace rows", path.display());
     }
-    println!("trace rows={rows} max_action_diff={max_diff:e} worst_tick={worst_tick} tolerance={tolerance:e}");
+    out!("trace rows={rows} max_action_diff={max_diff:e} worst_tick={worst_tick} tolerance={tolerance:e}");
     if max_diff > tolerance {
         bail!("actions differ from the trace by {max_diff:e} (tick {worst_tick}), over the tolerance {tolerance:e}");
     }
@@ -553,7 +597,7 @@ fn serve_sim(a: &Args, env: &str, env_cfg: &EnvConfig) -> Result<()> {
     eprintln!("serving {env} over ROS 2 ({pace:?}); Ctrl-C stops");
     robot.run(pace, a.steps)?;
     let s = h.stats();
-    println!(
+    out!(
         "summary ticks={} stamp_s={:.3} commands={} laps={} best_lap_s={} terminations={}",
         s.ticks,
         s.stamp_s,
