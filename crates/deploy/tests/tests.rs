@@ -898,7 +898,6 @@ fn foreign_bags_are_found_by_their_mcap_file_and_clock_jumps_are_named() {
 #[test]
 fn a_bag_with_a_bad_message_dumps_every_row_and_replays() {
     use agvrl_deploy::bag::{self, BagWriter, Offered, Topic};
-    use agvrl_deploy::hardware::msg;
     let dir = scratch("unknown");
     let d = dir.path().join("b");
     let (ok, _, err) = drive_cli(&[
