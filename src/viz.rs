@@ -9,7 +9,7 @@ use rapier3d::prelude::{Pose, Rotation, SharedShape};
 use rerun::RecordingStream;
 use std::path::PathBuf;
 
-pub use crate::sink::{Sink, sink_of};
+pub use crate::sink::{BagView, Sink, sink_of};
 
 /// Logs episodes into one recording.
 pub struct Recorder {
@@ -377,20 +377,6 @@ impl Recorder {
 
 /// Whether recordings can be made.
 pub const ENABLED: bool = true;
-
-/// What `agvrl view --bag` put into the recording.
-#[derive(Debug, Default)]
-pub struct BagView {
-    /// Scans, poses, images, ticks drawn.
-    pub scans: u64,
-    pub poses: u64,
-    pub images: u64,
-    pub ticks: u64,
-    /// Messages of topics with nothing to draw (the raw MCAP in rerun shows what it knows).
-    pub skipped: u64,
-    /// Where the bag stopped being readable, if it did.
-    pub damage: Option<String>,
-}
 
 /// A rosbag2 bag (`agvrl-drive --record`, `agvrl eval --record`, or a car log) as a recording:
 /// the car's pose from Odometry, its path, the LiDAR scan placed by `/tf_static` (red hits, green

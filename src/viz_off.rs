@@ -5,7 +5,7 @@ use crate::episode::StepView;
 use anyhow::{Result, bail};
 use std::path::PathBuf;
 
-pub use crate::sink::{Sink, sink_of};
+pub use crate::sink::{BagView, Sink, sink_of};
 
 /// Never constructed without the feature.
 pub struct Recorder {
@@ -28,17 +28,6 @@ impl Recorder {
 
 /// Whether recordings can be made.
 pub const ENABLED: bool = false;
-
-/// What `agvrl view --bag` put into the recording.
-#[derive(Debug, Default)]
-pub struct BagView {
-    pub scans: u64,
-    pub poses: u64,
-    pub images: u64,
-    pub ticks: u64,
-    pub skipped: u64,
-    pub damage: Option<String>,
-}
 
 pub fn bag(_sink: Sink, _dir: &std::path::Path) -> Result<(Option<PathBuf>, BagView)> {
     bail!("this agvrl was built without rerun; rebuild with the default features (cargo build --release)")
