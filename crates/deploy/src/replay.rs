@@ -1,8 +1,9 @@
 //! `agvrl-drive --replay DIR`: a recorded bag fed back through the `Vehicle` seam, open loop.
 //! Each tick's frame is made, by the code a ROS 2 car's frames go through
 //! ([`FrameBuilder`]), of the sensor messages logged up to the time that tick read its frame
-//! (`/agvrl/tick`'s `sensed_s`), and the watchdog reads the recorded clock, so the same binary
-//! on the same data gives the same commands; the commands go nowhere.
+//! (`/agvrl/tick`'s `sensed_s`; a car log without ticks: a tick grid on its log clock), and the
+//! watchdog reads the recorded clock, so the same binary on the same data gives the same
+//! commands; the commands go nowhere. [`Replayer`] drives it for the CLI, Python and the tests.
 
 use crate::bag::{self, BagMessage};
 use crate::hardware::config::Ros2Config;
