@@ -245,7 +245,6 @@ impl Vehicle for Replay {
 /// recorded one.
 pub struct Replayer {
     lp: DriveLoop<Replay, Box<dyn Task>>,
-    recorded: Vec<msg::Tick>,
     next: usize,
     /// The differences so far.
     pub diff: ReplayDiff,
@@ -322,7 +321,6 @@ impl Replayer {
             None
         };
         let vehicle = Replay::open(dir, cfg, camera, rate_hz)?;
-        let recorded = vehicle.ticks().to_vec();
         let drive = DriveConfig {
             rate_hz,
             realtime: false,
@@ -330,7 +328,6 @@ impl Replayer {
         };
         Ok(Self {
             lp: DriveLoop::new(vehicle, task, policy, drive, seed)?,
-            recorded,
             next: 0,
             diff: ReplayDiff::default(),
         })
@@ -341,20 +338,15 @@ impl Replayer {
         self.lp.vehicle()
     }
 
-    /// The recorded ticks.
-    pub fn recorded(&self) -> &[msg::Tick] {
-        &self.recorded
-    }
-
     /// Replay the next recorded tick (its watchdog reads the recorded clock): the recorded tick
     /// and the replayed one; `None` after the last.
-    pub fn step(&mut self) -> Result<Option<(&msg::Tick, Tick)>, DeployError> {
-        let Some(rec) = self.recorded.get(self.next) else {
+    pub fn step(&mut self) -> Result<Option<(msg::Tick, Tick)>, DeployError> {
+        let Some(rec) = self.lp.vehicle().ticks().get(self.next).cloned() else {
             return Ok(None);
         };
         let t = self.lp.tick_at(Some(rec.clock_s))?;
         if self.lp.vehicle().recorded() {
-            self.diff.add(rec, &t);
+            self.diff.add(&rec, &t);
         }
         self.next += 1;
         Ok(Some((rec, t)))

@@ -719,7 +719,7 @@ fn replay_bag<'py>(
                     .map_err(|e| format!("{}: {}", path.display(), agvrl_run::error_line(&e)))?;
             let mut rows = Vec::new();
             while let Some((rec, t)) = r.step().map_err(|e| agvrl_run::error_line(&e))? {
-                rows.push((rec.clone(), t));
+                rows.push((rec, t));
             }
             Ok((rows, r.vehicle().damage.clone(), r.vehicle().bad_messages()))
         });

@@ -320,7 +320,7 @@ fn replay(a: &Args, dir: &Path, env: &str, env_cfg: &EnvConfig, policy: Policy) 
             a.rate_hz
         );
     }
-    let (t0, clock0) = (Instant::now(), r.recorded()[0].clock_s);
+    let (t0, clock0) = (Instant::now(), r.vehicle().ticks()[0].clock_s);
     let (mut ticks, mut events) = (0, 0);
     loop {
         if !a.fast
