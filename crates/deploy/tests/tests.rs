@@ -1175,3 +1175,31 @@ fn damaged_bags_never_panic_the_reader_or_the_decoders() {
     assert!(refused + cut_short >= 200, "refused {refused}, cut short {cut_short}");
     eprintln!("refused {refused}, cut short {cut_short}, messages refused by a decoder {bad_messages}");
 }
+
+/// The fuzz targets' seeds and every input their runs kept (fuzz/seeds, fuzz/regressions; see
+/// docs/reliability.md) go through the same bodies on stable: none panics. CI replays; it does
+/// not fuzz.
+#[test]
+fn fuzz_regressions_replay_without_panic() {
+    use agvrl_deploy::bag::fuzz;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
+    let targets: [(&str, fn(&[u8])); 2] = [
+        ("bag_reader", fuzz::read_and_decode),
+        ("ros2_messages", fuzz::ros2_message),
+    ];
+    let mut replayed = 0;
+    for (target, body) in targets {
+        for kind in ["seeds", "regressions"] {
+            let Ok(dir) = std::fs::read_dir(root.join(kind).join(target)) else {
+                continue;
+            };
+            for entry in dir {
+                let path = entry.unwrap().path();
+                let bytes = std::fs::read(&path).unwrap();
+                body(&bytes);
+                replayed += 1;
+            }
+        }
+    }
+    assert!(replayed >= 6, "the seeds are missing: {replayed} inputs");
+}

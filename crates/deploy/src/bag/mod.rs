@@ -8,6 +8,8 @@
 //! a second, so a killed recording leaves every complete chunk readable; `metadata.yaml` is
 //! written last (temp file and rename) and [`reindex`] rebuilds it from the MCAP file.
 
+pub mod fuzz;
+
 use crate::DeployError;
 use std::collections::BTreeMap;
 use std::io::BufWriter;
@@ -305,31 +307,54 @@ pub fn mcap_file(dir: &Path) -> Result<PathBuf, DeployError> {
 pub fn read_messages(dir: &Path) -> Result<(Vec<BagMessage>, Option<String>), DeployError> {
     let path = mcap_file(dir)?;
     let bytes = std::fs::read(&path).map_err(|e| io_err(&path, e))?;
+    read_mcap(&bytes, &path)
+}
+
+/// Every intact message of MCAP file contents `bytes` (read from `path`, named in errors), as
+/// [`read_messages`]: the reader the fuzz target drives.
+pub fn read_mcap(bytes: &[u8], path: &Path) -> Result<(Vec<BagMessage>, Option<String>), DeployError> {
     if !bytes.starts_with(mcap::MAGIC) {
         return Err(DeployError::Bag(format!(
             "{}: not an MCAP file (no magic at offset 0)",
             path.display()
         )));
     }
-    let stream = mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
-        .map_err(|e| mcap_err(&path, e))?;
+    let mut stream = mcap::MessageStream::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into())
+        .map_err(|e| mcap_err(path, e))?;
     let mut out = Vec::new();
-    for m in stream {
-        match m {
-            Ok(m) => out.push(BagMessage {
+    // mcap 0.25 panics on some malformed chunks (a slice index in its linear reader, found by
+    // the `bag_reader` fuzz target): that is damage like any other, reported, not a crash. The
+    // default hook is muted meanwhile so the panic does not print as one.
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let damage = loop {
+        let next = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| stream.next()));
+        match next {
+            Ok(None) => break None,
+            Ok(Some(Ok(m))) => out.push(BagMessage {
                 topic: m.channel.topic.clone(),
                 ty: m.channel.schema.as_ref().map_or(String::new(), |s| s.name.clone()),
                 log_ns: m.log_time,
                 publish_ns: m.publish_time,
                 data: m.data.into_owned(),
             }),
-            Err(e) => {
-                let why = format!("{}: {e} after {} intact messages", path.display(), out.len());
-                return Ok((out, Some(why)));
+            Ok(Some(Err(e))) => break Some(format!("{}: {e} after {} intact messages", path.display(), out.len())),
+            Err(p) => {
+                let what = p
+                    .downcast_ref::<String>()
+                    .map(String::as_str)
+                    .or_else(|| p.downcast_ref::<&str>().copied())
+                    .unwrap_or("a malformed record");
+                break Some(format!(
+                    "{}: the MCAP reader failed ({what}) after {} intact messages",
+                    path.display(),
+                    out.len()
+                ));
             }
         }
-    }
-    Ok((out, None))
+    };
+    std::panic::set_hook(hook);
+    Ok((out, damage))
 }
 
 /// Rebuild `dir/metadata.yaml` from its MCAP file (a recording that was killed before it
