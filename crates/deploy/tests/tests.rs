@@ -1183,7 +1183,8 @@ fn damaged_bags_never_panic_the_reader_or_the_decoders() {
 fn fuzz_regressions_replay_without_panic() {
     use agvrl_deploy::bag::fuzz;
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
-    let targets: [(&str, fn(&[u8])); 2] = [
+    type Body = fn(&[u8]);
+    let targets: [(&str, Body); 2] = [
         ("bag_reader", fuzz::read_and_decode),
         ("ros2_messages", fuzz::ros2_message),
     ];
