@@ -323,12 +323,9 @@ pub fn read_mcap(bytes: &[u8], path: &Path) -> Result<(Vec<BagMessage>, Option<S
         .map_err(|e| mcap_err(path, e))?;
     let mut out = Vec::new();
     // mcap 0.25 panics on some malformed chunks (a slice index in its linear reader, found by
-    // the `bag_reader` fuzz target): that is damage like any other, reported, not a crash. The
-    // default hook is muted meanwhile so the panic does not print as one.
-    let hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
+    // the `bag_reader` fuzz target): that is damage like any other, reported, not a crash.
     let damage = loop {
-        let next = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| stream.next()));
+        let next = quiet_catch(|| stream.next());
         match next {
             Ok(None) => break None,
             Ok(Some(Ok(m))) => out.push(BagMessage {
@@ -353,8 +350,29 @@ pub fn read_mcap(bytes: &[u8], path: &Path) -> Result<(Vec<BagMessage>, Option<S
             }
         }
     };
-    std::panic::set_hook(hook);
     Ok((out, damage))
+}
+
+std::thread_local! {
+    static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// `catch_unwind` whose panic is not printed: the process's panic hook is wrapped once, and
+/// stays silent only for this thread and only inside `f` (other threads' panics print as ever).
+fn quiet_catch<R>(f: impl FnOnce() -> R) -> std::thread::Result<R> {
+    static WRAPPED: std::sync::Once = std::sync::Once::new();
+    WRAPPED.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(|q| q.get()) {
+                previous(info);
+            }
+        }));
+    });
+    QUIET.with(|q| q.set(true));
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    QUIET.with(|q| q.set(false));
+    r
 }
 
 /// Rebuild `dir/metadata.yaml` from its MCAP file (a recording that was killed before it
