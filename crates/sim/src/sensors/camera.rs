@@ -340,11 +340,14 @@ impl Camera {
         let tan_y = (self.cfg.fov_deg.to_radians() / 2.0).tan();
         let tan_x = tan_y * w as f32 / h as f32;
         // Pixel (u, v)'s unit ray and its length: unnormalised, the ray's component along the
-        // optical axis is 1, so the ray parameter at a hit over the length is the depth.
-        let ray = |u: usize, v: usize| {
-            let y = 1.0 - 2.0 * (v as f32 + 0.5) / h as f32;
-            let x = 2.0 * (u as f32 + 0.5) / w as f32 - 1.0;
-            let dir = fwd + right * (x * tan_x) + up * (y * tan_y);
+        // optical axis is 1, so the ray parameter at a hit over the length is the depth. Its
+        // column and row terms are computed once a frame.
+        let across: Vec<Vector> = (0..w)
+            .map(|u| fwd + right * ((2.0 * (u as f32 + 0.5) / w as f32 - 1.0) * tan_x))
+            .collect();
+        let rise = |v: usize| up * ((1.0 - 2.0 * (v as f32 + 0.5) / h as f32) * tan_y);
+        let ray = |a: &Vector, r: Vector| {
+            let dir = *a + r;
             let len = dir.length();
             (dir / len, len)
         };
@@ -359,16 +362,10 @@ impl Camera {
             segmentation,
         };
         if self.cfg.depth_only {
-            // `ray` with its per-column and per-row terms computed once (the same operations).
-            let across: Vec<Vector> = (0..w)
-                .map(|u| fwd + right * ((2.0 * (u as f32 + 0.5) / w as f32 - 1.0) * tan_x))
-                .collect();
             depth.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
-                let rise = up * ((1.0 - 2.0 * (v as f32 + 0.5) / h as f32) * tan_y);
+                let r = rise(v);
                 for (z, a) in row.iter_mut().zip(&across) {
-                    let dir = *a + rise;
-                    let len = dir.length();
-                    let d = dir / len;
+                    let (d, len) = ray(a, r);
                     let (t, _, _) = self.nearest(statics, &eye_g, d, self.cfg.far_m * len);
                     *z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
                 }
@@ -387,8 +384,9 @@ impl Camera {
             .zip(cls.par_chunks_mut(w))
             .enumerate()
             .for_each(|(v, (((rgb_row, depth_row), seg_row), cls_row))| {
-                for u in 0..w {
-                    let (d, len) = ray(u, v);
+                let r = rise(v);
+                for (u, a) in across.iter().enumerate() {
+                    let (d, len) = ray(a, r);
                     let (t, color, id, c) = self.shade(statics, &eye_g, d, self.cfg.far_m * len);
                     let z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
                     depth_row[u] = z;
