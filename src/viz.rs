@@ -38,6 +38,36 @@ fn y_up_to_z_up(pose: &Pose) -> rerun::Quaternion {
     q_of(pose.rotation * Rotation::from_rotation_x(-std::f32::consts::FRAC_PI_2))
 }
 
+/// The car's path so far under `world/trajectory`.
+fn log_trail(rec: &RecordingStream, trail: &[[f32; 3]]) -> Result<()> {
+    rec.log(
+        "world/trajectory",
+        &rerun::LineStrips3D::new([trail.to_vec()]).with_colors([rerun::Color::from_rgb(255, 200, 0)]),
+    )?;
+    Ok(())
+}
+
+/// A scan under `base`: rays from `origin` to `ends` (red hits, green misses, as the paper's
+/// figure) in `base/rays`, the hits in `base/scan`.
+fn log_scan(rec: &RecordingStream, base: &str, origin: [f32; 3], ends: &[[f32; 3]], hit: &[bool]) -> Result<()> {
+    let red = rerun::Color::from_rgb(255, 40, 40);
+    let colors = hit
+        .iter()
+        .map(|&h| if h { red } else { rerun::Color::from_rgb(40, 220, 40) });
+    rec.log(
+        format!("{base}/rays"),
+        &rerun::LineStrips3D::new(ends.iter().map(|e| [origin, *e]))
+            .with_colors(colors)
+            .with_radii([0.004]),
+    )?;
+    let hits = ends.iter().zip(hit).filter(|(_, h)| **h).map(|(e, _)| *e);
+    rec.log(
+        format!("{base}/scan"),
+        &rerun::Points3D::new(hits).with_radii([0.03]).with_colors([red]),
+    )?;
+    Ok(())
+}
+
 /// How a recording opens in the viewer: the scene and the car large, the LiDAR and the camera
 /// beside them, the time series below.
 /// A depth-only camera (the camera racing policy's) opens on its depth tab.
@@ -274,37 +304,10 @@ impl Recorder {
         self.trail.push([t.x, t.y, 0.02]);
         // The whole trail every half second keeps the file linear in the episode length.
         if v.step.is_multiple_of(15) || v.done {
-            rec.log(
-                "world/trajectory",
-                &rerun::LineStrips3D::new([self.trail.clone()]).with_colors([rerun::Color::from_rgb(255, 200, 0)]),
-            )?;
+            log_trail(rec, &self.trail)?;
         }
         if let Some(scan) = &v.frame.scan {
-            let o = scan.origin_w;
-            let strips = scan.points_w.iter().map(|p| [o, *p]);
-            let colors = scan.hit.iter().map(|&h| {
-                if h {
-                    rerun::Color::from_rgb(255, 40, 40)
-                } else {
-                    rerun::Color::from_rgb(40, 220, 40)
-                }
-            });
-            rec.log(
-                "world/lidar/rays",
-                &rerun::LineStrips3D::new(strips).with_colors(colors).with_radii([0.004]),
-            )?;
-            let hits = scan
-                .points_w
-                .iter()
-                .zip(&scan.hit)
-                .filter(|(_, h)| **h)
-                .map(|(p, _)| *p);
-            rec.log(
-                "world/lidar/scan",
-                &rerun::Points3D::new(hits)
-                    .with_radii([0.03])
-                    .with_colors([rerun::Color::from_rgb(255, 40, 40)]),
-            )?;
+            log_scan(rec, "world/lidar", scan.origin_w, &scan.points_w, &scan.hit)?;
             rec.log("plots/min_range_m", &rerun::Scalars::single(scan.min_range() as f64))?;
         }
         if let Some(img) = &v.frame.image
@@ -432,10 +435,7 @@ pub fn bag(sink: Sink, dir: &std::path::Path) -> Result<(Option<PathBuf>, BagVie
                 rec.log("plots/speed_mps", &rerun::Scalars::single(o.twist.twist.linear.x))?;
                 trail.push([f(p.x), f(p.y), 0.02]);
                 if v.poses.is_multiple_of(15) {
-                    rec.log(
-                        "world/trajectory",
-                        &rerun::LineStrips3D::new([trail.clone()]).with_colors([rerun::Color::from_rgb(255, 200, 0)]),
-                    )?;
+                    log_trail(rec, &trail)?;
                 }
                 v.poses += 1;
             }
@@ -457,22 +457,7 @@ pub fn bag(sink: Sink, dir: &std::path::Path) -> Result<(Option<PathBuf>, BagVie
                     ends.push([d * a.cos(), d * a.sin(), 0.0]);
                     hit.push(h);
                 }
-                let red = rerun::Color::from_rgb(255, 40, 40);
-                let colors = hit
-                    .iter()
-                    .map(|&h| if h { red } else { rerun::Color::from_rgb(40, 220, 40) });
-                let base = format!("world/vehicle/{frame}");
-                rec.log(
-                    format!("{base}/rays"),
-                    &rerun::LineStrips3D::new(ends.iter().map(|e| [[0.0, 0.0, 0.0], *e]))
-                        .with_colors(colors)
-                        .with_radii([0.004]),
-                )?;
-                let hits = ends.iter().zip(&hit).filter(|(_, h)| **h).map(|(e, _)| *e);
-                rec.log(
-                    format!("{base}/scan"),
-                    &rerun::Points3D::new(hits).with_radii([0.03]).with_colors([red]),
-                )?;
+                log_scan(rec, &format!("world/vehicle/{frame}"), [0.0; 3], &ends, &hit)?;
                 if min.is_finite() {
                     rec.log("plots/min_range_m", &rerun::Scalars::single(min as f64))?;
                 }
@@ -535,10 +520,7 @@ pub fn bag(sink: Sink, dir: &std::path::Path) -> Result<(Option<PathBuf>, BagVie
         }
     }
     if trail.len() > 1 {
-        rec.log(
-            "world/trajectory",
-            &rerun::LineStrips3D::new([trail]).with_colors([rerun::Color::from_rgb(255, 200, 0)]),
-        )?;
+        log_trail(rec, &trail)?;
     }
     Ok((r.finish()?, v))
 }
