@@ -7,7 +7,7 @@ use crate::plots::{self};
 use crate::viz::{self, Recorder, Sink};
 use agvrl_envs::{Env, VecEnv, make};
 use agvrl_rl::{Algorithm, Control, DeviceChoice, Learner, Policy, Ppo, Progress, Sac};
-use agvrl_run::{RunDir, RunReport, files, stamp, write_atomic};
+use agvrl_run::{Run, RunDir, RunReport, files, stamp, write_atomic};
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -176,9 +176,18 @@ pub fn train(a: TrainArgs) -> Result<()> {
     }
     if let Some(dir) = &a.resume {
         let device = DeviceChoice::from(a.device).device()?;
-        let cfg = RunConfig::load(&dir.join(files::CONFIG))
-            .with_context(|| format!("{} is not a run directory", dir.display()))?;
         let ckpt = dir.join(files::CHECKPOINT);
+        if dir.is_dir() && !ckpt.is_file() {
+            anyhow::bail!(
+                "{} has no checkpoint: its training stopped before the first one; start it again",
+                dir.display()
+            );
+        }
+        Run::open(dir)?;
+        // The run stays as it was until the continued one is complete (see RunDir::resume).
+        let run = RunDir::resume(dir)?;
+        let cfg = RunConfig::load(&run.file(files::CONFIG))?;
+        let ckpt = run.file(files::CHECKPOINT);
         let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
             Box::new(ppo_with_threads(
                 Ppo::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?,
@@ -195,9 +204,10 @@ pub fn train(a: TrainArgs) -> Result<()> {
             None => cfg.steps,
         };
         // A run stopped before its first chunk has no metrics yet; any other failure keeps the
-        // history from being overwritten.
-        let previous = match std::fs::read_to_string(dir.join(files::METRICS)) {
-            Ok(text) => text,
+        // history from being overwritten. Rows past the checkpoint (a kill between the metrics
+        // and the checkpoint write) are learnt again, so they go.
+        let previous = match std::fs::read_to_string(run.file(files::METRICS)) {
+            Ok(text) => metrics_up_to(&text, learner.num_timesteps()),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
             Err(e) => return Err(anyhow::Error::new(e).context(format!("reading {}/metrics.csv", dir.display()))),
         };
@@ -206,8 +216,9 @@ pub fn train(a: TrainArgs) -> Result<()> {
             dir.display(),
             learner.num_timesteps()
         );
-        let files = |name: &str| dir.join(name);
+        let files = |name: &str| run.file(name);
         let report = run_learner(learner.as_mut(), &cfg, target, &files, &previous, &STOP, a.progress)?;
+        let dir = run.finish()?;
         println!("run_dir={}", dir.display());
         print!("{}", report.text());
         return Ok(());
@@ -326,7 +337,7 @@ fn run_learner(
     progress: ProgressMode,
 ) -> Result<RunReport> {
     let t0 = Instant::now();
-    let rows = learn_in_chunks(learner, cfg, target, file, stop, progress)?;
+    let rows = learn_in_chunks(learner, cfg, target, file, previous_csv, stop, progress)?;
     let policy_path = file(files::POLICY);
     // The policy file carries the settings it drives with: the run config.
     let mut policy_data = learner.policy_data();
@@ -359,6 +370,7 @@ fn learn_in_chunks(
     cfg: &RunConfig,
     target: u64,
     file: &dyn Fn(&str) -> PathBuf,
+    previous_csv: &str,
     stop: &AtomicBool,
     progress: ProgressMode,
 ) -> Result<Vec<Row>> {
@@ -373,7 +385,7 @@ fn learn_in_chunks(
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let t0 = Instant::now();
-    let mut rows: Vec<Row> = Vec::new();
+    let rows = std::cell::RefCell::new(Vec::<Row>::new());
     let mut on_progress = |p: &Progress<'_>| {
         bar.set_position(p.steps.min(target));
         let mean = p.mean_return();
@@ -394,7 +406,7 @@ fn learn_in_chunks(
                 })
             );
         }
-        rows.push(Row {
+        rows.borrow_mut().push(Row {
             step: p.steps,
             episodes: p.episodes,
             mean_return: mean,
@@ -412,15 +424,32 @@ fn learn_in_chunks(
     let per_chunk = cfg.steps.div_ceil(10).clamp(1, 50_000);
     while learner.num_timesteps() < target && !stop.load(Ordering::SeqCst) {
         learner.learn(per_chunk.min(target - learner.num_timesteps()), &mut on_progress)?;
+        // The history first, then the checkpoint: a kill between them leaves rows past the
+        // checkpoint, which a resume drops (`metrics_up_to`), never a gap.
+        let csv = metrics_csv(previous_csv, &rows.borrow());
+        write_atomic(&file(files::METRICS), csv.as_bytes())?;
         learner.save_checkpoint(&file(files::CHECKPOINT))?;
     }
     learner.save_checkpoint(&file(files::CHECKPOINT))?;
     bar.finish_and_clear();
-    Ok(rows)
+    Ok(rows.into_inner())
 }
 
 /// metrics.csv: the rows of earlier sessions of the run (`previous`, header included), then
 /// these.
+/// The metrics CSV `text` without the rows past step `steps`.
+fn metrics_up_to(text: &str, steps: u64) -> String {
+    let mut out = String::new();
+    for (i, line) in text.lines().enumerate() {
+        let step = line.split(',').next().and_then(|s| s.parse::<u64>().ok());
+        if i == 0 || step.is_some_and(|s| s <= steps) {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    out
+}
+
 fn metrics_csv(previous: &str, rows: &[Row]) -> String {
     let mut csv = if previous.is_empty() {
         String::from("step,episodes,mean_return,policy_loss,value_loss,entropy,steps_per_s\n")

@@ -365,8 +365,16 @@ impl Recorder {
 
     /// Flush; a file recording is renamed into place. Returns its path.
     pub fn finish(self) -> Result<Option<PathBuf>> {
-        self.rec.flush_blocking().context("flushing the rerun recording")?;
         let file = self.file.clone();
+        if let Err(e) = self.rec.flush_blocking() {
+            // rerun's file writer names no cause; a full disk is the common one.
+            let full = file.as_ref().is_some_and(|(tmp, _)| no_space_left(tmp));
+            let e = anyhow::Error::new(e).context("flushing the rerun recording");
+            return Err(match (full, &file) {
+                (true, Some((tmp, _))) => e.context(format!("no space left on the device of {}", tmp.display())),
+                _ => e,
+            });
+        }
         drop(self.rec);
         match file {
             Some((tmp, path)) => {
@@ -523,4 +531,17 @@ pub fn bag(sink: Sink, dir: &std::path::Path) -> Result<(Option<PathBuf>, BagVie
         log_trail(rec, &trail)?;
     }
     Ok((r.finish()?, v))
+}
+
+/// Whether the file system holding `path` has no block left for an unprivileged writer.
+fn no_space_left(path: &std::path::Path) -> bool {
+    use std::os::unix::ffi::OsStrExt;
+    let Ok(c) = std::ffi::CString::new(path.as_os_str().as_bytes()) else {
+        return false;
+    };
+    // SAFETY: a NUL-terminated path and a zeroed statvfs the call fills.
+    unsafe {
+        let mut st: libc::statvfs = std::mem::zeroed();
+        libc::statvfs(c.as_ptr(), &mut st) == 0 && st.f_bavail == 0
+    }
 }

@@ -410,7 +410,7 @@ impl<E: Env> VecEnv<E> {
 
     /// Reset env `i` with `seeds[i]` (`None` continues its random stream) where `mask` is
     /// true, or every env without a mask. Rows of envs left alone hold their last observation
-    /// and their info is empty.
+    /// (zeros for an env never reset) and their info is empty.
     pub fn reset_envs(
         &mut self,
         seeds: Vec<Option<u64>>,
@@ -427,6 +427,9 @@ impl<E: Env> VecEnv<E> {
         let mut obs = Vec::with_capacity(n * self.obs_dim);
         let mut infos = Vec::with_capacity(n);
         for st in out {
+            if st.obs.is_empty() {
+                obs.resize(obs.len() + self.obs_dim, 0.0);
+            }
             obs.extend_from_slice(&st.obs);
             infos.push(st.info);
         }

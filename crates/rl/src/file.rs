@@ -66,7 +66,8 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         .permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666))
         .tempfile_in(dir)
         .map_err(io(dir))?;
-    tmp.write_all(bytes).map_err(io(tmp.path()))?;
+    // Through the plain file: NamedTempFile's own writes name the temporary path in errors.
+    tmp.as_file_mut().write_all(bytes).map_err(io(path))?;
     tmp.as_file().sync_all().map_err(io(path))?;
     tmp.persist(path).map_err(|e| io(path)(e.error))?;
     Ok(())

@@ -60,6 +60,8 @@ pub mod device;
 mod error;
 pub mod eval;
 mod file;
+#[doc(hidden)]
+pub mod fuzz;
 #[cfg(feature = "train")]
 mod gaussian;
 mod host_cnn;

@@ -169,6 +169,12 @@ impl PolicyData {
         Self::from_parts(path, h, arrays)
     }
 
+    /// Decode policy-file bytes as [`PolicyData::load`] does; `path` names them in errors.
+    pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Self> {
+        let (h, arrays): (Header, _) = file::decode(path, bytes, POLICY_MAGIC, &POLICY_READS, "policy")?;
+        Self::from_parts(path, h, arrays)
+    }
+
     fn from_parts(path: &Path, h: Header, mut arrays: Vec<Vec<f32>>) -> Result<Self> {
         let bad = |reason: String| RlError::BadFile {
             path: path.to_path_buf(),

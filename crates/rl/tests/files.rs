@@ -205,3 +205,148 @@ fn gsde_policy_round_trip_and_stochastic_actions() {
     let spread = samples.iter().cloned().fold(f32::MIN, f32::max) - samples.iter().cloned().fold(f32::MAX, f32::min);
     assert!(spread > 1e-3, "stochastic gSDE actions vary: {spread}");
 }
+
+/// Generated network shapes, heads and spaces.
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// An env of given widths; only its spaces are used.
+    struct Shaped {
+        obs: usize,
+        act: usize,
+    }
+
+    impl Env for Shaped {
+        fn observation_space(&self) -> agvrl_envs::BoxSpace {
+            agvrl_envs::BoxSpace::uniform(self.obs, -2.0, 3.0)
+        }
+        fn action_space(&self) -> agvrl_envs::BoxSpace {
+            agvrl_envs::BoxSpace::uniform(self.act, -1.0, 0.5)
+        }
+        fn reset(&mut self, _: Option<u64>) -> Result<(Vec<f32>, agvrl_envs::Info), agvrl_envs::EnvError> {
+            Ok((vec![0.0; self.obs], agvrl_envs::Info::default()))
+        }
+        fn step(&mut self, _: &[f32]) -> Result<agvrl_envs::Step, agvrl_envs::EnvError> {
+            unreachable!("only the spaces are used")
+        }
+        fn dt_s(&self) -> f64 {
+            0.05
+        }
+    }
+
+    fn shaped(obs: usize, act: usize) -> agvrl_envs::VecEnv<Shaped> {
+        agvrl_envs::VecEnv::new(vec![Shaped { obs, act }], 1).unwrap()
+    }
+
+    /// 0: SAC (squashed Gaussian); 1: PPO (Gaussian); 2: PPO with gSDE.
+    fn learner(
+        kind: u8,
+        obs: usize,
+        act: usize,
+        net_arch: Vec<usize>,
+        normalize_obs: bool,
+        seed: u64,
+    ) -> (Option<Ppo<Shaped>>, Option<Sac<Shaped>>) {
+        if kind == 0 {
+            let cfg = SacConfig {
+                net_arch,
+                normalize_obs,
+                buffer_size: 16,
+                ..SacConfig::default()
+            };
+            (
+                None,
+                Some(Sac::new(cfg, shaped(obs, act), &default_device(), seed).unwrap()),
+            )
+        } else {
+            let cfg = PpoConfig {
+                net_arch,
+                normalize_obs,
+                use_sde: kind == 2,
+                n_steps: 8,
+                batch_size: 8,
+                ..PpoConfig::default()
+            };
+            (
+                Some(Ppo::new(cfg, shaped(obs, act), &default_device(), seed).unwrap()),
+                None,
+            )
+        }
+    }
+
+    /// `bytes` with byte `at` (of its length) XORed with `flip` (non-zero).
+    fn flipped(bytes: &[u8], at: prop::sample::Index, flip: u8) -> Vec<u8> {
+        let mut b = bytes.to_vec();
+        let i = at.index(b.len());
+        b[i] ^= flip;
+        b
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+
+        /// A policy file reads back to the same policy; a file with any byte changed is
+        /// refused.
+        #[test]
+        fn policy_files_round_trip_and_a_flipped_byte_is_refused(
+            kind in 0u8..3,
+            obs in 1usize..12,
+            act in 1usize..4,
+            net_arch in prop::collection::vec(1usize..24, 1..4),
+            normalize_obs: bool,
+            seed: u64,
+            at: prop::sample::Index,
+            flip in 1u8..=255,
+        ) {
+            let data = match learner(kind, obs, act, net_arch, normalize_obs, seed) {
+                (Some(p), _) => p.policy_data(),
+                (_, Some(s)) => s.policy_data(),
+                _ => unreachable!(),
+            };
+            let bytes = data.to_bytes().unwrap();
+            let path = std::path::Path::new("generated.agvrl");
+            prop_assert_eq!(&PolicyData::from_bytes(path, &bytes).unwrap(), &data);
+            let bad = PolicyData::from_bytes(path, &flipped(&bytes, at, flip));
+            prop_assert!(matches!(bad, Err(RlError::BadFile { .. })), "{:?}", bad.map(|_| ()));
+        }
+
+        /// A checkpoint resumes to a learner that writes the same bytes; a checkpoint with
+        /// any byte changed is refused.
+        #[test]
+        fn checkpoints_round_trip_and_a_flipped_byte_is_refused(
+            kind in 0u8..3,
+            obs in 1usize..12,
+            act in 1usize..4,
+            net_arch in prop::collection::vec(1usize..24, 1..4),
+            normalize_obs: bool,
+            seed: u64,
+            at: prop::sample::Index,
+            flip in 1u8..=255,
+        ) {
+            let (a, b) = (tmp("prop-a.ckpt"), tmp("prop-b.ckpt"));
+            let device = default_device();
+            let resumed = match learner(kind, obs, act, net_arch, normalize_obs, seed) {
+                (Some(p), _) => {
+                    p.save_checkpoint(&a).unwrap();
+                    Ppo::load_checkpoint(&a, shaped(obs, act), &device).unwrap().save_checkpoint(&b)
+                }
+                (_, Some(s)) => {
+                    s.save_checkpoint(&a).unwrap();
+                    Sac::load_checkpoint(&a, shaped(obs, act), &device).unwrap().save_checkpoint(&b)
+                }
+                _ => unreachable!(),
+            };
+            resumed.unwrap();
+            let bytes = std::fs::read(&a).unwrap();
+            prop_assert!(bytes == std::fs::read(&b).unwrap(), "the resumed learner writes other bytes");
+            std::fs::write(&a, flipped(&bytes, at, flip)).unwrap();
+            let refused = if kind == 0 {
+                Sac::load_checkpoint(&a, shaped(obs, act), &device).map(|_| ())
+            } else {
+                Ppo::load_checkpoint(&a, shaped(obs, act), &device).map(|_| ())
+            };
+            prop_assert!(matches!(refused, Err(RlError::BadFile { .. })), "{refused:?}");
+        }
+    }
+}

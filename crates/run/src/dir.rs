@@ -98,7 +98,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         .permissions(mode)
         .tempfile_in(dir)
         .map_err(io(dir))?;
-    file.write_all(bytes)
+    // Through the plain file: NamedTempFile's own writes name the temporary path in errors.
+    file.as_file_mut()
+        .write_all(bytes)
         .and_then(|()| file.as_file().sync_all())
         .map_err(io(path))?;
     file.persist(path).map_err(|e| io(path)(e.error))?;
@@ -109,6 +111,13 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 pub struct RunDir {
     final_path: PathBuf,
     partial: PathBuf,
+    /// Resuming a finished run: `finish` swaps the filled copy with it.
+    replaces: bool,
+    /// Remove `partial` when dropped unfinished (a resume that failed: its copy is no use).
+    discard: bool,
+    /// A lock on the resumed run's directory, so a second resume of it is refused; the
+    /// kernel releases it when the process dies, however it dies.
+    _lock: Option<std::fs::File>,
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> RunError + '_ {
@@ -166,7 +175,53 @@ impl RunDir {
         Ok(Some(Self {
             final_path: path.to_path_buf(),
             partial,
+            replaces: false,
+            discard: false,
+            _lock: None,
         }))
+    }
+
+    /// Continue the run at `dir` without changing it before the continued run is complete.
+    ///
+    /// - A finished run is copied to `<dir>.resume.partial` (its checkpoint hard-linked: a
+    ///   checkpoint is only ever replaced, never written in place), the copy is filled, and
+    ///   [`RunDir::finish`] swaps the two in one rename. A killed resume leaves `dir` as it was
+    ///   and a `.resume.partial` that the next resume removes.
+    /// - A `<name>.partial` run (a training killed before it finished) is continued where it
+    ///   lies and published as `<name>` by `finish`.
+    pub fn resume(dir: &Path) -> Result<Self> {
+        let shown = dir.display().to_string();
+        if let Some(name) = shown.strip_suffix(".resume.partial") {
+            return Err(RunError::RunDir(format!(
+                "{shown} is the leftover of a resume that did not finish; resume {name} instead"
+            )));
+        }
+        if let Some(name) = shown.strip_suffix(".partial") {
+            return Ok(Self {
+                final_path: PathBuf::from(name),
+                partial: dir.to_path_buf(),
+                replaces: false,
+                discard: false,
+                _lock: Some(lock(dir)?),
+            });
+        }
+        if !dir.is_dir() {
+            return Err(RunError::RunDir(format!("{shown} is not a run directory")));
+        }
+        let lock = lock(dir)?;
+        let partial = PathBuf::from(format!("{shown}.resume.partial"));
+        if partial.exists() {
+            eprintln!("removing {} (a resume that did not finish)", partial.display());
+            std::fs::remove_dir_all(&partial).map_err(io(&partial))?;
+        }
+        copy_run(dir, &partial)?;
+        Ok(Self {
+            final_path: dir.to_path_buf(),
+            partial,
+            replaces: true,
+            discard: true,
+            _lock: Some(lock),
+        })
     }
 
     /// Path of a file inside the run (see [`files`]).
@@ -174,8 +229,23 @@ impl RunDir {
         self.partial.join(name)
     }
 
-    /// Publish the run under its final name.
-    pub fn finish(self) -> Result<PathBuf> {
+    /// Publish the run under its final name (a resumed finished run: in place of the old one).
+    pub fn finish(mut self) -> Result<PathBuf> {
+        if self.replaces {
+            exchange(&self.partial, &self.final_path)?;
+            // The old run now lies under the partial name; a kill here leaves it to the next
+            // resume to remove.
+            std::fs::remove_dir_all(&self.partial).map_err(io(&self.partial))?;
+            self.discard = false;
+            return Ok(self.final_path.clone());
+        }
+        if self.final_path.exists() {
+            return Err(RunError::RunDir(format!(
+                "the run is complete in {}, but {} exists: rename it yourself",
+                self.partial.display(),
+                self.final_path.display()
+            )));
+        }
         std::fs::rename(&self.partial, &self.final_path).map_err(|source| {
             RunError::RunDir(format!(
                 "renaming {} to {}: {source}",
@@ -183,13 +253,141 @@ impl RunDir {
                 self.final_path.display()
             ))
         })?;
-        Ok(self.final_path)
+        Ok(self.final_path.clone())
     }
+}
+
+impl Drop for RunDir {
+    fn drop(&mut self) {
+        if self.discard {
+            let _ = std::fs::remove_dir_all(&self.partial);
+        }
+    }
+}
+
+/// An exclusive lock on the directory `dir`, or a clear error when another process holds it.
+fn lock(dir: &Path) -> Result<std::fs::File> {
+    use std::os::fd::AsRawFd;
+    let file = std::fs::File::open(dir).map_err(io(dir))?;
+    // SAFETY: flock on a descriptor this function owns.
+    if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+        return Err(RunError::RunDir(format!(
+            "another process is resuming {}",
+            dir.display()
+        )));
+    }
+    Ok(file)
+}
+
+/// Copy the run directory `from` to `to` (created) for a resume: the files only ever replaced
+/// whole ([`write_atomic`]) are hard-linked where the file system allows, the evaluation's
+/// recording and plots (written in place, and written anew by the resume) are left out, and
+/// anything else is copied, subdirectories recursed.
+fn copy_run(from: &Path, to: &Path) -> Result<()> {
+    const LINKED: [&str; 6] = [
+        files::CONFIG,
+        files::POLICY,
+        files::CHECKPOINT,
+        files::METRICS,
+        files::EVAL,
+        files::EVAL_JSON,
+    ];
+    const REDONE: [&str; 3] = [files::RECORDING, files::LEARNING_CURVE, files::TRAJECTORY];
+    std::fs::create_dir(to).map_err(io(to))?;
+    for entry in std::fs::read_dir(from).map_err(io(from))? {
+        let entry = entry.map_err(io(from))?;
+        let (src, dst) = (entry.path(), to.join(entry.file_name()));
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if entry.file_type().map_err(io(&src))?.is_dir() {
+            copy_run(&src, &dst)?;
+        } else if REDONE.contains(&name.as_str()) {
+            continue;
+        } else if !LINKED.contains(&name.as_str()) || std::fs::hard_link(&src, &dst).is_err() {
+            std::fs::copy(&src, &dst).map_err(io(&dst))?;
+        }
+    }
+    // The copy is complete on disk before anything relies on it.
+    std::fs::File::open(to).and_then(|d| d.sync_all()).map_err(io(to))
+}
+
+/// Swap the directories `a` and `b` in one step (`renameat2` with `RENAME_EXCHANGE`); where
+/// the file system cannot, `b` moves aside first (a kill between the two renames leaves both).
+fn exchange(a: &Path, b: &Path) -> Result<()> {
+    use std::ffi::CString;
+    use std::os::unix::ffi::OsStrExt;
+    let c = |p: &Path| {
+        CString::new(p.as_os_str().as_bytes()).map_err(|_| RunError::RunDir(format!("{} has a NUL", p.display())))
+    };
+    let (ca, cb) = (c(a)?, c(b)?);
+    // SAFETY: two NUL-terminated paths that outlive the call.
+    let rc = unsafe {
+        libc::syscall(
+            libc::SYS_renameat2,
+            libc::AT_FDCWD,
+            ca.as_ptr(),
+            libc::AT_FDCWD,
+            cb.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if rc == 0 {
+        return Ok(());
+    }
+    let aside = PathBuf::from(format!("{}.old.partial", b.display()));
+    std::fs::rename(b, &aside).map_err(io(b))?;
+    std::fs::rename(a, b).map_err(io(a))?;
+    std::fs::rename(&aside, a).map_err(io(&aside))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_resumed_run_is_untouched_until_it_is_swapped_in_whole() {
+        let root = std::env::temp_dir().join(format!("agvrl-resume-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let done = root.join("run");
+        let new = RunDir::create(done.clone()).unwrap();
+        for (name, text) in [
+            (files::CONFIG, "old config"),
+            (files::CHECKPOINT, "old ckpt"),
+            ("sub/x", "x"),
+        ] {
+            std::fs::create_dir_all(new.file(name).parent().unwrap()).unwrap();
+            std::fs::write(new.file(name), text).unwrap();
+        }
+        new.finish().unwrap();
+        // A resume killed earlier left its copy; the next one removes it.
+        std::fs::create_dir(root.join("run.resume.partial")).unwrap();
+        let resumed = RunDir::resume(&done).unwrap();
+        assert!(
+            RunDir::resume(&done).is_err(),
+            "a second resume of the same run is refused"
+        );
+        write_atomic(&resumed.file(files::CHECKPOINT), b"new ckpt").unwrap();
+        assert_eq!(std::fs::read_to_string(resumed.file("sub/x")).unwrap(), "x");
+        assert_eq!(
+            std::fs::read_to_string(done.join(files::CHECKPOINT)).unwrap(),
+            "old ckpt"
+        );
+        assert_eq!(resumed.finish().unwrap(), done);
+        assert_eq!(
+            std::fs::read_to_string(done.join(files::CHECKPOINT)).unwrap(),
+            "new ckpt"
+        );
+        assert_eq!(std::fs::read_to_string(done.join(files::CONFIG)).unwrap(), "old config");
+        assert!(!root.join("run.resume.partial").exists());
+        // A killed new training is continued where it lies and published under its name.
+        let partial = RunDir::create(root.join("killed")).unwrap();
+        std::fs::write(partial.file(files::CONFIG), "c").unwrap();
+        std::mem::forget(partial);
+        let resumed = RunDir::resume(&root.join("killed.partial")).unwrap();
+        assert_eq!(resumed.finish().unwrap(), root.join("killed"));
+        assert!(root.join("killed").join(files::CONFIG).is_file());
+        assert!(RunDir::resume(&root.join("run.resume.partial")).is_err());
+        std::fs::remove_dir_all(&root).unwrap();
+    }
 
     #[test]
     fn a_run_directory_name_is_claimed_once() {

@@ -9,6 +9,8 @@ mod config;
 mod dir;
 mod error;
 mod error_line;
+#[doc(hidden)]
+pub mod fuzz;
 mod report;
 mod seeds;
 mod settings;

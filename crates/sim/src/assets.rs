@@ -93,6 +93,11 @@ impl AssetSource {
     }
 }
 
+/// The embedded asset files as (path relative to `assets/`, contents).
+pub(crate) fn embedded_files() -> &'static [(&'static str, &'static str)] {
+    embedded::EMBEDDED
+}
+
 /// Resolve `rel` relative to the directory of `base` (both asset-relative, `/`-separated).
 pub fn join_rel(base: &str, rel: &str) -> String {
     match base.rfind('/') {

@@ -15,6 +15,8 @@
 
 pub mod assets;
 mod error;
+#[doc(hidden)]
+pub mod fuzz;
 pub mod msg;
 pub mod scene;
 pub mod sensors;

@@ -49,6 +49,15 @@ impl Subscribed {
     }
 }
 
+/// Whether a message stamped as `new` replaces the held one (`held`): only a newer stamp does,
+/// so a duplicate, or a message overtaken on the wire (reordered, or a sensor clock stepped
+/// back), is never taken for news; it is counted in `count`.
+fn newer(count: &mut u64, held: Option<&msg::Header>, new: &msg::Header) -> bool {
+    let newer = held.is_none_or(|h| new.stamp.as_secs() > h.stamp.as_secs());
+    *count += u64::from(!newer);
+    newer
+}
+
 /// The newest message of each topic, and the frame they make.
 pub struct FrameBuilder {
     cfg: Ros2Config,
@@ -64,6 +73,8 @@ pub struct FrameBuilder {
     image_error: Option<String>,
     /// Images refused so far.
     bad_images: u64,
+    /// Messages not newer than the one held (see [`newer`]).
+    not_newer: u64,
 }
 
 impl FrameBuilder {
@@ -82,6 +93,7 @@ impl FrameBuilder {
             image: None,
             image_error: None,
             bad_images: 0,
+            not_newer: 0,
         }
     }
 
@@ -102,27 +114,43 @@ impl FrameBuilder {
 
     /// A LaserScan arrived.
     pub fn scan(&mut self, m: msg::LaserScan) {
-        self.scan = Some(m);
+        if newer(&mut self.not_newer, self.scan.as_ref().map(|h| &h.header), &m.header) {
+            self.scan = Some(m);
+        }
     }
 
     /// An Imu arrived.
     pub fn imu(&mut self, m: msg::Imu) {
-        self.imu = Some(m);
+        if newer(&mut self.not_newer, self.imu.as_ref().map(|h| &h.header), &m.header) {
+            self.imu = Some(m);
+        }
     }
 
     /// An Odometry arrived.
     pub fn odom(&mut self, m: msg::Odometry) {
-        self.odom = Some(m);
+        if newer(&mut self.not_newer, self.odom.as_ref().map(|h| &h.header), &m.header) {
+            self.odom = Some(m);
+        }
     }
 
     /// A NavSatFix arrived.
     pub fn navsat(&mut self, m: msg::NavSatFix) {
-        self.navsat = Some(m);
+        if newer(&mut self.not_newer, self.navsat.as_ref().map(|h| &h.header), &m.header) {
+            self.navsat = Some(m);
+        }
+    }
+
+    /// Messages dropped so far for a stamp no newer than the one held.
+    pub fn not_newer(&self) -> u64 {
+        self.not_newer
     }
 
     /// A depth image arrived: decoded and cut to the policy camera, or refused (counted, the
     /// reason kept).
     pub fn image(&mut self, m: &msg::Image) {
+        if self.camera.is_none() || !newer(&mut self.not_newer, self.image.as_ref().map(|h| &h.0), &m.header) {
+            return;
+        }
         let Some(cam) = &self.camera else { return };
         match mapping::depth_frame(m, &self.cfg.camera, cam) {
             Ok(f) => self.image = Some((m.header.clone(), f)),

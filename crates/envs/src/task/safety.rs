@@ -1181,4 +1181,141 @@ mod tests {
             assert_eq!(f.last_intervention(), Intervention::Braked);
         }
     }
+
+    /// Generated scans for the properties: two frames 0.1 s apart (the car drives between
+    /// them by odometry), so the check runs on remembered points as well as the latest scan.
+    mod properties {
+        use super::*;
+        use proptest::prelude::*;
+
+        const RAYS: usize = 61;
+        const LIMIT_RAD: f64 = 0.36;
+
+        /// A scan over `fan` either side with `ranges[i]` (`None`: no return).
+        fn scan_frame(ranges: &[Option<f32>], fan: f32, stamp_s: f64, speed: f64) -> SensorFrame {
+            let inc = 2.0 * fan / (RAYS - 1) as f32;
+            SensorFrame {
+                stamp_s,
+                scan: Some(LaserScan {
+                    angle_min: -fan,
+                    angle_increment: inc,
+                    range_min: 0.05,
+                    range_max: 12.0,
+                    points_w: vec![],
+                    object_id: vec![],
+                    origin_w: [0.0; 3],
+                    ranges: ranges.iter().map(|r| r.unwrap_or(12.0)).collect(),
+                    hit: ranges.iter().map(Option::is_some).collect(),
+                }),
+                imu: Some(ImuReading {
+                    lin_vel_b: [speed, 0.0, 0.0],
+                    ..ImuReading::default()
+                }),
+                ..SensorFrame::default()
+            }
+        }
+
+        /// The first pose along the arc of `steering_rad` (every `PATH_STEP_M` up to
+        /// `need_m`) at which some remembered point is inside the body's rectangle with margin
+        /// or within `clearance_m` of the LiDAR in its fan: a check over every point in the
+        /// memory, without the near-point radius, the boxes or the grid.
+        fn brute_force_hit(f: &SafetyFilter, steering_rad: f64, need_m: f32, fan: f32) -> Option<(f32, [f32; 2])> {
+            let cfg = &f.cfg;
+            let [ox, oy, oth] = f.pose;
+            let k = (steering_rad as f32).tan() / cfg.wheelbase_m;
+            let n = (need_m / PATH_STEP_M).ceil().max(1.0) as usize;
+            for i in 1..=n {
+                let s = (i as f32 * PATH_STEP_M).min(need_m);
+                let (x, y, th) = if k.abs() < 1e-6 {
+                    (s, 0.0, 0.0)
+                } else {
+                    ((k * s).sin() / k, (1.0 - (k * s).cos()) / k, k * s)
+                };
+                for &(ci, cj) in f.memory.keys() {
+                    // The cell's centre in the car's frame, then in the pose's frame.
+                    let (wx, wy) = ((ci as f64 + 0.5) * CELL_M - ox, (cj as f64 + 0.5) * CELL_M - oy);
+                    let (px, py) = (
+                        (oth.cos() * wx + oth.sin() * wy) as f32,
+                        (-oth.sin() * wx + oth.cos() * wy) as f32,
+                    );
+                    let (dx, dy) = (px - x, py - y);
+                    let (bx, by) = (th.cos() * dx + th.sin() * dy, -th.sin() * dx + th.cos() * dy);
+                    let m = cfg.body_margin_m;
+                    let in_body = (-cfg.rear_m - m..=cfg.front_m + m).contains(&bx) && by.abs() <= cfg.half_width_m + m;
+                    let lx = bx - cfg.lidar_x_m;
+                    let in_fan = fan >= std::f32::consts::FRAC_PI_2 || by.atan2(lx).abs() <= fan;
+                    let near_lidar = lx * lx + by * by < cfg.clearance_m * cfg.clearance_m && in_fan;
+                    if in_body || near_lidar {
+                        return Some((s, [px, py]));
+                    }
+                }
+            }
+            None
+        }
+
+        prop_compose! {
+            /// Two scans (a ray returns with probability `p`, 0.2 to 6 m), the speeds the
+            /// IMU reads with them, the fan and a driving control: from open ground, where
+            /// most controls pass, to clutter, where most are corrected.
+            fn scene()(p in 0.01f64..0.3)(
+                first in prop::collection::vec(prop::option::weighted(p, 0.2f32..6.0), RAYS),
+                second in prop::collection::vec(prop::option::weighted(p, 0.2f32..6.0), RAYS),
+                speeds in (0.0f64..2.5, 0.0f64..2.5),
+                fan in prop_oneof![Just(std::f32::consts::FRAC_PI_4), Just(1.2f32), Just(2.3f32)],
+                throttle in 0.01f64..=1.0,
+                steering_rad in -LIMIT_RAD..=LIMIT_RAD,
+            ) -> (Vec<Option<f32>>, Vec<Option<f32>>, (f64, f64), f32, Control) {
+                (first, second, speeds, fan, Control { throttle, steering_rad })
+            }
+        }
+
+        fn run(
+            first: &[Option<f32>],
+            second: &[Option<f32>],
+            speeds: (f64, f64),
+            fan: f32,
+            proposed: Control,
+        ) -> (SafetyFilter, Control) {
+            let mut f = on();
+            f.filter(&scan_frame(first, fan, 0.0, speeds.0), proposed, LIMIT_RAD, Some(fan));
+            let c = f.filter(&scan_frame(second, fan, 0.1, speeds.1), proposed, LIMIT_RAD, Some(fan));
+            (f, c)
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig { cases: 400, max_global_rejects: 4000, ..ProptestConfig::default() })]
+
+            /// Whatever the filter sends that drives forward (the policy's control, or its
+            /// steering instead) has a path clear of every remembered point for the distance
+            /// to react, brake and look ahead.
+            #[test]
+            fn a_driving_control_the_filter_sends_has_a_clear_path(
+                (first, second, speeds, fan, proposed) in scene()
+            ) {
+                let (f, c) = run(&first, &second, speeds, fan, proposed);
+                if c.throttle > 0.0 {
+                    let v = speeds.1 as f32;
+                    let need = v * f.cfg.reaction_s + v * v / (2.0 * f.cfg.decel_mps2) + f.cfg.lookahead_m;
+                    let hit = brute_force_hit(&f, c.steering_rad, need, fan);
+                    prop_assert!(hit.is_none(), "sent {c:?} ({:?}); blocked at {hit:?}", f.last);
+                }
+            }
+
+            /// From one state, a control the filter passes still passes with fewer points.
+            #[test]
+            fn removing_points_never_turns_a_passed_control_into_an_intervention(
+                (first, second, speeds, fan, proposed) in scene(),
+                keep in prop::collection::vec(any::<bool>(), 2 * RAYS),
+            ) {
+                let (f, c) = run(&first, &second, speeds, fan, proposed);
+                prop_assume!(f.last == Intervention::None);
+                let thin = |scan: &[Option<f32>], keep: &[bool]| -> Vec<Option<f32>> {
+                    scan.iter().zip(keep).map(|(r, k)| r.filter(|_| *k)).collect()
+                };
+                let (g, d) = run(&thin(&first, &keep[..RAYS]), &thin(&second, &keep[RAYS..]), speeds, fan, proposed);
+                prop_assert_eq!(g.last, Intervention::None);
+                prop_assert_eq!(d, c);
+            }
+        }
+    }
 }

@@ -230,16 +230,19 @@ fn ray_span(aabb: &Aabb, o: Vector, yaw: f32, a0: f32, da: f32, n: usize, full: 
         }
         return (lo, hi);
     }
-    // A fan narrower than a circle: the box may also be reached through the wrap at +-pi.
-    let lo2 = lo.max(0);
-    let hi2 = hi.min(n as i64 - 1);
-    if lo2 <= hi2 {
-        return (lo2, hi2);
-    }
+    // A fan narrower than a circle: the box may also be reached through the wrap at +-pi, and
+    // a fan wider than half a circle may reach it both ways (its first rays and its last).
+    let direct = (lo.max(0), hi.min(n as i64 - 1));
     let alt = if rel + dmin < 0.0 { TAU } else { -TAU };
-    let lo = ((rel + alt + dmin) / da).floor() as i64 - 1;
-    let hi = ((rel + alt + dmax) / da).ceil() as i64 + 1;
-    (lo.max(0), hi.min(n as i64 - 1))
+    let wrapped = (
+        (((rel + alt + dmin) / da).floor() as i64 - 1).max(0),
+        (((rel + alt + dmax) / da).ceil() as i64 + 1).min(n as i64 - 1),
+    );
+    match (direct.0 <= direct.1, wrapped.0 <= wrapped.1) {
+        (true, true) => (direct.0.min(wrapped.0), direct.1.max(wrapped.1)),
+        (true, false) => direct,
+        (false, _) => wrapped,
+    }
 }
 
 /// `atan2(y, x)` within 1e-5 rad (Hastings' 11th-order fit of atan on [0, 1]): ray culling keeps a

@@ -1,0 +1,92 @@
+//! The body of the fuzz target on the files a user writes for the simulator (`fuzz/`,
+//! cargo-fuzz on nightly), here so that the inputs it kept replay on stable
+//! (`fuzz_regressions_*`).
+
+use crate::assets::{AssetSource, embedded_files};
+use crate::urdf::UrdfModel;
+use crate::{Control, SceneSource, Sim, SimConfig, SimSettings};
+use rapier3d::prelude::Vector;
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+/// A private copy of the built-in assets, where a fuzzed file replaces one of them.
+fn assets_dir() -> &'static PathBuf {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("agvrl-fuzz-assets-{}", std::process::id()));
+        for (rel, text) in embedded_files() {
+            let path = dir.join(rel);
+            std::fs::create_dir_all(path.parent().expect("a file in a folder")).expect("temp dir");
+            std::fs::write(&path, text).expect("temp dir");
+        }
+        dir
+    })
+}
+
+/// `asset_files`: byte 0 picks the file, the rest is its text, loaded as a user's file is:
+/// - 0: a scene TOML (`--set env_config.scene=...`), built into a simulator with XTENTH-CAR;
+/// - 1: a vehicle TOML, or 2: the URDF XTENTH-CAR's TOML names, in a simulator on the oval;
+/// - 3: an object URDF, read and its collision shapes built.
+///
+/// A simulator that builds is driven for a few control periods, and scanned.
+pub fn asset_file(data: &[u8]) {
+    let Some((&which, body)) = data.split_first() else {
+        return;
+    };
+    let Ok(text) = std::str::from_utf8(body) else {
+        return;
+    };
+    let dir = assets_dir();
+    let mut cfg = SimConfig::default();
+    match which % 4 {
+        0 => {
+            let path = dir.join("scenes/fuzz.toml");
+            std::fs::write(&path, text).expect("temp dir");
+            cfg.scene = SceneSource::File(path);
+        }
+        1 => {
+            let path = dir.join("vehicles/fuzz.toml");
+            std::fs::write(&path, text).expect("temp dir");
+            cfg.settings = vehicle(&path);
+        }
+        2 => {
+            let toml = embedded_files()
+                .iter()
+                .find(|(p, _)| *p == "vehicles/xtenth_car.toml")
+                .expect("XTENTH-CAR is built in")
+                .1
+                .replace("xtenth_car.urdf", "fuzz.urdf");
+            std::fs::write(dir.join("vehicles/fuzz.urdf"), text).expect("temp dir");
+            let path = dir.join("vehicles/fuzz-urdf.toml");
+            std::fs::write(&path, toml).expect("temp dir");
+            cfg.settings = vehicle(&path);
+        }
+        _ => {
+            let src = AssetSource::Dir(dir.clone());
+            if let Ok(model) = UrdfModel::parse(&src, "objects/fuzz.urdf", text) {
+                let _ = model.collision_shapes(&src, Vector::new(1.0, 1.0, 1.0), |_| true);
+            }
+            return;
+        }
+    }
+    let Ok(mut sim) = Sim::new(cfg) else {
+        return;
+    };
+    for throttle in [1.0, 1.0, -1.0] {
+        let control = Control {
+            throttle,
+            steering_rad: 0.3,
+        };
+        if sim.step(control).is_err() {
+            return;
+        }
+    }
+    let _ = sim.lidar_scan();
+}
+
+fn vehicle(path: &std::path::Path) -> SimSettings {
+    SimSettings {
+        vehicle: path.display().to_string(),
+        ..SimSettings::default()
+    }
+}
