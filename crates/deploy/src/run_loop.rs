@@ -78,7 +78,8 @@ impl Default for DriveConfig {
 /// Why a tick commanded a safe stop.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Event {
-    /// The newest frame is older than the limit.
+    /// The newest frame is older than the limit, or stamped more than the limit ahead of the
+    /// drive's clock (negative age).
     Stale {
         /// Its age, seconds.
         age_s: f64,
@@ -202,7 +203,10 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
     fn check(&self, f: &SensorFrame, now_s: f64) -> Result<(), Event> {
         self.task.needs().check(f).map_err(|e| Event::Missing(e.to_string()))?;
         let age_s = now_s - f.stamp_s;
-        if age_s > self.cfg.max_age_periods / self.cfg.rate_hz + 1e-9 {
+        // A frame from the future (a sensor clock stepped forward) has no age to judge: it
+        // would look fresh for as long as the step, with the watchdog blind.
+        let limit = self.cfg.max_age_periods / self.cfg.rate_hz + 1e-9;
+        if age_s > limit || age_s < -limit {
             return Err(Event::Stale { age_s });
         }
         if let Some(s) = &f.scan

@@ -76,6 +76,11 @@ struct Args {
     /// Serve the simulated car of env ENV over ROS 2 instead of driving.
     #[arg(long, value_name = "ENV", conflicts_with = "vehicle")]
     serve_sim: Option<String>,
+    /// --serve-sim --realtime: faults on the wire, comma-separated KEY=VALUE (loss, delay_ms,
+    /// jitter_ms, duplicate, reorder, outage=FROM+TICKS, mute=SENSOR@TICK,
+    /// clock_step=SECONDS@TICK, seed); see docs/reliability.md.
+    #[arg(long, value_name = "SPEC", requires = "serve_sim")]
+    faults: Option<agvrl_deploy::hardware::WireFaults>,
     /// Control rate, Hz.
     #[arg(long, default_value_t = 30.0)]
     rate_hz: f64,
@@ -427,9 +432,11 @@ fn dump(dir: &Path) -> Result<()> {
 fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Option<Arc<DriveBag>>) -> Result<()> {
     let (cpu0, t0) = (cpu_time_s(), Instant::now());
     let (mut k, mut events, mut terminations, mut filtered) = (0u64, 0u64, 0u64, 0u64);
-    let mut infer_us = Vec::new();
-    let (mut late, mut tick_us, period_s) = (0u64, Vec::new(), 1.0 / a.rate_hz);
+    // Constant memory however long the car drives.
+    let mut infer_us = agvrl_deploy::stats::Latencies::default();
+    let (mut late, mut tick_us, period_s) = (0u64, agvrl_deploy::stats::Latencies::default(), 1.0 / a.rate_hz);
     let mut racing = None;
+    let mut stops = agvrl_deploy::stats::Stops::default();
     let mut trace = a.trace.as_deref().map(TraceWriter::create).transpose()?;
     while a.steps == 0 || k < a.steps {
         let t = lp.tick()?;
@@ -437,7 +444,8 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Optio
             b.tick(&t);
         }
         late += u64::from(t.late_s > period_s);
-        tick_us.push(t.tick_us);
+        stops.add(&t);
+        tick_us.add(t.tick_us);
         if let (Some(w), Some((obs, action))) = (trace.as_mut(), &t.inference) {
             w.row(t.index, obs, action)?;
         }
@@ -445,7 +453,7 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Optio
         events += u64::from(t.event.is_some());
         terminations += u64::from(t.termination.is_some());
         filtered += u64::from(t.intervention != Intervention::None);
-        infer_us.push(t.infer_us);
+        infer_us.add(t.infer_us);
         if t.racing.is_some() {
             racing = t.racing.clone();
         }
@@ -499,11 +507,12 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Optio
         )
     });
     out!(
-        "summary ticks={k} events={events} terminations={terminations} filter_interventions={filtered}{laps} infer_us_p50={:.1} infer_us_p99={:.1} late_ticks={late} tick_us_p99={:.1} tick_us_max={:.1} wall_s={wall_s:.2} cpu_pct={cpu} rss_mb={rss}{bagged}",
-        quantile(&infer_us, 0.5),
-        quantile(&infer_us, 0.99),
-        quantile(&tick_us, 0.99),
-        tick_us.iter().copied().fold(0.0, f64::max)
+        "summary ticks={k} events={events} terminations={terminations} filter_interventions={filtered}{laps} infer_us_p50={:.1} infer_us_p99={:.1} late_ticks={late} tick_us_p99={:.1} tick_us_max={:.1} wall_s={wall_s:.2} cpu_pct={cpu} rss_mb={rss}{}{bagged}",
+        infer_us.quantile(0.5),
+        infer_us.quantile(0.99),
+        tick_us.quantile(0.99),
+        tick_us.max(),
+        stops.summary()
     );
     Ok(())
 }
@@ -591,20 +600,30 @@ fn check_trace(policy: &mut Policy, path: &Path, tolerance: f32) -> Result<()> {
 fn serve_sim(a: &Args, env: &str, env_cfg: &EnvConfig) -> Result<()> {
     use agvrl_deploy::hardware::{Faults, Pace, SimRobot};
     let cfg = ros2_config(a)?;
-    let mut robot = SimRobot::new(env, env_cfg, cfg, a.seed, Faults::default())?;
+    let faults = Faults {
+        wire: a.faults.clone().unwrap_or_default(),
+        ..Faults::default()
+    };
+    let mut robot = SimRobot::new(env, env_cfg, cfg, a.seed, faults)?;
     let h = robot.handle();
     let pace = if a.realtime { Pace::Realtime } else { Pace::Lockstep };
     eprintln!("serving {env} over ROS 2 ({pace:?}); Ctrl-C stops");
     robot.run(pace, a.steps)?;
-    let s = h.stats();
+    let (s, w) = (h.stats(), robot.wire_stats());
     out!(
-        "summary ticks={} stamp_s={:.3} commands={} laps={} best_lap_s={} terminations={}",
+        "summary ticks={} stamp_s={:.3} commands={} laps={} best_lap_s={} terminations={} wire_offered={} wire_sent={} wire_lost={} wire_withheld={} wire_duplicated={} wire_held_back={}",
         s.ticks,
         s.stamp_s,
         s.commands,
         s.laps,
         s.best_lap_s.map_or("na".into(), |b| format!("{b:.2}")),
-        s.terminations
+        s.terminations,
+        w.offered,
+        w.sent,
+        w.lost,
+        w.withheld,
+        w.duplicated,
+        w.held_back
     );
     Ok(())
 }

@@ -9,9 +9,11 @@ pub mod msg;
 pub mod ros2;
 #[cfg(feature = "ros2")]
 pub mod sim_robot;
+pub mod wire;
 
 pub use config::Ros2Config;
 #[cfg(feature = "ros2")]
 pub use ros2::Ros2Vehicle;
 #[cfg(feature = "ros2")]
 pub use sim_robot::{Faults, Pace, RobotHandle, RobotStats, SimRobot};
+pub use wire::WireFaults;

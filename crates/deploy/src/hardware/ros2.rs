@@ -244,6 +244,12 @@ impl Ros2Vehicle {
         self.bad_messages + self.frames.bad_images()
     }
 
+    /// Sensor messages dropped so far for a stamp no newer than the one held (copies, messages
+    /// overtaken on the wire, a clock stepped back).
+    pub fn not_newer(&self) -> u64 {
+        self.frames.not_newer()
+    }
+
     /// Readers of the drive topic that discovery has found so far.
     fn drive_readers(&self) -> Vec<FoundReader> {
         let dds_name = format!("rt/{}", self.cfg.topics.drive.trim_start_matches('/'));

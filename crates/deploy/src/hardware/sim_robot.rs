@@ -12,6 +12,7 @@ use super::ros2::{
     DRIVE_TYPE, IMAGE_TYPE, IMU_TYPE, NAVSAT_TYPE, ODOM_TYPE, Publisher, SCAN_TYPE, Subscription, node, publisher,
     subscribe,
 };
+use super::wire::{Outgoing, Wire, WireFaults, WireStats};
 use crate::DeployError;
 use agvrl_envs::api::{Control, SensorFrame, TerminationCause, Vehicle};
 use agvrl_envs::task::Task;
@@ -50,6 +51,8 @@ pub struct Faults {
     pub drive_reader_from: u64,
     /// Camera images go out on every this many ticks (2: a 15 Hz camera on a 30 Hz car).
     pub image_every: u64,
+    /// Faults on the wire (real-time pace only).
+    pub wire: WireFaults,
 }
 
 impl Default for Faults {
@@ -60,6 +63,7 @@ impl Default for Faults {
             nan_rays: 0..0,
             drive_reader_from: 0,
             image_every: 1,
+            wire: WireFaults::default(),
         }
     }
 }
@@ -126,6 +130,7 @@ pub struct SimRobot {
     events: Events,
     frame: SensorFrame,
     faults: Faults,
+    wire: Wire,
     handle: RobotHandle,
     bad_messages: u64,
 }
@@ -180,6 +185,7 @@ impl SimRobot {
             None
         };
         let handle = RobotHandle::default();
+        let wire = Wire::new(faults.wire.clone(), vehicle.control_period_s());
         Ok(Self {
             cfg,
             vehicle,
@@ -196,6 +202,7 @@ impl SimRobot {
             events: Events::with_capacity(8),
             frame,
             faults,
+            wire,
             handle,
             bad_messages: 0,
         })
@@ -206,17 +213,23 @@ impl SimRobot {
         self.handle.clone()
     }
 
+    /// What the wire did so far.
+    pub fn wire_stats(&self) -> WireStats {
+        self.wire.stats()
+    }
+
     /// Commands that failed to decode so far.
     pub fn bad_messages(&self) -> u64 {
         self.bad_messages
     }
 
+    /// Hand the current sensor set to the wire (see [`Wire`]), then send what is due.
     fn publish(&mut self) -> Result<(), DeployError> {
         let f = &self.frame;
-        let t = &self.cfg.topics;
         let tick = (f.stamp_s / self.vehicle.control_period_s()).round() as u64;
-        let stamp_s = f.stamp_s + self.stamp_offset_s;
-        let pub_err = |name: &str, e: String| DeployError::Vehicle(format!("publishing {name}: {e}"));
+        let stamp_s = f.stamp_s + self.stamp_offset_s + self.wire.faults().clock_offset_s(tick);
+        let now = Instant::now();
+        let mut out = Vec::with_capacity(5);
         if let Some(s) = &f.scan
             && tick < self.faults.mute_scan_from
         {
@@ -228,25 +241,57 @@ impl SimRobot {
                     }
                 }
             }
-            self.scan.publish(m).map_err(|e| pub_err(&t.scan, e.to_string()))?;
+            out.push(Outgoing::Scan(m));
         }
-        if let (Some(p), Some(i)) = (&self.imu, &f.imu) {
-            p.publish(mapping::imu_msg(i, stamp_s, &t.frame_id))
-                .map_err(|e| pub_err(&t.imu, e.to_string()))?;
+        let t = &self.cfg.topics;
+        if let (Some(_), Some(i)) = (&self.imu, &f.imu) {
+            out.push(Outgoing::Imu(mapping::imu_msg(i, stamp_s, &t.frame_id)));
         }
-        if let (Some(p), Some(i), Some(g)) = (&self.odom, &f.imu, &f.gps) {
-            p.publish(mapping::odom_msg(g, i, stamp_s, &t.frame_id))
-                .map_err(|e| pub_err(&t.odom, e.to_string()))?;
+        if let (Some(_), Some(i), Some(g)) = (&self.odom, &f.imu, &f.gps) {
+            out.push(Outgoing::Odom(mapping::odom_msg(g, i, stamp_s, &t.frame_id)));
         }
-        if let (Some(p), Some(geo)) = (&self.navsat, f.gps.as_ref().and_then(|g| g.geodetic)) {
-            p.publish(mapping::navsat_msg(&geo, stamp_s, "gps"))
-                .map_err(|e| pub_err(&t.navsat, e.to_string()))?;
+        if let (Some(_), Some(geo)) = (&self.navsat, f.gps.as_ref().and_then(|g| g.geodetic)) {
+            out.push(Outgoing::NavSat(mapping::navsat_msg(&geo, stamp_s, "gps")));
         }
-        if let (Some(p), Some(img)) = (&self.image, &f.image)
+        if let (Some(_), Some(img)) = (&self.image, &f.image)
             && tick.is_multiple_of(self.faults.image_every.max(1))
         {
-            p.publish(mapping::depth_image_msg(img, stamp_s, "camera"))
-                .map_err(|e| pub_err(&t.image, e.to_string()))?;
+            out.push(Outgoing::Image(mapping::depth_image_msg(img, stamp_s, "camera")));
+        }
+        for m in out {
+            self.wire.send(tick, now, m);
+        }
+        self.flush(now)
+    }
+
+    /// Send the messages the wire releases by `now`.
+    fn flush(&mut self, now: Instant) -> Result<(), DeployError> {
+        let t = &self.cfg.topics;
+        let pub_err = |name: &str, e: String| DeployError::Vehicle(format!("publishing {name}: {e}"));
+        for m in self.wire.due(now) {
+            match m {
+                Outgoing::Scan(m) => self.scan.publish(m).map_err(|e| pub_err(&t.scan, e.to_string()))?,
+                Outgoing::Imu(m) => {
+                    if let Some(p) = &self.imu {
+                        p.publish(m).map_err(|e| pub_err(&t.imu, e.to_string()))?;
+                    }
+                }
+                Outgoing::Odom(m) => {
+                    if let Some(p) = &self.odom {
+                        p.publish(m).map_err(|e| pub_err(&t.odom, e.to_string()))?;
+                    }
+                }
+                Outgoing::NavSat(m) => {
+                    if let Some(p) = &self.navsat {
+                        p.publish(m).map_err(|e| pub_err(&t.navsat, e.to_string()))?;
+                    }
+                }
+                Outgoing::Image(m) => {
+                    if let Some(p) = &self.image {
+                        p.publish(m).map_err(|e| pub_err(&t.image, e.to_string()))?;
+                    }
+                }
+            }
         }
         Ok(())
     }
@@ -290,6 +335,11 @@ impl SimRobot {
 
     /// Serve until `max_ticks` control periods have run (0: until stopped).
     pub fn run(&mut self, pace: Pace, max_ticks: u64) -> Result<(), DeployError> {
+        if pace == Pace::Lockstep && self.faults.wire.any() {
+            return Err(DeployError::Config(
+                "faults on the wire need real-time pace (--realtime): lockstep waits for every message".into(),
+            ));
+        }
         let period = self.vehicle.control_period_s();
         let done = |h: &RobotHandle| h.stop.load(Ordering::Relaxed) || (max_ticks > 0 && h.stats().ticks >= max_ticks);
         // In real time the stamps are the wall clock's, as a car's are (ROS tools read them as
@@ -324,8 +374,18 @@ impl SimRobot {
                 while !done(&self.handle) {
                     k += 1;
                     let deadline = t0 + Duration::from_secs_f64(period * k as f64);
-                    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
-                        let _ = self.poll.poll(&mut self.events, Some(left));
+                    // Wake for the wire's releases too, so delayed messages leave on time.
+                    loop {
+                        let now = Instant::now();
+                        self.flush(now)?;
+                        let Some(left) = deadline.checked_duration_since(now) else {
+                            break;
+                        };
+                        let wake = self
+                            .wire
+                            .next_release()
+                            .map_or(left, |r| left.min(r.saturating_duration_since(now)));
+                        let _ = self.poll.poll(&mut self.events, Some(wake));
                     }
                     if self.drive.is_none() && u64::from(k) > self.faults.drive_reader_from {
                         self.drive = drive_reader(&mut self.node, &self.cfg, &self.poll)?;
