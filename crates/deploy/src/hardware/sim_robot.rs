@@ -133,6 +133,8 @@ pub struct SimRobot {
     wire: Wire,
     handle: RobotHandle,
     bad_messages: u64,
+    /// Sensor messages not sent because a writer would have blocked.
+    blocked_messages: u64,
 }
 
 impl SimRobot {
@@ -205,6 +207,7 @@ impl SimRobot {
             wire,
             handle,
             bad_messages: 0,
+            blocked_messages: 0,
         })
     }
 
@@ -216,6 +219,11 @@ impl SimRobot {
     /// What the wire did so far.
     pub fn wire_stats(&self) -> WireStats {
         self.wire.stats()
+    }
+
+    /// Sensor messages not sent so far because a writer would have blocked.
+    pub fn blocked_messages(&self) -> u64 {
+        self.blocked_messages
     }
 
     /// Commands that failed to decode so far.
@@ -248,7 +256,7 @@ impl SimRobot {
             out.push(Outgoing::Imu(mapping::imu_msg(i, stamp_s, &t.frame_id)));
         }
         if let (Some(_), Some(i), Some(g)) = (&self.odom, &f.imu, &f.gps) {
-            out.push(Outgoing::Odom(mapping::odom_msg(g, i, stamp_s, &t.frame_id)));
+            out.push(Outgoing::Odom(Box::new(mapping::odom_msg(g, i, stamp_s, &t.frame_id))));
         }
         if let (Some(_), Some(geo)) = (&self.navsat, f.gps.as_ref().and_then(|g| g.geodetic)) {
             out.push(Outgoing::NavSat(mapping::navsat_msg(&geo, stamp_s, "gps")));
@@ -269,28 +277,21 @@ impl SimRobot {
         let t = &self.cfg.topics;
         let pub_err = |name: &str, e: String| DeployError::Vehicle(format!("publishing {name}: {e}"));
         for m in self.wire.due(now) {
-            match m {
-                Outgoing::Scan(m) => self.scan.publish(m).map_err(|e| pub_err(&t.scan, e.to_string()))?,
-                Outgoing::Imu(m) => {
-                    if let Some(p) = &self.imu {
-                        p.publish(m).map_err(|e| pub_err(&t.imu, e.to_string()))?;
-                    }
-                }
-                Outgoing::Odom(m) => {
-                    if let Some(p) = &self.odom {
-                        p.publish(m).map_err(|e| pub_err(&t.odom, e.to_string()))?;
-                    }
-                }
-                Outgoing::NavSat(m) => {
-                    if let Some(p) = &self.navsat {
-                        p.publish(m).map_err(|e| pub_err(&t.navsat, e.to_string()))?;
-                    }
-                }
-                Outgoing::Image(m) => {
-                    if let Some(p) = &self.image {
-                        p.publish(m).map_err(|e| pub_err(&t.image, e.to_string()))?;
-                    }
-                }
+            let sent = match m {
+                Outgoing::Scan(m) => self
+                    .scan
+                    .publish(m)
+                    .map_err(|e| (t.scan.as_str(), e.to_string(), blocked(&e))),
+                Outgoing::Imu(m) => send(&self.imu, m, &t.imu),
+                Outgoing::Odom(m) => send(&self.odom, *m, &t.odom),
+                Outgoing::NavSat(m) => send(&self.navsat, m, &t.navsat),
+                Outgoing::Image(m) => send(&self.image, m, &t.image),
+            };
+            match sent {
+                Ok(()) => {}
+                // A reader that is behind loses this message, as a car's sensor would drop it.
+                Err((_, _, true)) => self.blocked_messages += 1,
+                Err((name, e, false)) => return Err(pub_err(name, e)),
             }
         }
         Ok(())
@@ -402,6 +403,19 @@ impl SimRobot {
             }
         }
         Ok(())
+    }
+}
+
+/// Whether a write failed only because it would have blocked.
+fn blocked<M>(e: &ros2_client::WriteError<M>) -> bool {
+    matches!(e, ros2_client::WriteError::WouldBlock { .. })
+}
+
+/// Publish `m` on `p` when the topic is served: (topic, error, whether it would have blocked).
+fn send<'a, M: serde::Serialize>(p: &Option<Publisher<M>>, m: M, name: &'a str) -> Result<(), (&'a str, String, bool)> {
+    match p {
+        Some(p) => p.publish(m).map_err(|e| (name, e.to_string(), blocked(&e))),
+        None => Ok(()),
     }
 }
 

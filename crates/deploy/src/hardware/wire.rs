@@ -179,7 +179,7 @@ pub enum Outgoing {
     /// Imu.
     Imu(msg::Imu),
     /// Odometry.
-    Odom(msg::Odometry),
+    Odom(Box<msg::Odometry>),
     /// NavSatFix.
     NavSat(msg::NavSatFix),
     /// Image.
