@@ -90,11 +90,11 @@ def kill_when(p, mode: str, watch: Path, rng: random.Random) -> str:
         t0 = time.monotonic()
         while p.poll() is None and time.monotonic() - t0 < 120 and not (watch / "eval.txt").exists():
             if (watch / "policy.agvrl").exists() and (watch / "policy.agvrl").stat().st_mtime > t0 - 1:
-                time.sleep(rng.uniform(0.0, 0.3))
+                time.sleep(rng.uniform(0.0, 0.15))
                 break
             time.sleep(0.002)
     else:
-        time.sleep(rng.uniform(0.0, 4.5))
+        time.sleep(rng.uniform(0.0, 2.5))
     state = "exited" if p.poll() is not None else "killed"
     if state == "killed":
         p.send_signal(signal.SIGKILL)

@@ -211,3 +211,39 @@ impl FrameBuilder {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scan_at(sec: i32, range: f32) -> msg::LaserScan {
+        let mut m = msg::LaserScan {
+            angle_min: -0.5,
+            angle_max: 0.5,
+            angle_increment: 0.5,
+            range_min: 0.05,
+            range_max: 12.0,
+            ranges: vec![range; 3],
+            ..Default::default()
+        };
+        m.header.stamp.sec = sec;
+        m
+    }
+
+    #[test]
+    fn a_copy_or_an_older_message_never_replaces_the_one_held() {
+        let mut f = FrameBuilder::new(Ros2Config::default(), None);
+        f.scan(scan_at(10, 2.0));
+        // A copy (same stamp) and an overtaken one (older) arrive: neither is news.
+        f.scan(scan_at(10, 3.0));
+        f.scan(scan_at(9, 4.0));
+        assert_eq!(f.not_newer(), 2);
+        assert_eq!(
+            f.scan.as_ref().map(|s| (s.header.stamp.sec, s.ranges[0])),
+            Some((10, 2.0))
+        );
+        f.scan(scan_at(11, 5.0));
+        assert_eq!(f.scan.as_ref().map(|s| s.header.stamp.sec), Some(11));
+        assert_eq!(f.not_newer(), 2);
+    }
+}
