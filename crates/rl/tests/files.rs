@@ -283,6 +283,21 @@ mod properties {
         b
     }
 
+    prop_compose! {
+        /// A learner kind (see [`learner`]), observation and action widths, hidden layers, a
+        /// normaliser or not, and a seed.
+        fn shape()(
+            kind in 0u8..3,
+            obs in 1usize..12,
+            act in 1usize..4,
+            net_arch in prop::collection::vec(1usize..24, 1..4),
+            normalize_obs: bool,
+            seed: u64,
+        ) -> (u8, usize, usize, Vec<usize>, bool, u64) {
+            (kind, obs, act, net_arch, normalize_obs, seed)
+        }
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(48))]
 
@@ -290,12 +305,7 @@ mod properties {
         /// refused.
         #[test]
         fn policy_files_round_trip_and_a_flipped_byte_is_refused(
-            kind in 0u8..3,
-            obs in 1usize..12,
-            act in 1usize..4,
-            net_arch in prop::collection::vec(1usize..24, 1..4),
-            normalize_obs: bool,
-            seed: u64,
+            (kind, obs, act, net_arch, normalize_obs, seed) in shape(),
             at: prop::sample::Index,
             flip in 1u8..=255,
         ) {
@@ -315,12 +325,7 @@ mod properties {
         /// any byte changed is refused.
         #[test]
         fn checkpoints_round_trip_and_a_flipped_byte_is_refused(
-            kind in 0u8..3,
-            obs in 1usize..12,
-            act in 1usize..4,
-            net_arch in prop::collection::vec(1usize..24, 1..4),
-            normalize_obs: bool,
-            seed: u64,
+            (kind, obs, act, net_arch, normalize_obs, seed) in shape(),
             at: prop::sample::Index,
             flip in 1u8..=255,
         ) {

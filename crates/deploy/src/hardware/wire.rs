@@ -4,38 +4,22 @@
 //! or holds it back before it reaches DDS, so the faults really travel over the network.
 
 use super::msg;
+use crate::record::Sensor;
 use agvrl_rl::rng::Rng;
 use std::fmt;
 use std::str::FromStr;
 use std::time::{Duration, Instant};
 
-/// A sensor topic of the robot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Sensor {
-    /// LaserScan.
-    Scan,
-    /// Imu.
-    Imu,
-    /// Odometry.
-    Odom,
-    /// NavSatFix.
-    NavSat,
-    /// Image.
-    Image,
-}
-
-impl FromStr for Sensor {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Ok(match s {
-            "scan" => Self::Scan,
-            "imu" => Self::Imu,
-            "odom" => Self::Odom,
-            "navsat" => Self::NavSat,
-            "image" => Self::Image,
-            _ => return Err(format!("unknown sensor '{s}' (scan, imu, odom, navsat, image)")),
-        })
-    }
+/// The sensor `s` names in a fault spec.
+fn sensor_named(s: &str) -> Result<Sensor, String> {
+    Ok(match s {
+        "scan" => Sensor::Scan,
+        "imu" => Sensor::Imu,
+        "odom" => Sensor::Odom,
+        "navsat" => Sensor::NavSat,
+        "image" => Sensor::Image,
+        _ => return Err(format!("unknown sensor '{s}' (scan, imu, odom, navsat, image)")),
+    })
 }
 
 /// What goes wrong on the wire; the default is a perfect wire.
@@ -131,7 +115,10 @@ impl FromStr for WireFaults {
                     let (sensor, from) = value
                         .split_once('@')
                         .ok_or_else(|| format!("--faults mute: '{value}' is not SENSOR@TICK"))?;
-                    f.mute = Some((sensor.parse().map_err(|e| format!("--faults mute: {e}"))?, tick(from)?));
+                    f.mute = Some((
+                        sensor_named(sensor).map_err(|e| format!("--faults mute: {e}"))?,
+                        tick(from)?,
+                    ));
                 }
                 "clock_step" => {
                     let (s, at) = value

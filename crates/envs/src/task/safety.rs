@@ -821,10 +821,16 @@ mod tests {
             })
             .collect();
         let hit = ranges.iter().map(|r| *r < 12.0).collect();
+        frame_of(-half, inc, ranges, hit, stamp_s, speed)
+    }
+
+    /// A frame with a 12 m scan from `angle_min` by `inc` (`ranges`, `hit`) and the IMU
+    /// reading `speed`.
+    fn frame_of(angle_min: f32, inc: f32, ranges: Vec<f32>, hit: Vec<bool>, stamp_s: f64, speed: f64) -> SensorFrame {
         SensorFrame {
             stamp_s,
             scan: Some(LaserScan {
-                angle_min: -half,
+                angle_min,
                 angle_increment: inc,
                 range_min: 0.05,
                 range_max: 12.0,
@@ -1194,25 +1200,15 @@ mod tests {
         /// A scan over `fan` either side with `ranges[i]` (`None`: no return).
         fn scan_frame(ranges: &[Option<f32>], fan: f32, stamp_s: f64, speed: f64) -> SensorFrame {
             let inc = 2.0 * fan / (RAYS - 1) as f32;
-            SensorFrame {
+            let hit = ranges.iter().map(Option::is_some).collect();
+            frame_of(
+                -fan,
+                inc,
+                ranges.iter().map(|r| r.unwrap_or(12.0)).collect(),
+                hit,
                 stamp_s,
-                scan: Some(LaserScan {
-                    angle_min: -fan,
-                    angle_increment: inc,
-                    range_min: 0.05,
-                    range_max: 12.0,
-                    points_w: vec![],
-                    object_id: vec![],
-                    origin_w: [0.0; 3],
-                    ranges: ranges.iter().map(|r| r.unwrap_or(12.0)).collect(),
-                    hit: ranges.iter().map(Option::is_some).collect(),
-                }),
-                imu: Some(ImuReading {
-                    lin_vel_b: [speed, 0.0, 0.0],
-                    ..ImuReading::default()
-                }),
-                ..SensorFrame::default()
-            }
+                speed,
+            )
         }
 
         /// The first pose along the arc of `steering_rad` (every `PATH_STEP_M` up to
