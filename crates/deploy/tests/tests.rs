@@ -497,6 +497,7 @@ mod ros2_loopback {
         while robot.try_wait().unwrap().is_none() && t0.elapsed().as_secs() < 30 {
             std::thread::sleep(std::time::Duration::from_millis(20));
         }
+        let hung = robot.try_wait().unwrap().is_none();
         let _ = robot.kill();
         let robot = robot.wait_with_output().unwrap();
         let out = format!(
@@ -507,7 +508,15 @@ mod ros2_loopback {
         (
             drive.status.success(),
             out,
-            String::from_utf8_lossy(&robot.stdout).into_owned(),
+            format!(
+                "{}{}",
+                if hung {
+                    "robot killed, still waiting 30 s after the drive ended\n"
+                } else {
+                    ""
+                },
+                String::from_utf8_lossy(&robot.stdout)
+            ),
         )
     }
 

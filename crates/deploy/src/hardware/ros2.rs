@@ -146,6 +146,19 @@ pub(crate) fn drain<M: DeserializeOwned + 'static>(
     }
 }
 
+impl Drop for Ros2Vehicle {
+    /// In lockstep the robot steps only on a command, and DDS sends from a thread of its own:
+    /// leaving right after the last `actuate` can take that command down unsent, and the robot
+    /// waits for it forever. Stay until the set it produced arrives (up to `fresh_timeout_s`).
+    fn drop(&mut self) {
+        if self.lockstep && self.awaiting {
+            // That set belongs to no tick: it stays out of the bag.
+            self.bag = None;
+            self.wait_newer(self.last_stamp_s, Duration::from_secs_f64(self.cfg.fresh_timeout_s));
+        }
+    }
+}
+
 /// A car (or the sim-backed robot) over ROS 2.
 pub struct Ros2Vehicle {
     cfg: Ros2Config,
