@@ -59,6 +59,10 @@ pub struct EvalArgs {
     /// (`--set env_config.safety_filter.clearance_m=0.7`).
     #[arg(long, value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Race on the track of a ROS map file (its YAML; a centre-line CSV beside it, or traced):
+    /// `--set env_config.track=PATH`, loaded into the run config and policy file.
+    #[arg(long, value_name = "MAP.yaml")]
+    pub track: Option<PathBuf>,
     /// Base of the evaluation episodes' seeds: episode k resets with seed S + k, drawn from the
     /// held-out half of the seed space that training never uses (default: the run's seed +
     /// 2,000,000, or 0 for --policy).
@@ -454,7 +458,8 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     if a.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
-    let mut src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
+    let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
+    let mut src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &sets)?;
     let mut policy = match a.random || a.planner.is_some() {
         true => None,
         false => Some(src.load_policy()?),
@@ -540,6 +545,17 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     println!("seed={seed}");
     println!("layouts={}", arg_name(a.layouts));
     println!("preset={}", a.preset.map_or_else(|| "none".to_string(), arg_name));
+    if let Some(t) = &env_cfg.track {
+        let t = t.load()?;
+        println!(
+            "track={} track_crc32={} centreline={} lap_m={:.2} walls={}",
+            t.name,
+            t.crc32,
+            t.centreline_source,
+            t.lap_length_m(),
+            t.walls.len()
+        );
+    }
     println!(
         "safety_filter={}",
         if env_cfg.safety_filter.enabled { "on" } else { "off" }

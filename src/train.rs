@@ -71,13 +71,17 @@ pub struct TrainArgs {
     pub device: DeviceArg,
     /// Continue an interrupted (or finished) run directory up to its configured steps, or
     /// --steps more.
-    #[arg(long, conflicts_with_all = ["env", "algo", "seed", "n_envs", "config", "out", "set"])]
+    #[arg(long, conflicts_with_all = ["env", "algo", "seed", "n_envs", "config", "out", "set", "track"])]
     pub resume: Option<PathBuf>,
     /// Set one key of the run config, KEY=VALUE with a TOML value and a dotted key
     /// (`--set ppo.learning_rate=1e-4 --set env_config.max_steps=500 --set threads=1`); applied
     /// after --config, before --env/--algo/--steps/--seed/--n-envs.
     #[arg(long, value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Race on the track of a ROS map file (its YAML; a centre-line CSV beside it, or traced):
+    /// `--set env_config.track=PATH`, loaded into the run config and policy file.
+    #[arg(long, value_name = "MAP.yaml")]
+    pub track: Option<PathBuf>,
     /// Progress output: a bar on stderr (bar), none, or JSON lines on stdout (json: one
     /// `{"event":"progress",...}` object per update and a last `{"event":"done",...}` with the
     /// run directory and the evaluation; for drivers such as sweeps, and the process then also
@@ -119,7 +123,8 @@ fn resolve(a: &TrainArgs) -> Result<RunConfig> {
         ),
         None => (DEFAULT_TOML.to_string(), "configs/default.toml (built in)".to_string()),
     };
-    let mut cfg = RunConfig::from_toml_with(&text, &origin, &a.set)?;
+    let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
+    let mut cfg = RunConfig::from_toml_with(&text, &origin, &sets)?;
     if let Some(v) = &a.env {
         cfg.env = v.clone();
     }

@@ -21,6 +21,10 @@ pub struct ViewArgs {
     /// Override one of the policy's settings, KEY=VALUE as `agvrl train --set`.
     #[arg(long, value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Race on the track of a ROS map file (its YAML; a centre-line CSV beside it, or traced):
+    /// `--set env_config.track=PATH`, loaded into the run config and policy file.
+    #[arg(long, value_name = "MAP.yaml")]
+    pub track: Option<PathBuf>,
     /// Take env, env settings and policy from a run directory.
     #[arg(long, conflicts_with_all = ["env"])]
     pub run: Option<PathBuf>,
@@ -69,13 +73,18 @@ pub fn view(a: ViewArgs) -> Result<()> {
         return Ok(());
     }
     let (env_id, mut env_cfg, src) = if a.run.is_some() || a.policy.is_some() {
-        let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
+        let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
+        let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &sets)?;
         (src.env_id(a.env.as_deref())?, src.eval_env_config(), Some(src))
     } else {
         if let Some(s) = a.set.first() {
             bail!("--set {s}: random actions have no settings to override; give --policy or --run");
         }
-        (a.env.clone().unwrap_or_default(), EnvConfig::default(), None)
+        let cfg = EnvConfig {
+            track: a.track.clone().map(agvrl_envs::TrackSetting::Path),
+            ..EnvConfig::default()
+        };
+        (a.env.clone().unwrap_or_default(), cfg, None)
     };
     if let Some(n) = a.steps {
         env_cfg.max_steps = n;

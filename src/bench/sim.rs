@@ -31,10 +31,21 @@ pub(super) fn run(quick: bool) -> Vec<String> {
     let reps = if quick { 3 } else { 7 };
     let steps = if quick { 100 } else { 1000 };
     let mut out = Vec::new();
+    // The built-in scenes, and the shipped map-file tracks (from the working directory).
+    let mut scenes: Vec<(String, SceneSource)> = SCENE_IDS
+        .iter()
+        .map(|id| (id.to_string(), SceneSource::Builtin(id.to_string())))
+        .collect();
+    for t in ["bean", "sweepers"] {
+        match agvrl_sim::MapTrack::load(std::path::Path::new(&format!("assets/tracks/{t}.yaml"))) {
+            Ok(m) => scenes.push((format!("track-{t}"), SceneSource::Map(Box::new(m)))),
+            Err(_) => out.push(format!("scene=track-{t} error=assets/tracks/{t}.yaml_not_found")),
+        }
+    }
     for mode in [DynamicsMode::Raycast, DynamicsMode::Multibody] {
-        for id in SCENE_IDS {
+        for (id, scene) in &scenes {
             let cfg = SimConfig {
-                scene: SceneSource::Builtin(id.to_string()),
+                scene: scene.clone(),
                 settings: agvrl_sim::SimSettings {
                     dynamics: mode,
                     ..Default::default()

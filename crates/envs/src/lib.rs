@@ -28,7 +28,9 @@ pub mod wrappers;
 /// Order statistics (agvrl-sim's), for the crates above.
 pub use api::{BoxSpace, Control, Env, EnvError, Info, SensorFrame, Step, Vehicle};
 pub use check::{CheckError, check_env};
-pub use registry::{ENV_IDS, ENVS, EnvConfig, EnvSpec, TaskKind, make, make_sim_car, make_task, make_vehicle};
+pub use registry::{
+    ENV_IDS, ENVS, EnvConfig, EnvSpec, TaskKind, TrackSetting, make, make_sim_car, make_task, make_vehicle,
+};
 pub use sim_vehicle::{Randomisation, SimCar, SimVehicle, SpawnMode};
 pub use task::ActionMapping;
 pub use task_env::TaskEnv;

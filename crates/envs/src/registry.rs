@@ -10,7 +10,7 @@ use crate::task::{
 };
 use crate::task_env::TaskEnv;
 use crate::wrappers::{NoiseConfig, Noisy, TimeLimit};
-use agvrl_sim::{SceneKind, SceneSource, SimConfig, SimSettings};
+use agvrl_sim::{MapTrack, SceneKind, SceneSource, SimConfig, SimSettings};
 use serde::{Deserialize, Serialize};
 
 /// The task an env id poses.
@@ -136,6 +136,29 @@ pub struct EnvConfig {
     /// (see `heldout`): evaluation sets it, training never does, so the two never share an
     /// episode or a layout.
     pub held_out: bool,
+    /// Race on a track from a ROS map file instead of the env's own (racing envs): the map
+    /// YAML's path, or the track loaded from it, as run configs and policy files carry it.
+    pub track: Option<TrackSetting>,
+}
+
+/// `EnvConfig::track`: a map YAML's path, or the track loaded from it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged, expecting = "a map YAML's path, or a loaded track table")]
+pub enum TrackSetting {
+    /// The map YAML (relative paths from the working directory).
+    Path(std::path::PathBuf),
+    /// The loaded track: walls and centre line.
+    Loaded(Box<MapTrack>),
+}
+
+impl TrackSetting {
+    /// The track, loading it when this is a path.
+    pub fn load(&self) -> Result<MapTrack, EnvError> {
+        match self {
+            Self::Path(p) => Ok(MapTrack::load(p)?),
+            Self::Loaded(t) => Ok((**t).clone()),
+        }
+    }
 }
 
 impl Default for EnvConfig {
@@ -155,6 +178,7 @@ impl Default for EnvConfig {
             layout_seed: None,
             new_layout_each_episode: false,
             held_out: false,
+            track: None,
         }
     }
 }
@@ -178,6 +202,15 @@ impl EnvConfig {
             randomisation: Randomisation::sim2real(),
             ..Self::default()
         }
+    }
+
+    /// Load a track given by path, so that this config carries the track itself (a policy
+    /// trained with it then drives it without the files).
+    pub fn embed_track(&mut self) -> Result<(), EnvError> {
+        if let Some(t @ TrackSetting::Path(_)) = &self.track {
+            self.track = Some(TrackSetting::Loaded(Box::new(t.load()?)));
+        }
+        Ok(())
     }
 
     /// A named preset: `default`, `paper` or `sim2real`.
@@ -217,9 +250,20 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn crate::Vehicle>
 pub fn make_sim_car(id: &str, cfg: &EnvConfig) -> Result<SimCar, EnvError> {
     let spec = spec(id).filter(|s| s.scene.is_some()).ok_or_else(|| unknown(id))?;
     let scene = spec.scene.unwrap_or_default();
-    let source = match cfg.layout_seed {
-        None => SceneSource::Builtin(scene.into()),
-        Some(seed) => {
+    if cfg.track.is_some() && spec.task != TaskKind::Racing {
+        return Err(EnvError::Config(format!(
+            "track is a racing setting; {id} is not a racing env"
+        )));
+    }
+    let source = match (&cfg.track, cfg.layout_seed) {
+        (Some(_), Some(_)) => {
+            return Err(EnvError::Config(
+                "a map-file track has no procedural layouts: leave layout_seed unset".into(),
+            ));
+        }
+        (Some(t), None) => SceneSource::Map(Box::new(t.load()?)),
+        (None, None) => SceneSource::Builtin(scene.into()),
+        (None, Some(seed)) => {
             let (kind, half_m) = spec.procedural.unwrap_or((SceneKind::Track, 0.0));
             SceneSource::Procedural {
                 kind,

@@ -98,7 +98,7 @@ pub struct SimVehicle {
 /// Free cells, track and subjects of a built world.
 fn map_of(sim: &Sim) -> MapInfo {
     let half = sim.scene().half_extent_m();
-    let track = sim.scene().file.track.as_ref().map(|t| crate::api::OvalTrack {
+    let oval = sim.scene().file.track.as_ref().map(|t| crate::api::OvalTrack {
         straight_m: t.straight_m,
         inner_radius_m: t.inner_radius_m,
         outer_radius_m: t.outer_radius_m,
@@ -111,7 +111,7 @@ fn map_of(sim: &Sim) -> MapInfo {
                 -half[0] + (i as f32 + 0.5) * CELL_M,
                 -half[1] + (j as f32 + 0.5) * CELL_M,
             );
-            let on_track = track
+            let on_track = oval
                 .map(|t| t.lateral_offset_m(x, y).abs() < 0.5 * (t.outer_radius_m - t.inner_radius_m))
                 .unwrap_or(true);
             if on_track && sim.free_at(x, y, 0.5 * CELL_M) {
@@ -126,6 +126,11 @@ fn map_of(sim: &Sim) -> MapInfo {
         .filter(|o| o.class == "person")
         .map(|o| o.id)
         .collect();
+    let track = match (oval, &sim.scene().centreline) {
+        (Some(t), _) => Some(crate::api::Track::Oval(t)),
+        (None, Some(c)) => Some(crate::api::Track::Path(crate::api::PathTrack::new(c.clone()))),
+        (None, None) => None,
+    };
     MapInfo {
         half_extent_m: half,
         track,
@@ -188,7 +193,7 @@ impl SimVehicle {
     }
 
     fn random_pose(&mut self) -> PlanarPose {
-        if let Some(t) = self.map.track {
+        if let Some(t) = &self.map.track {
             let s = self.rng.random_range(0.0..t.lap_length_m());
             let ([x, y], [dx, dy]) = t.centreline_at(s);
             let lateral = self.rng.random_range(-0.2..0.2f32);

@@ -376,7 +376,9 @@ mod episodes {
     fn the_racing_map_carries_the_scene_s_oval() {
         let car = agvrl_envs::make_sim_car("racing-oval", &EnvConfig::default()).unwrap();
         let spec = car.sim().scene().file.track.clone().unwrap();
-        let t = car.map().unwrap().track.unwrap();
+        let Some(agvrl_envs::api::Track::Oval(t)) = car.map().unwrap().track.clone() else {
+            panic!("the oval's map carries the oval");
+        };
         assert_eq!(
             (t.straight_m, t.inner_radius_m, t.outer_radius_m),
             (spec.straight_m, spec.inner_radius_m, spec.outer_radius_m)
@@ -386,7 +388,7 @@ mod episodes {
 
     /// Pure pursuit along the oval's centre line, from the GPS: a known-good driver.
     fn pursue(frame: &SensorFrame, map: &MapInfo) -> f32 {
-        let t = map.track.unwrap();
+        let t = map.track.as_ref().unwrap();
         let g = frame.gps.as_ref().unwrap();
         let (x, y, yaw) = (g.position_m[0] as f32, g.position_m[1] as f32, g.rpy_rad[2] as f32);
         let s = t.centreline_s(x, y);
@@ -426,6 +428,52 @@ mod episodes {
         assert_eq!(r.best_lap_s, Some(lap_s));
         // 53.1 m at no more than the top speed of 1.79 m/s.
         assert!(lap_s > 53.1 / 1.8 && lap_s < 120.0, "lap {lap_s} s");
+    }
+
+    /// The racing env on a map-file track (the shipped bean, centre line from its CSV): the
+    /// centre-line driver laps it without coming within 0.8 m of a wall, and progress counts
+    /// one lap of the centre line's length.
+    #[test]
+    fn racing_on_a_map_file_track_counts_a_lap_of_its_centre_line() {
+        let yaml = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tracks/bean.yaml");
+        let cfg = EnvConfig {
+            track: Some(agvrl_envs::TrackSetting::Path(yaml)),
+            spawn: SpawnMode::Fixed,
+            ..EnvConfig::default()
+        };
+        let mut env = make_sim_env_for_test("racing-oval", &cfg);
+        let lap_m = env.vehicle().map().unwrap().track.as_ref().unwrap().lap_length_m();
+        assert!((lap_m - 65.9).abs() < 0.5, "the bean's centre line is 65.9 m: {lap_m}");
+        env.reset(Some(0)).unwrap();
+        let mut info = None;
+        for _ in 0..2500 {
+            let steer = pursue(env.last_frame().unwrap(), env.vehicle().map().unwrap());
+            let st = env.step(&[0.2, steer]).unwrap();
+            assert!(!st.terminated, "{:?}", st.info.termination);
+            info = st.info.racing.clone();
+            if info.as_ref().unwrap().laps >= 1 {
+                break;
+            }
+        }
+        let r = info.unwrap();
+        assert_eq!(r.laps, 1, "{r:?}");
+        let lap_s = r.last_lap_s.unwrap();
+        assert!(lap_s > lap_m as f64 / 1.8 && lap_s < 150.0, "lap {lap_s} s");
+    }
+
+    fn make_sim_env_for_test(id: &str, cfg: &EnvConfig) -> TaskEnv<SimVehicle, Racing> {
+        let mut sim_cfg = cfg.clone();
+        sim_cfg.embed_track().unwrap();
+        let Some(agvrl_envs::TrackSetting::Loaded(t)) = sim_cfg.track else {
+            panic!("embedded");
+        };
+        assert_eq!(id, "racing-oval");
+        let sim = agvrl_sim::SimConfig {
+            scene: agvrl_sim::SceneSource::Map(t),
+            ..Default::default()
+        };
+        let vehicle = SimVehicle::new(sim, cfg.spawn, Randomisation::default()).unwrap();
+        TaskEnv::new(vehicle, Racing::new(RacingConfig::default(), 0.36))
     }
 }
 

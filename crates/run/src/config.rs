@@ -71,13 +71,18 @@ impl Default for RunConfig {
 
 impl RunConfig {
     /// Parse a run TOML; `origin` names it in errors.
+    /// A track given by path (`env_config.track`) is loaded here, so that every config read
+    /// carries the track itself: the run directory's and the policy file's copies need no files.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
-        let cfg: RunConfig =
+        let mut cfg: RunConfig =
             toml::from_str(text).map_err(|e| RunError::Config(format!("{origin}: {}", e.message().trim())))?;
         cfg.validate().map_err(|e| match e {
             RunError::Config(m) => RunError::Config(format!("{origin}: {m}")),
             other => other,
         })?;
+        cfg.env_config
+            .embed_track()
+            .map_err(|e| RunError::Config(format!("{origin}: env_config.track: {e}")))?;
         Ok(cfg)
     }
 
@@ -163,6 +168,11 @@ impl RunConfig {
                 "advisory_filter_envs: env {i} does not exist (n_envs = {})",
                 self.n_envs
             )));
+        }
+        if self.env_config.track.is_some() && self.procedural_layouts > 0 {
+            return Err(RunError::Config(
+                "procedural_layouts draws layouts of the env's own map; env_config.track is a fixed map".into(),
+            ));
         }
         if !self.advisory_filter_envs.is_empty() && !self.env_config.safety_filter.enabled {
             return Err(RunError::Config(

@@ -23,3 +23,8 @@ pub use error_line::error_line;
 pub use report::{EvalReport, FilterReport, RacingReport, RunReport, SearchReport, SubjectsReport};
 pub use seeds::Seeds;
 pub use settings::{PolicySettings, SettingsSource};
+
+/// `--track MAP.yaml` as the `--set` it stands for (train, eval, view, agvrl-drive).
+pub fn track_set(path: &std::path::Path) -> String {
+    format!("env_config.track={}", toml::Value::String(path.display().to_string()))
+}

@@ -26,6 +26,6 @@ pub mod vehicle;
 pub mod world;
 
 pub use error::{InvalidSetting, SimError};
-pub use scene::{SCENE_IDS, Scene, SceneKind};
+pub use scene::{MapTrack, SCENE_IDS, Scene, SceneKind};
 pub use sim::{PlanarPose, SceneSource, Sim, SimConfig, SimSettings, VehicleParams, VehicleSource};
 pub use vehicle::{Control, DriveModel, DynamicsMode};

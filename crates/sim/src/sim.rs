@@ -3,7 +3,7 @@
 use crate::SimError;
 use crate::assets::AssetSource;
 use crate::msg::{GpsReading, ImuReading, LaserScan};
-use crate::scene::{Scene, SceneKind};
+use crate::scene::{MapTrack, Scene, SceneKind};
 use crate::sensors::imu::ImuState;
 use crate::sensors::{GpsConfig, Lidar, LidarConfig, gps};
 use crate::vehicle::body::Body;
@@ -30,6 +30,8 @@ pub enum SceneSource {
         /// Inner half size of the map, metres (outdoor/urban).
         half_m: f32,
     },
+    /// A race track loaded from a map file (see [`MapTrack::load`]).
+    Map(Box<MapTrack>),
 }
 
 /// Everything that defines a simulation: the scene and the settings.
@@ -226,7 +228,11 @@ impl Sim {
                 Scene::load(&src, &name)?
             }
             SceneSource::Procedural { kind, seed, half_m } => Scene::procedural(*kind, *seed, *half_m, 2.0)?,
+            SceneSource::Map(t) => Scene::from_map(t)?,
         };
+        if set.subjects > 0 && scene.centreline.is_some() {
+            return Err(invalid("subjects are search targets; a map-file track has none".into()));
+        }
         if set.subjects > 0 {
             let file = scene.file.clone().with_subjects(set.subjects, set.subject_seed, 3.0);
             scene = Scene::build(file, &assets, "scene with subjects")?;

@@ -59,6 +59,10 @@ struct Args {
     /// (`--set env_config.safety_filter.clearance_m=0.9`).
     #[arg(long, value_name = "KEY=VALUE")]
     set: Vec<String>,
+    /// Race on the track of a ROS map file (its YAML): `--set env_config.track=PATH`; with
+    /// --serve-sim, the simulated car drives it.
+    #[arg(long, value_name = "MAP.yaml")]
+    track: Option<PathBuf>,
     /// Environment id whose task to run (default: the policy's; racing-oval for --serve-sim
     /// without a policy).
     #[arg(long)]
@@ -157,9 +161,14 @@ fn policy_and_env(a: &Args) -> Result<(Option<PolicySettings>, String, EnvConfig
             bail!("--set {s}: there is no policy whose settings it could override");
         }
         let env = a.env.clone().unwrap_or_else(|| "racing-oval".to_string());
-        return Ok((None, env, EnvConfig::default()));
+        let cfg = EnvConfig {
+            track: a.track.clone().map(agvrl_envs::TrackSetting::Path),
+            ..EnvConfig::default()
+        };
+        return Ok((None, env, cfg));
     }
-    let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &a.set)?;
+    let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
+    let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &sets)?;
     let (env, cfg) = (src.env_id(a.env.as_deref())?, src.drive_env_config());
     Ok((Some(src), env, cfg))
 }

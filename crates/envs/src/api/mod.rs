@@ -8,5 +8,5 @@ mod vehicle;
 
 pub use env::*;
 pub use space::BoxSpace;
-pub use track::OvalTrack;
+pub use track::{OvalTrack, PathTrack, Track};
 pub use vehicle::*;

@@ -1,6 +1,7 @@
-//! The oval race track's geometry as the racing task reads it: progress along the centre line
-//! and the lateral offset. Plain numbers: the simulator's scene file describes the walls, and
-//! `SimVehicle` hands the task this from it.
+//! Race track geometry as the racing task reads it: progress along the centre line and the
+//! lateral offset, for the oval (closed form) and for a map-file track (a closed polyline).
+//! Plain numbers: the simulator's scene describes the walls, and `SimVehicle` hands the task
+//! this from it.
 
 use serde::{Deserialize, Serialize};
 
@@ -78,6 +79,125 @@ impl OvalTrack {
         } else {
             let cy = if y > 0.0 { h } else { -h };
             (x * x + (y - cy).powi(2)).sqrt() - r
+        }
+    }
+}
+
+/// A closed centre line as a polyline (a map-file track), in racing order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PathTrack {
+    points: Vec<[f32; 2]>,
+    /// Arc length at each point; the last entry is the lap.
+    cum_s: Vec<f32>,
+}
+
+impl PathTrack {
+    /// The closed polyline through `points` (at least 3, not repeating the first at the end).
+    pub fn new(points: Vec<[f32; 2]>) -> Self {
+        let n = points.len();
+        let mut cum_s = Vec::with_capacity(n + 1);
+        let mut s = 0.0f32;
+        cum_s.push(0.0);
+        for i in 0..n {
+            let (a, b) = (points[i], points[(i + 1) % n]);
+            s += ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+            cum_s.push(s);
+        }
+        Self { points, cum_s }
+    }
+
+    /// Length of the centre line, metres.
+    pub fn lap_length_m(&self) -> f32 {
+        self.cum_s[self.points.len()]
+    }
+
+    /// The segment nearest to (x, y): (index, fraction along it, signed distance; positive on
+    /// the right of the racing direction).
+    fn nearest(&self, x: f32, y: f32) -> (usize, f32, f32) {
+        let n = self.points.len();
+        let mut best = (0, 0.0, f32::INFINITY, 0.0f32);
+        for i in 0..n {
+            let (a, b) = (self.points[i], self.points[(i + 1) % n]);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let len2 = dx * dx + dy * dy;
+            let t = if len2 > 0.0 {
+                (((x - a[0]) * dx + (y - a[1]) * dy) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let (px, py) = (a[0] + t * dx - x, a[1] + t * dy - y);
+            let d2 = px * px + py * py;
+            if d2 < best.2 {
+                // Cross product of the direction and the offset: negative on the left.
+                let side = dx * (y - a[1]) - dy * (x - a[0]);
+                best = (i, t, d2, side);
+            }
+        }
+        let d = best.2.sqrt();
+        (best.0, best.1, if best.3 > 0.0 { -d } else { d })
+    }
+
+    /// Arc length (metres, in [0, lap)) of the centre-line point nearest to (x, y), from the
+    /// first point.
+    pub fn centreline_s(&self, x: f32, y: f32) -> f32 {
+        let (i, t, _) = self.nearest(x, y);
+        let s = self.cum_s[i] + t * (self.cum_s[i + 1] - self.cum_s[i]);
+        s.rem_euclid(self.lap_length_m())
+    }
+
+    /// The centre-line point at arc length `s` and the racing direction there (unit x, y).
+    pub fn centreline_at(&self, s: f32) -> ([f32; 2], [f32; 2]) {
+        let n = self.points.len();
+        let s = s.rem_euclid(self.lap_length_m());
+        let i = self.cum_s[1..].partition_point(|&c| c <= s).min(n - 1);
+        let (a, b) = (self.points[i], self.points[(i + 1) % n]);
+        let len = self.cum_s[i + 1] - self.cum_s[i];
+        let t = if len > 0.0 { (s - self.cum_s[i]) / len } else { 0.0 };
+        let d = if len > 0.0 {
+            [(b[0] - a[0]) / len, (b[1] - a[1]) / len]
+        } else {
+            [1.0, 0.0]
+        };
+        ([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])], d)
+    }
+
+    /// Distance from the centre line, metres, positive on the right of the racing direction.
+    pub fn lateral_offset_m(&self, x: f32, y: f32) -> f32 {
+        self.nearest(x, y).2
+    }
+}
+
+/// A race track: the oval, or a centre line from a map file.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Track {
+    /// The oval (closed form).
+    Oval(OvalTrack),
+    /// A map-file track's centre line.
+    Path(PathTrack),
+}
+
+impl Track {
+    /// Length of the centre line, metres.
+    pub fn lap_length_m(&self) -> f32 {
+        match self {
+            Self::Oval(t) => t.lap_length_m(),
+            Self::Path(t) => t.lap_length_m(),
+        }
+    }
+
+    /// Arc length of the centre-line point nearest to (x, y), metres in [0, lap).
+    pub fn centreline_s(&self, x: f32, y: f32) -> f32 {
+        match self {
+            Self::Oval(t) => t.centreline_s(x, y),
+            Self::Path(t) => t.centreline_s(x, y),
+        }
+    }
+
+    /// The centre-line point at arc length `s` and the racing direction there.
+    pub fn centreline_at(&self, s: f32) -> ([f32; 2], [f32; 2]) {
+        match self {
+            Self::Oval(t) => t.centreline_at(s),
+            Self::Path(t) => t.centreline_at(s),
         }
     }
 }

@@ -1,5 +1,5 @@
 use super::env::EnvError;
-use super::track::OvalTrack;
+use super::track::Track;
 pub use agvrl_sim::msg::Control;
 use agvrl_sim::msg::{CameraFrame, GpsReading, ImuReading, LaserScan};
 
@@ -60,7 +60,7 @@ pub struct MapInfo {
     /// Half extents of the drivable area around the origin, metres (leaving it ends episodes).
     pub half_extent_m: [f32; 2],
     /// Race track geometry, when the map is a track.
-    pub track: Option<OvalTrack>,
+    pub track: Option<Track>,
     /// Centres of the free cells of a `cell_m` grid (coverage), metres.
     pub free_cells: Vec<[f32; 2]>,
     /// Cell size of `free_cells`, metres.

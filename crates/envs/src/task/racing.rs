@@ -87,7 +87,7 @@ impl Task for Racing {
         self.info = RacingInfo::default();
         self.progress_m = 0.0;
         self.lap_start_s = frame.stamp_s;
-        self.last_s = match (map.and_then(|m| m.track), &frame.gps) {
+        self.last_s = match (map.and_then(|m| m.track.as_ref()), &frame.gps) {
             (Some(t), Some(g)) => Some(t.centreline_s(g.position_m[0] as f32, g.position_m[1] as f32)),
             _ => None,
         };
@@ -103,7 +103,7 @@ impl Task for Racing {
         let mut terms = reward::racing(d, c.throttle, c.steering_rad);
         let termination = terminate(&mut terms, frame, map, d, self.cfg.terminate_below_m, reward::PENALTY);
         let mut racing = None;
-        if let (Some(t), Some(g)) = (map.and_then(|m| m.track), &frame.gps) {
+        if let (Some(t), Some(g)) = (map.and_then(|m| m.track.as_ref()), &frame.gps) {
             let lap = t.lap_length_m() as f64;
             let s = t.centreline_s(g.position_m[0] as f32, g.position_m[1] as f32);
             if let Some(prev) = self.last_s {

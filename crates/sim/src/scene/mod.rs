@@ -3,9 +3,11 @@
 //! generator per scene kind (`procedural.rs`).
 
 mod file;
+mod map_track;
 mod procedural;
 
 pub use file::{BoundarySpec, Decal, GroundSpec, Placement, SceneFile, SceneKind, SpawnSpec, TrackSpec};
+pub use map_track::{MapTrack, SIMPLIFY_PX};
 
 use crate::SimError;
 use crate::assets::AssetSource;
@@ -34,6 +36,9 @@ pub struct Scene {
     pub file: SceneFile,
     /// Every static object (walls included), id = index.
     pub objects: Vec<SceneObject>,
+    /// The closed centre line of a map-file track in racing order, metres (the oval's is in
+    /// `file.track`).
+    pub centreline: Option<Vec<[f32; 2]>>,
 }
 
 /// Ids of the built-in scenes.
@@ -190,7 +195,66 @@ impl Scene {
         for (i, o) in objects.iter_mut().enumerate() {
             o.id = i as u32;
         }
-        Ok(Self { file, objects })
+        Ok(Self {
+            file,
+            objects,
+            centreline: None,
+        })
+    }
+
+    /// A map-file track: its walls on a ground that holds them all, the vehicle spawning on the
+    /// centre line's first point, heading to the next.
+    pub fn from_map(t: &MapTrack) -> Result<Self, SimError> {
+        t.validate().map_err(|msg| SimError::Invalid {
+            context: format!("track {}", t.name),
+            msg,
+        })?;
+        let mut reach = 0.0f32;
+        let shapes = t
+            .walls
+            .iter()
+            .map(|&[x, y, hx, hy, yaw]| {
+                reach = reach.max(x.abs() + hx.max(hy) * std::f32::consts::SQRT_2);
+                reach = reach.max(y.abs() + hx.max(hy) * std::f32::consts::SQRT_2);
+                let hz = t.wall_height_m / 2.0;
+                ShapeSpec {
+                    shape: SharedShape::cuboid(hx, hy, hz),
+                    pose: Pose::from_parts(Vector::new(x, y, hz), Rotation::from_rotation_z(yaw)),
+                    link: "wall".into(),
+                    color: [0.8, 0.1, 0.1],
+                }
+            })
+            .collect();
+        let c = &t.centreline;
+        let size = 2.0 * (reach + 2.0);
+        let file = SceneFile {
+            name: t.name.clone(),
+            kind: SceneKind::Track,
+            ground: GroundSpec {
+                size_m: [size, size],
+                friction: 1.0,
+                color: [0.5, 0.5, 0.5],
+            },
+            boundary: None,
+            spawn: SpawnSpec {
+                x_m: c[0][0],
+                y_m: c[0][1],
+                yaw_deg: (c[1][1] - c[0][1]).atan2(c[1][0] - c[0][0]).to_degrees(),
+            },
+            track: None,
+            decals: Vec::new(),
+            objects: Vec::new(),
+        };
+        Ok(Self {
+            file,
+            objects: vec![SceneObject {
+                id: 0,
+                model: "track".into(),
+                class: "wall".into(),
+                shapes,
+            }],
+            centreline: Some(t.centreline.clone()),
+        })
     }
 
     /// Half extents (x, y) of the drivable map, metres: inside the boundary walls, or the ground.
