@@ -595,7 +595,8 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             (_, Some(planner::Knowledge::Frontier)) => "frontier explorer",
             _ => algo.as_str(),
         };
-        if !watch.plot(p, &format!("{env_id} {driver}: deterministic evaluation"))? {
+        let on = env_cfg.track_suffix();
+        if !watch.plot(p, &format!("{env_id}{on} {driver}: deterministic evaluation"))? {
             bail!("{env_id} has no map to draw");
         }
         println!("plot={}", p.display());

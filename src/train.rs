@@ -353,7 +353,13 @@ fn run_learner(
     let csv = metrics_csv(previous_csv, &rows);
     write_atomic(&file(files::METRICS), csv.as_bytes())?;
     let summary = evaluate_run(cfg, &policy_path, file)?;
-    let title = format!("{} {} seed {}", cfg.env, cfg.algo, cfg.seed);
+    let title = format!(
+        "{}{} {} seed {}",
+        cfg.env,
+        cfg.env_config.track_suffix(),
+        cfg.algo,
+        cfg.seed
+    );
     plots::learning_curve(&file(files::LEARNING_CURVE), &plots::curve_of_csv(&csv), &title)?;
     let report = RunReport {
         train_s,
@@ -484,7 +490,7 @@ fn evaluate_run(cfg: &RunConfig, policy_path: &std::path::Path, file: &dyn Fn(&s
     if viz::ENABLED && agvrl_envs::registry::scene_of(&cfg.env).is_some() {
         watch.rec = Some(Recorder::new(
             Sink::File(file(files::RECORDING)),
-            &format!("{} {} eval", cfg.env, cfg.algo),
+            &format!("{}{} {} eval", cfg.env, cfg.env_config.track_suffix(), cfg.algo),
             cfg.eval_env_config().sim.camera.as_ref(),
         )?);
     }
@@ -499,7 +505,13 @@ fn evaluate_run(cfg: &RunConfig, policy_path: &std::path::Path, file: &dyn Fn(&s
     if let Some(r) = watch.rec.take() {
         r.finish()?;
     }
-    let title = format!("{} {} seed {}", cfg.env, cfg.algo, cfg.seed);
+    let title = format!(
+        "{}{} {} seed {}",
+        cfg.env,
+        cfg.env_config.track_suffix(),
+        cfg.algo,
+        cfg.seed
+    );
     watch.plot(&file(files::TRAJECTORY), &format!("{title}: deterministic evaluation"))?;
     Ok(summary)
 }

@@ -1240,13 +1240,14 @@ fn fuzz_regressions_replay_without_panic() {
     use agvrl_deploy::bag::fuzz;
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
     type Body = fn(&[u8]);
-    let targets: [(&str, Body); 6] = [
+    let targets: [(&str, Body); 7] = [
         ("bag_reader", fuzz::read_and_decode),
         ("ros2_messages", fuzz::ros2_message),
         ("policy_file", agvrl_run::fuzz::policy_file),
         ("checkpoint", agvrl_rl::fuzz::checkpoint),
         ("run_toml", agvrl_run::fuzz::run_toml),
         ("asset_files", agvrl_sim::fuzz::asset_file),
+        ("map_file", agvrl_sim::fuzz::map_file),
     ];
     let mut replayed = 0;
     for (target, body) in targets {
@@ -1262,7 +1263,7 @@ fn fuzz_regressions_replay_without_panic() {
             }
         }
     }
-    assert!(replayed >= 33, "the seeds are missing: {replayed} inputs");
+    assert!(replayed >= 36, "the seeds are missing: {replayed} inputs");
     // Seeds the decoders refuse would leave the fuzzer at the first check.
     for entry in std::fs::read_dir(root.join("seeds/policy_file")).unwrap() {
         let path = entry.unwrap().path();

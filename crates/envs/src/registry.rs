@@ -155,7 +155,8 @@ impl TrackSetting {
     /// The track, loading it when this is a path.
     pub fn load(&self) -> Result<MapTrack, EnvError> {
         match self {
-            Self::Path(p) => Ok(MapTrack::load(p)?),
+            // A file that will not load is a bad setting, as a bad value would be.
+            Self::Path(p) => MapTrack::load(p).map_err(|e| EnvError::Config(format!("track: {e}"))),
             Self::Loaded(t) => Ok((**t).clone()),
         }
     }
@@ -211,6 +212,15 @@ impl EnvConfig {
             self.track = Some(TrackSetting::Loaded(Box::new(t.load()?)));
         }
         Ok(())
+    }
+
+    /// ` on NAME` for a map-file track (titles of plots and recordings), else nothing.
+    pub fn track_suffix(&self) -> String {
+        match &self.track {
+            Some(TrackSetting::Loaded(t)) => format!(" on {}", t.name),
+            Some(TrackSetting::Path(p)) => format!(" on {}", p.display()),
+            None => String::new(),
+        }
     }
 
     /// A named preset: `default`, `paper` or `sim2real`.

@@ -80,9 +80,12 @@ impl RunConfig {
             RunError::Config(m) => RunError::Config(format!("{origin}: {m}")),
             other => other,
         })?;
-        cfg.env_config
-            .embed_track()
-            .map_err(|e| RunError::Config(format!("{origin}: env_config.track: {e}")))?;
+        cfg.env_config.embed_track().map_err(|e| {
+            RunError::Config(match e {
+                agvrl_envs::EnvError::Config(m) => format!("{origin}: env_config.{m}"),
+                other => format!("{origin}: env_config.track: {other}"),
+            })
+        })?;
         Ok(cfg)
     }
 

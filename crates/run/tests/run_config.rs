@@ -22,3 +22,48 @@ fn a_run_config_round_trips_and_its_errors_name_the_file() {
         .to_string();
     assert!(e.starts_with("y.toml: env_config.held_out"), "{e}");
 }
+
+/// `env_config.track` given as a map YAML's path is loaded when the config is read: the TOML
+/// it writes carries the walls and centre line, reads back to the same track without the
+/// files, and makes the same env. A path to no file, or a track with procedural layouts or on
+/// a search env, is refused with the key named.
+#[test]
+fn a_track_path_is_loaded_into_the_config_and_travels_without_the_files() {
+    let dir = tempfile::Builder::new().prefix("agvrl-run-track-").tempdir().unwrap();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tracks");
+    for f in ["bean.yaml", "bean.pgm", "bean.csv"] {
+        std::fs::copy(root.join(f), dir.path().join(f)).unwrap();
+    }
+    let yaml = dir.path().join("bean.yaml");
+    let set = agvrl_run::track_set(&yaml);
+    let c = RunConfig::from_toml_with("env = \"racing-oval\"\n", "x.toml", std::slice::from_ref(&set)).unwrap();
+    let Some(agvrl_envs::TrackSetting::Loaded(t)) = &c.env_config.track else {
+        panic!("loaded: {:?}", c.env_config.track);
+    };
+    assert_eq!((t.name.as_str(), t.centreline_source.as_str()), ("bean", "csv"));
+    let text = c.to_toml().unwrap();
+    drop(dir);
+    assert!(!yaml.exists());
+    let back = RunConfig::from_toml(&text, "back").unwrap();
+    assert_eq!(back, c);
+    let mut env = agvrl_envs::make("racing-oval", &back.env_config).unwrap();
+    env.reset(Some(3)).unwrap();
+    let e = RunConfig::from_toml_with("env = \"racing-oval\"\n", "x.toml", std::slice::from_ref(&set))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("env_config.track") && e.contains("bean.yaml"), "{e}");
+    let e = RunConfig::from_toml(
+        &text.replace("procedural_layouts = 0", "procedural_layouts = 2"),
+        "z.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.starts_with("z.toml: procedural_layouts"), "{e}");
+    let search = text.replace("env = \"racing-oval\"", "env = \"search-urban-20\"");
+    let cfg = RunConfig::from_toml(&search, "s.toml").unwrap();
+    let e = agvrl_envs::make("search-urban-20", &cfg.env_config)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("track is a racing setting"), "{e}");
+}

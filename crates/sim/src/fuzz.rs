@@ -69,6 +69,11 @@ pub fn asset_file(data: &[u8]) {
             return;
         }
     }
+    drive(cfg);
+}
+
+/// Build a simulator from `cfg` (when it builds), drive it for a few control periods, and scan.
+fn drive(cfg: SimConfig) {
     let Ok(mut sim) = Sim::new(cfg) else {
         return;
     };
@@ -89,4 +94,42 @@ fn vehicle(path: &std::path::Path) -> SimSettings {
         vehicle: path.display().to_string(),
         ..SimSettings::default()
     }
+}
+
+/// `map_file`: a map-file track as `--track` loads one. The input is
+/// `[yaml length: u16 LE][YAML][CSV length: u16 LE][CSV][image]`, written as `map.yaml`,
+/// `map.csv` (when its length is not 0) and both `map.pgm` and `map.png`. A track that loads is
+/// built into a simulator, driven for a few control periods, and scanned.
+pub fn map_file(data: &[u8]) {
+    fn take<'a>(data: &mut &'a [u8]) -> Option<&'a [u8]> {
+        let (len, rest) = data.split_first_chunk::<2>()?;
+        let n = u16::from_le_bytes(*len) as usize;
+        let (part, rest) = (rest.get(..n)?, rest.get(n..)?);
+        *data = rest;
+        Some(part)
+    }
+    let mut rest = data;
+    let (Some(yaml), Some(csv)) = (take(&mut rest), take(&mut rest)) else {
+        return;
+    };
+    let dir = assets_dir().join("map");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    std::fs::write(dir.join("map.yaml"), yaml).expect("temp dir");
+    let csv_path = dir.join("map.csv");
+    if csv.is_empty() {
+        let _ = std::fs::remove_file(&csv_path);
+    } else {
+        std::fs::write(&csv_path, csv).expect("temp dir");
+    }
+    for name in ["map.pgm", "map.png"] {
+        std::fs::write(dir.join(name), rest).expect("temp dir");
+    }
+    let Ok(track) = crate::MapTrack::load(&dir.join("map.yaml")) else {
+        return;
+    };
+    let cfg = SimConfig {
+        scene: SceneSource::Map(Box::new(track)),
+        ..SimConfig::default()
+    };
+    drive(cfg);
 }

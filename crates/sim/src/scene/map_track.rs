@@ -20,8 +20,10 @@ const TRACE_REACH_M: f64 = 10.0;
 /// How far a wall face may stray from the middles of the pixel edges it stands for, pixels
 /// (a map's own accuracy): a curve of 3 m radius at 5 cm a pixel then takes a face every metre.
 pub const SIMPLIFY_PX: f64 = 1.0;
-/// The largest image accepted, pixels a side.
-const MAX_SIDE_PX: u32 = 16_384;
+/// The largest image accepted, pixels a side and in all (F1TENTH's maps are a few thousand a
+/// side; the clearance field takes 8 bytes a pixel).
+const MAX_SIDE_PX: u32 = 8_192;
+const MAX_PIXELS: u64 = 16 << 20;
 
 /// The map_server YAML. Unknown keys are an error: a misspelt threshold would otherwise leave
 /// its default in force without a word.
@@ -523,17 +525,25 @@ fn decode_image(bytes: &[u8], path: &Path) -> Result<(usize, usize, Vec<u8>), Si
         context: path.display().to_string(),
         msg,
     };
-    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
-        .with_guessed_format()
-        .map_err(|e| bad(e.to_string()))?;
-    let mut limits = image::Limits::default();
-    limits.max_image_width = Some(MAX_SIDE_PX);
-    limits.max_image_height = Some(MAX_SIDE_PX);
-    limits.max_alloc = Some(1 << 30);
-    reader.limits(limits);
-    if reader.format().is_none() {
-        return Err(bad("not a PGM or PNG image".into()));
+    let open = || -> Result<image::ImageReader<std::io::Cursor<&[u8]>>, SimError> {
+        let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| bad(e.to_string()))?;
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_SIDE_PX);
+        limits.max_image_height = Some(MAX_SIDE_PX);
+        limits.max_alloc = Some(256 << 20);
+        reader.limits(limits);
+        if reader.format().is_none() {
+            return Err(bad("not a PGM or PNG image".into()));
+        }
+        Ok(reader)
+    };
+    let (w, h) = open()?.into_dimensions().map_err(|e| bad(format!("bad image: {e}")))?;
+    if w as u64 * h as u64 > MAX_PIXELS {
+        return Err(bad(format!("the image is {w} x {h} pixels: over {MAX_PIXELS} in all")));
     }
+    let reader = open()?;
     let img = reader.decode().map_err(|e| bad(format!("bad image: {e}")))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     if w < 2 || h < 2 {

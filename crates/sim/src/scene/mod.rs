@@ -209,13 +209,14 @@ impl Scene {
             context: format!("track {}", t.name),
             msg,
         })?;
-        let mut reach = 0.0f32;
+        // The ground is centred at the origin: it reaches the farthest wall each way, and 2 m on.
+        let mut reach = [0.0f32; 2];
         let shapes = t
             .walls
             .iter()
             .map(|&[x, y, hx, hy, yaw]| {
-                reach = reach.max(x.abs() + hx.max(hy) * std::f32::consts::SQRT_2);
-                reach = reach.max(y.abs() + hx.max(hy) * std::f32::consts::SQRT_2);
+                let r = hx.hypot(hy);
+                reach = [reach[0].max(x.abs() + r), reach[1].max(y.abs() + r)];
                 let hz = t.wall_height_m / 2.0;
                 ShapeSpec {
                     shape: SharedShape::cuboid(hx, hy, hz),
@@ -226,12 +227,11 @@ impl Scene {
             })
             .collect();
         let c = &t.centreline;
-        let size = 2.0 * (reach + 2.0);
         let file = SceneFile {
             name: t.name.clone(),
             kind: SceneKind::Track,
             ground: GroundSpec {
-                size_m: [size, size],
+                size_m: [2.0 * (reach[0] + 2.0), 2.0 * (reach[1] + 2.0)],
                 friction: 1.0,
                 color: [0.5, 0.5, 0.5],
             },
