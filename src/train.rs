@@ -353,13 +353,7 @@ fn run_learner(
     let csv = metrics_csv(previous_csv, &rows);
     write_atomic(&file(files::METRICS), csv.as_bytes())?;
     let summary = evaluate_run(cfg, &policy_path, file)?;
-    let title = format!(
-        "{}{} {} seed {}",
-        cfg.env,
-        cfg.env_config.track_suffix(),
-        cfg.algo,
-        cfg.seed
-    );
+    let title = run_title(cfg);
     plots::learning_curve(&file(files::LEARNING_CURVE), &plots::curve_of_csv(&csv), &title)?;
     let report = RunReport {
         train_s,
@@ -505,15 +499,20 @@ fn evaluate_run(cfg: &RunConfig, policy_path: &std::path::Path, file: &dyn Fn(&s
     if let Some(r) = watch.rec.take() {
         r.finish()?;
     }
-    let title = format!(
+    let title = run_title(cfg);
+    watch.plot(&file(files::TRAJECTORY), &format!("{title}: deterministic evaluation"))?;
+    Ok(summary)
+}
+
+/// `ENV[ on TRACK] ALGO seed S`: the title of a run's plots.
+fn run_title(cfg: &RunConfig) -> String {
+    format!(
         "{}{} {} seed {}",
         cfg.env,
         cfg.env_config.track_suffix(),
         cfg.algo,
         cfg.seed
-    );
-    watch.plot(&file(files::TRAJECTORY), &format!("{title}: deterministic evaluation"))?;
-    Ok(summary)
+    )
 }
 
 #[cfg(test)]

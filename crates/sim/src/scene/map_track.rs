@@ -664,21 +664,12 @@ impl MapTrack {
                 (pts, "traced")
             }
         };
-        let lap_m: f64 = (0..centreline.len())
-            .map(|i| {
-                let (a, b) = (centreline[i], centreline[(i + 1) % centreline.len()]);
-                ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt()
-            })
-            .sum();
-        if lap_m < 2.0 {
-            return Err(invalid(format!("the centre line is {lap_m:.2} m long: no track")));
-        }
         let walls = grid.wall_boxes();
         if walls.is_empty() {
             return Err(invalid("the image has no free pixels: no track".into()));
         }
         let name = yaml.file_stem().and_then(|s| s.to_str()).unwrap_or("map").to_string();
-        Ok(Self {
+        let track = Self {
             name,
             crc32: format!("{:08x}", crc.finalize()),
             resolution_m: m.resolution as f32,
@@ -686,7 +677,12 @@ impl MapTrack {
             walls,
             centreline: centreline.iter().map(|p| [p[0] as f32, p[1] as f32]).collect(),
             centreline_source: source.into(),
-        })
+        };
+        let lap_m = track.lap_length_m();
+        if lap_m < 2.0 {
+            return Err(invalid(format!("the centre line is {lap_m:.2} m long: no track")));
+        }
+        Ok(track)
     }
 
     /// Length of the centre line, metres.
