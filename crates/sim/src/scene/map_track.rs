@@ -525,29 +525,25 @@ fn decode_image(bytes: &[u8], path: &Path) -> Result<(usize, usize, Vec<u8>), Si
         context: path.display().to_string(),
         msg,
     };
-    let open = || -> Result<image::ImageReader<std::io::Cursor<&[u8]>>, SimError> {
-        let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
-            .with_guessed_format()
-            .map_err(|e| bad(e.to_string()))?;
-        let mut limits = image::Limits::default();
-        limits.max_image_width = Some(MAX_SIDE_PX);
-        limits.max_image_height = Some(MAX_SIDE_PX);
-        limits.max_alloc = Some(256 << 20);
-        reader.limits(limits);
-        if reader.format().is_none() {
-            return Err(bad("not a PGM or PNG image".into()));
-        }
-        Ok(reader)
-    };
-    let (w, h) = open()?.into_dimensions().map_err(|e| bad(format!("bad image: {e}")))?;
-    if w as u64 * h as u64 > MAX_PIXELS {
-        return Err(bad(format!("the image is {w} x {h} pixels: over {MAX_PIXELS} in all")));
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| bad(e.to_string()))?;
+    if reader.format().is_none() {
+        return Err(bad("not a PGM or PNG image".into()));
     }
-    let reader = open()?;
+    // The decoder refuses what its limits forbid before it allocates the pixels.
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_SIDE_PX);
+    limits.max_image_height = Some(MAX_SIDE_PX);
+    limits.max_alloc = Some(256 << 20);
+    reader.limits(limits);
     let img = reader.decode().map_err(|e| bad(format!("bad image: {e}")))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     if w < 2 || h < 2 {
         return Err(bad(format!("the image is {w} x {h} pixels: too small for a track")));
+    }
+    if (w * h) as u64 > MAX_PIXELS {
+        return Err(bad(format!("the image is {w} x {h} pixels: over {MAX_PIXELS} in all")));
     }
     let rgb = img.to_rgb8();
     let grey = rgb
