@@ -68,9 +68,24 @@ pub struct LaserScan {
     pub object_id: Vec<Option<u32>>,
     /// World-frame origin of the rays, metres.
     pub origin_w: [f32; 3],
+    /// The other car each ray hit (`None`: the scene or nothing); empty when the world holds
+    /// one car.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub car: Vec<Option<u32>>,
 }
 
 impl LaserScan {
+    /// Smallest range among the rays that hit no other car, metres: the clearance to the
+    /// static scene (`range_max` for an empty scan).
+    pub fn min_static_range(&self) -> f32 {
+        self.ranges
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| self.car.get(*i).is_none_or(|c| c.is_none()))
+            .map(|(_, r)| *r)
+            .fold(self.range_max, f32::min)
+    }
+
     /// Smallest range in the scan, metres (`range_max` for an empty scan).
     pub fn min_range(&self) -> f32 {
         self.ranges.iter().copied().fold(self.range_max, f32::min)

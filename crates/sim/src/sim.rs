@@ -8,7 +8,8 @@ use crate::sensors::imu::ImuState;
 use crate::sensors::{GpsConfig, Lidar, LidarConfig, gps};
 use crate::vehicle::body::Body;
 use crate::vehicle::{BodyParams, Control, DriveModel, DynamicsMode, VehicleModel, ackermann_split};
-use crate::world::World;
+use crate::sensors::fast_ray::FastRay;
+use crate::world::{Movers, NearStatics, StaticEntry, World};
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -170,32 +171,61 @@ pub struct VehicleParams {
     pub steering_offset_rad: f64,
 }
 
-/// The simulator.
+/// One vehicle of the world: its body and the state its actuation and sensors keep.
+#[derive(Clone)]
+struct Car {
+    body: Body,
+    params: VehicleParams,
+    lidar: Lidar,
+    imu: ImuState,
+    wheel_speed: f64,
+    control: Control,
+    wheel_angles: (f64, f64),
+    vel_w: (Vector, Vector),
+    /// The static colliders around the car, for its suspension rays.
+    near: NearStatics,
+    /// Held where it stands until the next reset (see [`Sim::park`]).
+    parked: bool,
+}
+
+/// Another car touched in the last physics step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CarContact {
+    /// The other car's index.
+    pub other: usize,
+    /// The deepest contact point, world frame, metres.
+    pub point_w: [f32; 3],
+}
+
+/// The simulator: one scene and one or more vehicles of one model.
 pub struct Sim {
     cfg: SimConfig,
     world: World,
     scene: Scene,
     model: VehicleModel,
-    body: Body,
     nominal: VehicleParams,
-    params: VehicleParams,
-    lidar: Lidar,
+    cars: Vec<Car>,
     camera: crate::sensors::Camera,
-    imu: ImuState,
-    wheel_speed: f64,
-    control: Control,
-    wheel_angles: (f64, f64),
     time_s: f64,
     steps: u64,
-    vel_w: (Vector, Vector),
-    pristine: (crate::world::WorldSnapshot, Body),
+    pristine: (crate::world::WorldSnapshot, Vec<Body>),
     /// Control steps taken without rapier's pipeline since the simulator was built.
     free_steps: u64,
 }
 
+/// Most cars one world holds.
+pub const MAX_CARS: usize = 8;
+
 impl Sim {
     /// Build the world once: scene, vehicle at the scene's spawn, sensors.
     pub fn new(cfg: SimConfig) -> Result<Self, SimError> {
+        Self::with_cars(cfg, 1)
+    }
+
+    /// Build a world holding `n_cars` vehicles (1 to [`MAX_CARS`]) with real contact between
+    /// them; each car's sensors see the others. Car 0 stands at the scene's spawn, the others
+    /// above it until the first [`Sim::reset_cars`].
+    pub fn with_cars(cfg: SimConfig, n_cars: usize) -> Result<Self, SimError> {
         let invalid = |msg: String| SimError::Invalid {
             context: "sim config".into(),
             msg,
@@ -215,6 +245,9 @@ impl Sim {
                 "brake_mps2 must be finite and >= 0, got {}",
                 set.brake_mps2
             )));
+        }
+        if !(1..=MAX_CARS).contains(&n_cars) {
+            return Err(invalid(format!("a world holds 1 to {MAX_CARS} cars, not {n_cars}")));
         }
         set.lidar.validate().map_err(|e| invalid(e.message))?;
         if let Some(c) = &set.camera {
@@ -265,40 +298,51 @@ impl Sim {
             y_m: spawn.y_m,
             yaw_rad: spawn.yaw_deg.to_radians(),
         };
-        let body = Body::new(
-            &mut world,
-            &model,
-            set.dynamics,
-            spawn_pose(&model, pose2),
-            body_params(&nominal),
-        )?;
-        let lidar = Lidar::new(set.lidar.clone());
+        let others = n_cars > 1;
+        let mut cars = Vec::with_capacity(n_cars);
+        for k in 0..n_cars {
+            // Stacked a metre apart until the first reset puts them on the ground.
+            let mut pose = spawn_pose(&model, pose2);
+            pose.translation.z += k as f32;
+            let body = Body::new(&mut world, &model, set.dynamics, pose, body_params(&nominal), others)?;
+            cars.push(Car {
+                body,
+                params: nominal,
+                lidar: Lidar::new(set.lidar.clone()),
+                imu: ImuState::default(),
+                wheel_speed: 0.0,
+                control: Control::default(),
+                wheel_angles: (0.0, 0.0),
+                vel_w: (Vector::ZERO, Vector::ZERO),
+                near: NearStatics::new(&world.pw),
+                parked: false,
+            });
+        }
         let camera = crate::sensors::Camera::new(set.camera.clone().unwrap_or_default(), &scene, &world.statics);
         // One physics step first, so the snapshot holds a built broad phase: the wheel rays of
         // the first substep after every reset then see the ground.
         world.pw.step();
-        let pristine = (world.snapshot(), body.clone());
+        let pristine = (world.snapshot(), cars.iter().map(|c| c.body.clone()).collect());
         let mut sim = Self {
             cfg,
             world,
             scene,
             model,
-            body,
             nominal,
-            params: nominal,
-            lidar,
+            cars,
             camera,
-            imu: ImuState::default(),
-            wheel_speed: 0.0,
-            control: Control::default(),
-            wheel_angles: (0.0, 0.0),
             time_s: 0.0,
             steps: 0,
-            vel_w: (Vector::ZERO, Vector::ZERO),
             pristine,
             free_steps: 0,
         };
-        sim.reset(pose2)?;
+        let poses: Vec<PlanarPose> = (0..n_cars)
+            .map(|k| PlanarPose {
+                x_m: pose2.x_m - 1.0 * k as f32,
+                ..pose2
+            })
+            .collect();
+        sim.reset_cars(&poses)?;
         Ok(sim)
     }
 
@@ -322,14 +366,24 @@ impl Sim {
         self.nominal
     }
 
-    /// The parameters in force.
+    /// The parameters in force (car 0).
     pub fn params(&self) -> VehicleParams {
-        self.params
+        self.cars[0].params
     }
 
     /// Change parameters (domain randomisation); they take effect at the next `reset`.
     pub fn set_params(&mut self, p: VehicleParams) {
-        self.params = p;
+        self.set_params_of(0, p);
+    }
+
+    /// Change car `i`'s parameters; they take effect at the next reset.
+    pub fn set_params_of(&mut self, i: usize, p: VehicleParams) {
+        self.cars[i].params = p;
+    }
+
+    /// The number of cars in the world.
+    pub fn n_cars(&self) -> usize {
+        self.cars.len()
     }
 
     /// AutoVRL's fixed spawn of this scene.
@@ -344,86 +398,172 @@ impl Sim {
 
     /// Put the vehicle at `pose` on the ground, at rest, wheel speed 0 (no scene reload).
     pub fn reset(&mut self, pose: PlanarPose) -> Result<(), SimError> {
-        let p = spawn_pose(&self.model, pose);
-        let bp = body_params(&self.params);
+        self.reset_cars(&[pose])
+    }
+
+    /// Put every car at its pose (one per car), at rest, wheel speed 0.
+    pub fn reset_cars(&mut self, poses: &[PlanarPose]) -> Result<(), SimError> {
+        self.check_count(poses.len(), "poses")?;
         self.world.restore(&self.pristine.0);
-        self.body.clone_from(&self.pristine.1);
-        self.body.reset(&mut self.world, &self.model, p, bp)?;
-        self.wheel_speed = 0.0;
-        self.control = Control::default();
-        self.wheel_angles = (0.0, 0.0);
+        for (car, (pose, pristine)) in self.cars.iter_mut().zip(poses.iter().zip(&self.pristine.1)) {
+            let p = spawn_pose(&self.model, *pose);
+            car.body.clone_from(pristine);
+            car.body
+                .reset(&mut self.world, &self.model, p, body_params(&car.params))?;
+            car.wheel_speed = 0.0;
+            car.control = Control::default();
+            car.wheel_angles = (0.0, 0.0);
+            car.vel_w = (Vector::ZERO, Vector::ZERO);
+            car.imu.reset();
+            car.parked = false;
+        }
         self.time_s = 0.0;
         self.steps = 0;
-        self.vel_w = (Vector::ZERO, Vector::ZERO);
-        self.imu.reset();
         Ok(())
+    }
+
+    fn check_count(&self, n: usize, what: &str) -> Result<(), SimError> {
+        if n == self.cars.len() {
+            return Ok(());
+        }
+        Err(SimError::Invalid {
+            context: "sim".into(),
+            msg: format!("{n} {what} for a world of {} cars", self.cars.len()),
+        })
+    }
+
+    /// Hold car `i` where it stands until the next reset: it stops at once and stays an
+    /// obstacle (a crashed car in a race). Its controls are ignored meanwhile.
+    pub fn park(&mut self, i: usize) {
+        let car = &mut self.cars[i];
+        car.body.park(&mut self.world);
+        car.parked = true;
+        car.wheel_speed = 0.0;
+        car.control = Control::default();
+        car.vel_w = (Vector::ZERO, Vector::ZERO);
+    }
+
+    /// Whether car `i` is parked.
+    pub fn parked(&self, i: usize) -> bool {
+        self.cars[i].parked
     }
 
     /// Apply `control` for one control period: advance the wheel-speed model, split the
     /// steering, and run the physics substeps.
     pub fn step(&mut self, control: Control) -> Result<(), SimError> {
-        let c = Control {
-            throttle: if control.throttle.is_finite() {
-                control.throttle.clamp(-1.0, 1.0)
-            } else {
-                0.0
-            },
-            steering_rad: if control.steering_rad.is_finite() {
-                control.steering_rad
-            } else {
-                0.0
-            },
-        };
-        let max = self.model.spec.steering.max_rad;
-        let delta = (c.steering_rad + self.params.steering_offset_rad).clamp(-max, max);
+        self.step_cars(&[control])
+    }
+
+    /// Apply one control per car for one control period. Every car's wheels act, then the
+    /// world takes one physics step, substep by substep.
+    pub fn step_cars(&mut self, controls: &[Control]) -> Result<(), SimError> {
+        self.check_count(controls.len(), "controls")?;
         let t = self.cfg.settings.control_period_s;
-        self.wheel_speed = self.params.drive.advance(self.wheel_speed, c.throttle, t);
         let ack = self
             .cfg
             .settings
             .ackermann
             .unwrap_or(self.model.spec.steering.ackermann);
-        self.wheel_angles = ackermann_split(
-            delta,
-            self.model.wheelbase_m as f64,
-            self.model.front_track_m as f64,
-            ack,
-        );
-        self.control = Control {
-            throttle: c.throttle,
-            steering_rad: delta,
-        };
-        let bp = body_params(&self.params);
-        let steer = (self.wheel_angles.0 as f32, self.wheel_angles.1 as f32);
-        let mut before = self.base_pose();
+        let max = self.model.spec.steering.max_rad;
+        for (car, control) in self.cars.iter_mut().zip(controls) {
+            if car.parked {
+                continue;
+            }
+            let c = Control {
+                throttle: if control.throttle.is_finite() {
+                    control.throttle.clamp(-1.0, 1.0)
+                } else {
+                    0.0
+                },
+                steering_rad: if control.steering_rad.is_finite() {
+                    control.steering_rad
+                } else {
+                    0.0
+                },
+            };
+            let delta = (c.steering_rad + car.params.steering_offset_rad).clamp(-max, max);
+            car.wheel_speed = car.params.drive.advance(car.wheel_speed, c.throttle, t);
+            car.wheel_angles = ackermann_split(
+                delta,
+                self.model.wheelbase_m as f64,
+                self.model.front_track_m as f64,
+                ack,
+            );
+            car.control = Control {
+                throttle: c.throttle,
+                steering_rad: delta,
+            };
+        }
         // The first step after a reset runs through rapier: it applies the reset's mass and pose.
-        let free = self.cfg.settings.free_flight && self.steps > 0 && self.body.free_of_contacts(&self.world, t as f32);
+        let free = self.cfg.settings.free_flight && self.steps > 0 && self.free_of_contacts(t as f32);
         self.free_steps += u64::from(free);
+        let mut before = vec![Pose::IDENTITY; self.cars.len()];
         for _ in 0..self.cfg.settings.substeps {
-            before = self.base_pose();
-            self.body
-                .substep(&mut self.world, &self.model, self.wheel_speed as f32, steer, bp, free);
+            for (i, car) in self.cars.iter_mut().enumerate() {
+                before[i] = *self.world.pw.bodies[car.body.base()].position();
+                if car.parked && car.body.is_raycast() {
+                    continue;
+                }
+                let steer = (car.wheel_angles.0 as f32, car.wheel_angles.1 as f32);
+                car.body.drive(
+                    &mut self.world,
+                    &mut car.near,
+                    &self.model,
+                    car.wheel_speed as f32,
+                    steer,
+                    body_params(&car.params),
+                );
+            }
+            if free {
+                for car in self.cars.iter().filter(|c| !c.parked) {
+                    car.body.fly(&mut self.world);
+                }
+            } else {
+                self.world.pw.step();
+            }
         }
         self.time_s += t;
         self.steps += 1;
         // Velocities of the base origin over the last substep: the motion the pose really made.
         // (rapier's body velocity is the centre of mass's, and in ray-cast mode it carries the
         // gravity increment that the next suspension impulse cancels.)
-        let after = self.base_pose();
         let h = self.world.pw.integration_parameters.dt;
-        let lin = (after.translation - before.translation) / h;
-        let (axis, angle) = (after.rotation * before.rotation.inverse()).to_axis_angle();
-        let ang = if angle.is_finite() && axis.is_finite() {
-            axis * (angle / h)
-        } else {
-            Vector::ZERO
-        };
-        if !(after.is_finite() && lin.is_finite() && ang.is_finite()) {
-            return Err(SimError::NotFinite(format!("vehicle state after step {}", self.steps)));
+        for (i, car) in self.cars.iter_mut().enumerate() {
+            let after = *self.world.pw.bodies[car.body.base()].position();
+            let lin = (after.translation - before[i].translation) / h;
+            let (axis, angle) = (after.rotation * before[i].rotation.inverse()).to_axis_angle();
+            let ang = if angle.is_finite() && axis.is_finite() {
+                axis * (angle / h)
+            } else {
+                Vector::ZERO
+            };
+            if !(after.is_finite() && lin.is_finite() && ang.is_finite()) {
+                return Err(SimError::NotFinite(format!(
+                    "state of car {i} after step {}",
+                    self.steps
+                )));
+            }
+            car.vel_w = (lin, ang);
+            car.imu.update(lin, ang, t as f32);
         }
-        self.vel_w = (lin, ang);
-        self.imu.update(lin, ang, t as f32);
         Ok(())
+    }
+
+    /// Whether the coming control period can skip rapier's pipeline: no car may touch the
+    /// scene, and the cars' widened boxes must stay apart (see `Body::free_reach`).
+    fn free_of_contacts(&self, period_s: f32) -> bool {
+        let Some(boxes) = self
+            .cars
+            .iter()
+            .map(|c| c.body.free_reach(&self.world, period_s, c.parked))
+            .collect::<Option<Vec<Aabb>>>()
+        else {
+            return false;
+        };
+        boxes
+            .iter()
+            .enumerate()
+            .all(|(i, a)| boxes[i + 1..].iter().all(|b| !a.intersects(b)))
     }
 
     /// Control steps that skipped rapier's pipeline (see `SimSettings::free_flight`) since the
@@ -444,27 +584,42 @@ impl Sim {
 
     /// The drive model's wheel speed, rad/s.
     pub fn wheel_speed_radps(&self) -> f64 {
-        self.wheel_speed
+        self.cars[0].wheel_speed
     }
 
     /// The control in force (throttle, centre steering angle after limits and offset).
     pub fn control(&self) -> Control {
-        self.control
+        self.control_of(0)
+    }
+
+    /// Car `i`'s control in force.
+    pub fn control_of(&self, i: usize) -> Control {
+        self.cars[i].control
     }
 
     /// Steering angles of the left and right front wheels, rad.
     pub fn wheel_angles_rad(&self) -> (f64, f64) {
-        self.wheel_angles
+        self.cars[0].wheel_angles
     }
 
     /// World pose of the vehicle's base frame.
     pub fn base_pose(&self) -> Pose {
-        *self.world.pw.bodies[self.body.base()].position()
+        self.base_pose_of(0)
+    }
+
+    /// World pose of car `i`'s base frame.
+    pub fn base_pose_of(&self, i: usize) -> Pose {
+        *self.world.pw.bodies[self.cars[i].body.base()].position()
     }
 
     /// Planar pose of the base frame.
     pub fn pose2(&self) -> PlanarPose {
-        let p = self.base_pose();
+        self.pose2_of(0)
+    }
+
+    /// Planar pose of car `i`'s base frame.
+    pub fn pose2_of(&self, i: usize) -> PlanarPose {
+        let p = self.base_pose_of(i);
         let fwd = p.rotation * Vector::X;
         PlanarPose {
             x_m: p.translation.x,
@@ -475,18 +630,28 @@ impl Sim {
 
     /// Linear velocity of the base origin over the last physics substep, world frame, m/s.
     pub fn linvel_w(&self) -> Vector {
-        self.vel_w.0
+        self.linvel_w_of(0)
+    }
+
+    /// Car `i`'s linear velocity over the last physics substep, world frame, m/s.
+    pub fn linvel_w_of(&self, i: usize) -> Vector {
+        self.cars[i].vel_w.0
     }
 
     /// Angular velocity of the base over the last physics substep, world frame, rad/s.
     pub fn angvel_w(&self) -> Vector {
-        self.vel_w.1
+        self.cars[0].vel_w.1
     }
 
     /// Speed along the heading, m/s (negative when rolling backwards).
     pub fn forward_speed_mps(&self) -> f32 {
-        let p = self.base_pose();
-        self.linvel_w().dot(p.rotation * Vector::X)
+        self.forward_speed_mps_of(0)
+    }
+
+    /// Car `i`'s speed along its heading, m/s.
+    pub fn forward_speed_mps_of(&self, i: usize) -> f32 {
+        let p = self.base_pose_of(i);
+        self.linvel_w_of(i).dot(p.rotation * Vector::X)
     }
 
     /// Yaw rate, rad/s.
@@ -497,18 +662,28 @@ impl Sim {
 
     /// Whether the car is on its side or roof (body z more than 60 degrees from world z).
     pub fn flipped(&self) -> bool {
-        (self.base_pose().rotation * Vector::Z).z < 0.5
+        self.flipped_of(0)
+    }
+
+    /// Whether car `i` is on its side or roof.
+    pub fn flipped_of(&self, i: usize) -> bool {
+        (self.base_pose_of(i).rotation * Vector::Z).z < 0.5
     }
 
     /// Scene objects the vehicle touched in the last physics step (walls included, ground
     /// excluded); empty right after a reset. (Refreshing contacts at reset with rapier's
     /// collision-only pass would drop the multibody car from the solver's islands.)
     pub fn contacts(&self) -> Vec<u32> {
+        self.contacts_of(0)
+    }
+
+    /// Scene objects car `i` touched in the last physics step.
+    pub fn contacts_of(&self, i: usize) -> Vec<u32> {
         let mut out = Vec::new();
         if self.steps == 0 {
             return out;
         }
-        for &h in self.body.colliders() {
+        for &h in self.cars[i].body.colliders() {
             for pair in self.world.pw.narrow_phase.contact_pairs_with(h) {
                 if !pair.has_any_active_contact() {
                     continue;
@@ -528,6 +703,49 @@ impl Sim {
         out
     }
 
+    /// The other cars car `i` touched in the last physics step, each once, with the deepest
+    /// contact point.
+    pub fn car_contacts_of(&self, i: usize) -> Vec<CarContact> {
+        let mut out: Vec<(f32, CarContact)> = Vec::new();
+        if self.steps == 0 || self.cars.len() < 2 {
+            return Vec::new();
+        }
+        let owner = |h: ColliderHandle| self.cars.iter().position(|c| c.body.colliders().contains(&h));
+        for &h in self.cars[i].body.colliders() {
+            for pair in self.world.pw.narrow_phase.contact_pairs_with(h) {
+                if !pair.has_any_active_contact() {
+                    continue;
+                }
+                let other = if pair.collider1 == h {
+                    pair.collider2
+                } else {
+                    pair.collider1
+                };
+                let Some(j) = owner(other).filter(|&j| j != i) else {
+                    continue;
+                };
+                let Some((_, pt)) = pair.find_deepest_contact() else {
+                    continue;
+                };
+                let Some(co1) = self.world.pw.colliders.get(pair.collider1) else {
+                    continue;
+                };
+                let p = *co1.position() * pt.local_p1;
+                let c = CarContact {
+                    other: j,
+                    point_w: p.to_array(),
+                };
+                match out.iter_mut().find(|(_, k)| k.other == j) {
+                    Some(slot) if pt.dist < slot.0 => *slot = (pt.dist, c),
+                    Some(_) => {}
+                    None => out.push((pt.dist, c)),
+                }
+            }
+        }
+        out.sort_by_key(|(_, c)| c.other);
+        out.into_iter().map(|(_, c)| c).collect()
+    }
+
     /// The LiDAR's world pose.
     pub fn lidar_pose(&self) -> Pose {
         self.base_pose() * self.model.lidar_b
@@ -535,26 +753,43 @@ impl Sim {
 
     /// The camera's world pose, when the vehicle has a camera link.
     pub fn camera_pose(&self) -> Option<Pose> {
-        self.model.camera_b.map(|c| self.base_pose() * c)
+        self.camera_pose_of(0)
+    }
+
+    /// Car `i`'s camera pose, when the vehicle has a camera link.
+    pub fn camera_pose_of(&self, i: usize) -> Option<Pose> {
+        self.model.camera_b.map(|c| self.base_pose_of(i) * c)
     }
 
     /// A LiDAR scan from the current pose.
     pub fn lidar_scan(&mut self) -> LaserScan {
-        let pose = self.lidar_pose();
-        self.lidar.scan(&self.world.statics, &pose)
+        self.lidar_scan_of(0)
+    }
+
+    /// Car `i`'s LiDAR scan: the scene and the other cars.
+    pub fn lidar_scan_of(&mut self, i: usize) -> LaserScan {
+        let pose = self.base_pose_of(i) * self.model.lidar_b;
+        let movers = self.movers(i);
+        let car = &mut self.cars[i];
+        car.lidar.scan_with(&self.world.statics, &movers, &pose)
     }
 
     /// A LiDAR scan as if the LiDAR link were at `pose_w` (probing; the car does not move).
     pub fn lidar_scan_at(&mut self, pose_w: &Pose) -> LaserScan {
-        self.lidar.scan(&self.world.statics, pose_w)
+        self.cars[0].lidar.scan(&self.world.statics, pose_w)
     }
 
     /// The camera frame from the vehicle's camera link, when a camera is configured and the
     /// vehicle has a camera link.
     pub fn camera_frame(&self) -> Option<crate::sensors::camera::RenderedFrame> {
+        self.camera_frame_of(0)
+    }
+
+    /// Car `i`'s camera frame: the scene and the other cars.
+    pub fn camera_frame_of(&self, i: usize) -> Option<crate::sensors::camera::RenderedFrame> {
         self.cfg.settings.camera.as_ref()?;
-        let pose = self.camera_pose()?;
-        Some(self.camera.render(&self.world.statics, &pose))
+        let pose = self.camera_pose_of(i)?;
+        Some(self.camera.render_with(&self.world.statics, &self.movers(i), &pose))
     }
 
     /// Render the camera (configured, or the default 160x120) as if it stood at `pose_w`
@@ -563,14 +798,52 @@ impl Sim {
         self.camera.render(&self.world.statics, pose_w)
     }
 
+    /// Every car's collision shapes but car `i`'s, where they stand now.
+    fn movers(&self, i: usize) -> Movers {
+        let mut m = Movers::default();
+        for (j, car) in self.cars.iter().enumerate().filter(|(j, _)| *j != i) {
+            for &h in car.body.colliders() {
+                let co = &self.world.pw.colliders[h];
+                // With free flight the colliders keep the pose of the last rapier step: place
+                // each from its body's pose now.
+                let pose = match co.parent() {
+                    Some(b) => *self.world.pw.bodies[b].position() * co.position_wrt_parent().copied().unwrap_or(Pose::IDENTITY),
+                    None => *co.position(),
+                };
+                let shape = co.shared_shape().clone();
+                m.entries.push(StaticEntry {
+                    aabb: shape.compute_aabb(&pose),
+                    fast: FastRay::new(&shape, &pose),
+                    shape,
+                    pose,
+                    object_id: None,
+                    color: self.model.body_shapes.first().map_or([0.5; 3], |s| s.color),
+                });
+                m.car.push(j as u32);
+            }
+        }
+        m
+    }
+
     /// The GPS reading.
     pub fn gps(&self) -> GpsReading {
-        gps::read(&self.cfg.settings.gps, &self.base_pose())
+        self.gps_of(0)
+    }
+
+    /// Car `i`'s GPS reading.
+    pub fn gps_of(&self, i: usize) -> GpsReading {
+        gps::read(&self.cfg.settings.gps, &self.base_pose_of(i))
     }
 
     /// The IMU reading (accelerations over the last control period).
     pub fn imu(&self) -> ImuReading {
-        self.imu.read(&self.base_pose(), self.linvel_w(), self.angvel_w())
+        self.imu_of(0)
+    }
+
+    /// Car `i`'s IMU reading.
+    pub fn imu_of(&self, i: usize) -> ImuReading {
+        let c = &self.cars[i];
+        c.imu.read(&self.base_pose_of(i), c.vel_w.0, c.vel_w.1)
     }
 
     /// Whether a vertical cylinder of `radius_m` standing at (x, y) from the ground to 1 m

@@ -17,13 +17,16 @@ pub mod groups {
     /// The vehicle's colliders.
     pub const VEHICLE: Group = Group::GROUP_3;
 
-    /// Groups of a vehicle collider that may touch the ground.
-    pub fn vehicle() -> InteractionGroups {
-        InteractionGroups::new(VEHICLE, GROUND.union(OBSTACLE), InteractionTestMode::And)
+    /// Groups of a vehicle collider that may touch the ground (and other cars, when the world
+    /// holds several).
+    pub fn vehicle(other_cars: bool) -> InteractionGroups {
+        let with = if other_cars { VEHICLE } else { Group::NONE };
+        InteractionGroups::new(VEHICLE, GROUND.union(OBSTACLE).union(with), InteractionTestMode::And)
     }
     /// Groups of a vehicle collider that must not touch the ground (ray-cast wheel proxies).
-    pub fn vehicle_no_ground() -> InteractionGroups {
-        InteractionGroups::new(VEHICLE, OBSTACLE, InteractionTestMode::And)
+    pub fn vehicle_no_ground(other_cars: bool) -> InteractionGroups {
+        let with = if other_cars { VEHICLE } else { Group::NONE };
+        InteractionGroups::new(VEHICLE, OBSTACLE.union(with), InteractionTestMode::And)
     }
     /// Groups for queries that see everything but the vehicle.
     pub fn sensors() -> InteractionGroups {
@@ -58,6 +61,16 @@ pub struct StaticIndex {
     pub entries: Vec<StaticEntry>,
 }
 
+/// The shapes of the other cars where they stand now, for one car's sensors (a handful of
+/// shapes a car: sensors test them all, after the static scene).
+#[derive(Clone, Default)]
+pub struct Movers {
+    /// The shapes; `object_id` is `None`.
+    pub entries: Vec<StaticEntry>,
+    /// The car each entry belongs to.
+    pub car: Vec<u32>,
+}
+
 /// The rapier state plus the static index.
 pub struct World {
     /// rapier's bundle of sets and pipelines.
@@ -66,11 +79,9 @@ pub struct World {
     pub statics: StaticIndex,
     /// The ground's collider.
     pub ground: ColliderHandle,
-    /// The static colliders around the car, for the wheels' suspension rays.
-    pub(crate) near: NearStatics,
 }
 
-/// A tree of the static colliders (ground and obstacles) around one place, for the wheels'
+/// A tree of the static colliders (ground and obstacles) around one car, for its wheels'
 /// suspension rays: they only ever hit those, and a tree of the few colliders near the car
 /// is walked in a fraction of the time of a tree of the whole scene.
 #[derive(Clone)]
@@ -86,7 +97,7 @@ impl NearStatics {
     /// How far the car may move before the tree is rebuilt, metres.
     const SLACK_M: f32 = 0.5;
 
-    fn new(pw: &PhysicsWorld) -> Self {
+    pub(crate) fn new(pw: &PhysicsWorld) -> Self {
         let all = pw
             .colliders
             .iter()
@@ -180,13 +191,7 @@ impl World {
                 });
             }
         }
-        let near = NearStatics::new(&pw);
-        Self {
-            pw,
-            statics,
-            ground,
-            near,
-        }
+        Self { pw, statics, ground }
     }
 
     /// Half the thickness of the thinnest obstacle (parry's `ccd_thickness`: a box's smallest
@@ -280,8 +285,9 @@ mod tests {
         for id in ["urban-20", "oval"] {
             let scene = Scene::builtin(&AssetSource::builtin(), id).unwrap();
             let mut w = World::new(&scene, 1.0 / 120.0);
+            let mut near_tree = NearStatics::new(&w.pw);
             let mut full = BroadPhaseBvh::new();
-            for (h, aabb) in &w.near.all {
+            for (h, aabb) in &near_tree.all {
                 full.set_aabb(&w.pw.integration_parameters, *h, *aabb);
             }
             let filter = QueryFilter::default().groups(groups::sensors());
@@ -304,7 +310,7 @@ mod tests {
                 let b = Vector::new(next() - 0.5, next() - 0.5, next() - 0.8).normalize() * reach * next();
                 let ray = Ray::new(at + a, b - a);
                 let pw = &mut w.pw;
-                let near = w.near.around(&pw.integration_parameters, at, reach);
+                let near = near_tree.around(&pw.integration_parameters, at, reach);
                 let got = near
                     .as_query_pipeline(pw.narrow_phase.query_dispatcher(), &pw.bodies, &pw.colliders, filter)
                     .cast_ray_and_get_normal(&ray, 1.0, true);
@@ -332,9 +338,9 @@ mod tests {
                     ray.dir
                 );
                 hits += usize::from(want.is_some_and(|(c, _)| c != w.ground));
-                if w.near.built != last {
+                if near_tree.built != last {
                     rebuilds += 1;
-                    last = w.near.built;
+                    last = near_tree.built;
                 }
             }
             assert!(hits > 20, "{id}: only {hits} rays met an obstacle");

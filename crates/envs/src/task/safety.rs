@@ -836,6 +836,7 @@ mod tests {
                 range_max: 12.0,
                 points_w: vec![],
                 object_id: vec![],
+                car: vec![],
                 origin_w: [0.0; 3],
                 ranges,
                 hit,

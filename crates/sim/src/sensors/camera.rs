@@ -10,7 +10,7 @@
 
 use crate::msg::CameraFrame;
 use crate::scene::Scene;
-use crate::world::StaticIndex;
+use crate::world::{Movers, StaticEntry, StaticIndex};
 use rapier3d::prelude::*;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -332,6 +332,11 @@ impl Camera {
     /// Render from a camera at `pose_w` looking along its x axis with z up (the ROS link
     /// convention of a camera mount).
     pub fn render(&self, statics: &StaticIndex, pose_w: &Pose) -> RenderedFrame {
+        self.render_with(statics, &Movers::default(), pose_w)
+    }
+
+    /// Render the static scene and the other cars' shapes (class `car`, segmentation 0).
+    pub fn render_with(&self, statics: &StaticIndex, movers: &Movers, pose_w: &Pose) -> RenderedFrame {
         let eye = pose_w.translation;
         let fwd = pose_w.rotation * Vector::X;
         let up = pose_w.rotation * Vector::Z;
@@ -366,7 +371,7 @@ impl Camera {
                 let r = rise(v);
                 for (z, a) in row.iter_mut().zip(&across) {
                     let (d, len) = ray(a, r);
-                    let (t, _, _) = self.nearest(statics, &eye_g, d, self.cfg.far_m * len);
+                    let (t, _, _) = self.nearest(statics, movers, &eye_g, d, self.cfg.far_m * len);
                     *z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
                 }
             });
@@ -387,7 +392,7 @@ impl Camera {
                 let r = rise(v);
                 for (u, a) in across.iter().enumerate() {
                     let (d, len) = ray(a, r);
-                    let (t, color, id, c) = self.shade(statics, &eye_g, d, self.cfg.far_m * len);
+                    let (t, color, id, c) = self.shade(statics, movers, &eye_g, d, self.cfg.far_m * len);
                     let z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
                     depth_row[u] = z;
                     seg_row[u] = id;
@@ -403,9 +408,17 @@ impl Camera {
         }
     }
 
-    /// The first surface along `o + t d` (`d` unit) before `max_t`: its distance, the static
-    /// entry hit and its normal, or whether it is the ground.
-    fn nearest(&self, statics: &StaticIndex, eye: &Eye, d: Vector, max_t: f32) -> (f32, Option<(usize, Vector)>, bool) {
+    /// The first surface along `o + t d` (`d` unit) before `max_t`: its distance, the entry hit
+    /// (a static one, or after them another car's shape) and its normal, or whether it is the
+    /// ground.
+    fn nearest(
+        &self,
+        statics: &StaticIndex,
+        movers: &Movers,
+        eye: &Eye,
+        d: Vector,
+        max_t: f32,
+    ) -> (f32, Option<(usize, Vector)>, bool) {
         let o = eye.o;
         // The ground plane bounds the walk.
         let mut best = max_t;
@@ -453,19 +466,42 @@ impl Camera {
         if hit.is_some() {
             best = reach;
         }
+        for (m, e) in movers.entries.iter().enumerate() {
+            let inv = *inv.get_or_insert_with(|| slab_recip(d));
+            if !crosses_box(o, inv, &e.aabb, best) {
+                continue;
+            }
+            if let Some((t, n)) = e.fast.cast_normal(o, d, best)
+                && t < best
+            {
+                best = t;
+                hit = Some((statics.entries.len() + m, n));
+                ground = false;
+            }
+        }
         (best, hit, ground)
     }
 
     /// (distance, colour, object id + 1, class) of the first surface along `o + t d`.
-    fn shade(&self, statics: &StaticIndex, eye: &Eye, d: Vector, max_t: f32) -> (f32, [f32; 3], u32, u8) {
+    fn shade(
+        &self,
+        statics: &StaticIndex,
+        movers: &Movers,
+        eye: &Eye,
+        d: Vector,
+        max_t: f32,
+    ) -> (f32, [f32; 3], u32, u8) {
         let sun = Vector::from_array(SUN).normalize();
         let o = eye.o;
-        let (best, hit, ground) = self.nearest(statics, eye, d, max_t);
+        let (best, hit, ground) = self.nearest(statics, movers, eye, d, max_t);
         if let Some((k, n)) = hit {
-            let e = &statics.entries[k];
+            let (e, class): (&StaticEntry, u8) = match k.checked_sub(statics.entries.len()) {
+                None => (&statics.entries[k], self.classes[k]),
+                Some(m) => (&movers.entries[m], class::CAR),
+            };
             let lambert = 0.35 + 0.65 * n.dot(sun).max(0.0);
             let c = e.color.map(|v| v * lambert);
-            return (best, c, e.object_id.map(|i| i + 1).unwrap_or(0), self.classes[k]);
+            return (best, c, e.object_id.map(|i| i + 1).unwrap_or(0), class);
         }
         if ground {
             let p = o + d * best;

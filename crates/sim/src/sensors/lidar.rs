@@ -1,7 +1,7 @@
 //! Planar LiDAR. Rays start at the LiDAR link's full 3D world pose and fan out evenly over the
 //! field of view, centred on the sensor's x axis (this fixes AutoVRL's rays, which are right
-//! only at the world origin). The vehicle is never in its own scan: only the static scene is
-//! cast against.
+//! only at the world origin). The vehicle is never in its own scan: the static scene and the
+//! other cars (when the world holds several) are cast against.
 //!
 //! Speed: the scene is static, so each scan first culls the scene's colliders to those whose
 //! bounding box meets the scan's reach, then tests each ray against that short list (a slab test
@@ -9,7 +9,7 @@
 //! hits found so far (a fifth of a scan in urban-20, where cars stand behind cars).
 
 use crate::msg::LaserScan;
-use crate::world::StaticIndex;
+use crate::world::{Movers, StaticIndex};
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -110,6 +110,12 @@ impl Lidar {
 
     /// Scan the static scene from `pose_w` (the LiDAR link's world pose).
     pub fn scan(&mut self, scene: &StaticIndex, pose_w: &Pose) -> LaserScan {
+        self.scan_with(scene, &Movers::default(), pose_w)
+    }
+
+    /// Scan the static scene and the other cars' shapes from `pose_w`; with other cars the
+    /// scan's `car` names the car each ray hit.
+    pub fn scan_with(&mut self, scene: &StaticIndex, movers: &Movers, pose_w: &Pose) -> LaserScan {
         let (angle_min, angle_increment) = self.cfg.angles();
         let origin = pose_w.translation;
         let rmax = self.cfg.range_max_m;
@@ -130,6 +136,11 @@ impl Lidar {
         let full = self.cfg.fov_deg >= 360.0;
         let mut best = vec![rmax; n];
         let mut best_id: Vec<Option<Option<u32>>> = vec![None; n];
+        let mut best_car: Vec<Option<u32>> = if movers.entries.is_empty() {
+            Vec::new()
+        } else {
+            vec![None; n]
+        };
         // Nearest boxes first, so that a box no nearer than every hit so far in its rays is
         // skipped whole: none of its points could be a nearer hit.
         self.candidates.clear();
@@ -141,10 +152,23 @@ impl Lidar {
                 .filter(|(_, e)| e.aabb.intersects(&reach))
                 .map(|(i, e)| (distance_to_box(&e.aabb, origin), i)),
         );
+        // Other cars' shapes follow the scene's in the index space.
+        let statics = scene.entries.len();
+        self.candidates.extend(
+            movers
+                .entries
+                .iter()
+                .enumerate()
+                .filter(|(_, e)| e.aabb.intersects(&reach))
+                .map(|(i, e)| (distance_to_box(&e.aabb, origin), statics + i)),
+        );
         self.candidates
             .sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         for &(d, ci) in &self.candidates {
-            let e = &scene.entries[ci];
+            let e = match ci.checked_sub(statics) {
+                None => &scene.entries[ci],
+                Some(m) => &movers.entries[m],
+            };
             let (lo, hi) = if level && angle_increment > 0.0 {
                 ray_span(&e.aabb, origin, yaw, angle_min, angle_increment, n, full)
             } else {
@@ -163,6 +187,9 @@ impl Lidar {
                 {
                     best[i] = t;
                     best_id[i] = Some(e.object_id);
+                    if let Some(c) = best_car.get_mut(i) {
+                        *c = ci.checked_sub(statics).map(|m| movers.car[m]);
+                    }
                 }
             }
         }
@@ -176,6 +203,7 @@ impl Lidar {
             points_w: Vec::with_capacity(n),
             object_id: Vec::with_capacity(n),
             origin_w: origin.to_array(),
+            car: best_car,
         };
         for i in 0..n {
             scan.ranges.push(best[i].max(self.cfg.range_min_m));

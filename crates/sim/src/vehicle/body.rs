@@ -12,7 +12,7 @@
 
 use super::spec::VehicleModel;
 use crate::SimError;
-use crate::world::{World, groups};
+use crate::world::{NearStatics, World, groups};
 use rapier3d::control::{DynamicRayCastVehicleController, WheelTuning};
 use rapier3d::prelude::*;
 use rapier3d_urdf::{UrdfLoaderOptions, UrdfMultibodyOptions, UrdfRobot};
@@ -82,14 +82,15 @@ impl Body {
         mode: DynamicsMode,
         pose: Pose,
         p: BodyParams,
+        other_cars: bool,
     ) -> Result<Self, SimError> {
         match mode {
-            DynamicsMode::Raycast => Ok(Self::new_raycast(world, model, pose, p)),
-            DynamicsMode::Multibody => Self::new_multibody(world, model, pose, p),
+            DynamicsMode::Raycast => Ok(Self::new_raycast(world, model, pose, p, other_cars)),
+            DynamicsMode::Multibody => Self::new_multibody(world, model, pose, p, other_cars),
         }
     }
 
-    fn new_raycast(world: &mut World, model: &VehicleModel, pose: Pose, p: BodyParams) -> Self {
+    fn new_raycast(world: &mut World, model: &VehicleModel, pose: Pose, p: BodyParams, other_cars: bool) -> Self {
         let mp = scale_mass(model.mass_props, p.mass_scale);
         let chassis = world.pw.insert_body(
             RigidBodyBuilder::dynamic()
@@ -107,7 +108,7 @@ impl Body {
                         .position(s.pose)
                         .density(0.0)
                         .friction(0.5)
-                        .collision_groups(groups::vehicle()),
+                        .collision_groups(groups::vehicle(other_cars)),
                     Some(chassis),
                 ),
             );
@@ -122,7 +123,7 @@ impl Body {
                         .position(Pose::from_parts(w.center_b, rot))
                         .density(0.0)
                         .friction(0.5)
-                        .collision_groups(groups::vehicle_no_ground()),
+                        .collision_groups(groups::vehicle_no_ground(other_cars)),
                     Some(chassis),
                 ),
             );
@@ -163,7 +164,13 @@ impl Body {
         }
     }
 
-    fn new_multibody(world: &mut World, model: &VehicleModel, pose: Pose, p: BodyParams) -> Result<Self, SimError> {
+    fn new_multibody(
+        world: &mut World,
+        model: &VehicleModel,
+        pose: Pose,
+        p: BodyParams,
+        other_cars: bool,
+    ) -> Result<Self, SimError> {
         let options = UrdfLoaderOptions {
             create_colliders_from_collision_shapes: true,
             apply_imported_mass_props: true,
@@ -172,7 +179,7 @@ impl Body {
                 .density(0.0)
                 .friction(0.5)
                 .friction_combine_rule(CoefficientCombineRule::Multiply)
-                .collision_groups(groups::vehicle()),
+                .collision_groups(groups::vehicle(other_cars)),
             ..UrdfLoaderOptions::default()
         };
         let mut template = UrdfRobot::from_robot(&model.urdf.robot, options, std::path::Path::new("."));
@@ -230,6 +237,10 @@ impl Body {
         }
     }
 
+    pub(crate) fn is_raycast(&self) -> bool {
+        matches!(self, Body::Raycast { .. })
+    }
+
     pub(crate) fn colliders(&self) -> &[ColliderHandle] {
         match self {
             Body::Raycast { colliders, .. } => colliders,
@@ -238,12 +249,15 @@ impl Body {
     }
 
     /// Whether the next `period_s` seconds can skip rapier's pipeline (see [`free_flight`]):
-    /// only the chassis moves, and no contact can start on the way. The car's boxes, widened by
-    /// twice the distance its farthest point can travel plus rapier's contact prediction
-    /// distance and a margin, must stay clear of every obstacle's box and of the ground.
-    pub(crate) fn free_of_contacts(&self, world: &World, period_s: f32) -> bool {
+    /// only the chassis moves, and no contact with the scene can start on the way. The car's
+    /// boxes, widened by twice the distance its farthest point can travel plus rapier's contact
+    /// prediction distance and a margin, must stay clear of every obstacle's box and of the
+    /// ground. Returns that widened box (other cars' boxes must stay clear of it too), or
+    /// `None` when the car may touch the scene. A parked car moves nowhere and answers its
+    /// own box.
+    pub(crate) fn free_reach(&self, world: &World, period_s: f32, parked: bool) -> Option<Aabb> {
         let Body::Raycast { chassis, bounds, .. } = self else {
-            return false;
+            return None;
         };
         let rb = &world.pw.bodies[*chassis];
         let pose = *rb.position();
@@ -259,16 +273,35 @@ impl Body {
             }
             radius = radius.max((local.mins - com).abs().max(local.maxs - com).abs().length());
         }
-        let (v, w) = (rb.linvel(), rb.angvel());
         let prediction = world.pw.integration_parameters.prediction_distance();
+        if parked {
+            return Some(car.loosened(prediction + FREE_MARGIN_M));
+        }
+        let (v, w) = (rb.linvel(), rb.angvel());
         let gap = 2.0 * (v.length() + w.length() * radius) * period_s + prediction + FREE_MARGIN_M;
         // Only a climb or a roll or pitch brings the chassis nearer the ground.
         let drop = 2.0 * (v.z.abs() + w.truncate().length() * radius) * period_s + prediction + GROUND_MARGIN_M;
         let reach = car.loosened(gap);
-        world.statics.entries.iter().all(|e| match e.object_id {
+        let clear = world.statics.entries.iter().all(|e| match e.object_id {
             None => lowest - drop > e.aabb.maxs.z,
             Some(_) => !e.aabb.intersects(&reach),
-        })
+        });
+        clear.then_some(reach)
+    }
+
+    /// Hold the car where it stands for the rest of the episode (a crashed car in a race): its
+    /// chassis becomes a fixed body that others still hit. `reset` restores the dynamic body
+    /// from the pristine copy.
+    /// A multibody car stays dynamic (rapier's multibodies keep their links' types): its
+    /// drive motors hold the wheels still instead.
+    pub(crate) fn park(&self, world: &mut World) {
+        if let Body::Raycast { chassis, .. } = self
+            && let Some(rb) = world.pw.bodies.get_mut(*chassis)
+        {
+            rb.set_linvel(Vector::ZERO, false);
+            rb.set_angvel(Vector::ZERO, false);
+            rb.set_body_type(RigidBodyType::Fixed, true);
+        }
     }
 
     /// Put the car at `pose`, at rest, with parameters `p` (no bodies are rebuilt).
@@ -298,15 +331,17 @@ impl Body {
         }
     }
 
-    /// Apply the command for one physics substep and advance rapier by one step.
-    pub(crate) fn substep(
+    /// Apply the command for one physics substep: the ray-cast wheels' impulses, or the
+    /// multibody's motor targets. The world then advances by one rapier step, or by
+    /// [`Body::fly`] when no contact can start.
+    pub(crate) fn drive(
         &mut self,
         world: &mut World,
+        near: &mut NearStatics,
         model: &VehicleModel,
         w_radps: f32,
         steer: (f32, f32),
         p: BodyParams,
-        free: bool,
     ) {
         match self {
             Body::Raycast {
@@ -339,7 +374,7 @@ impl Body {
                     .iter()
                     .map(|w| w.chassis_connection_point_cs.length() + w.suspension_rest_length + w.radius)
                     .fold(0.0f32, f32::max);
-                let near = world.near.around(&pw.integration_parameters, at, reach);
+                let near = near.around(&pw.integration_parameters, at, reach);
                 let q = near.as_query_pipeline_mut(
                     pw.narrow_phase.query_dispatcher(),
                     &mut pw.bodies,
@@ -347,11 +382,6 @@ impl Body {
                     filter,
                 );
                 controller.update_vehicle(dt, q);
-                if free {
-                    free_flight(&mut world.pw, *chassis);
-                } else {
-                    world.pw.step();
-                }
             }
             Body::Multibody(car) => {
                 let max_t = model.spec.drive.max_torque_nm as f32;
@@ -375,8 +405,15 @@ impl Body {
                             .set_motor_position(JointAxis::AngX, target, STEER_STIFFNESS, STEER_DAMPING);
                     }
                 }
-                world.pw.step();
             }
+        }
+    }
+
+    /// Advance a ray-cast car by one rapier step without rapier's pipeline (see
+    /// [`free_flight`]); only called when [`Body::free_reach`] allowed it.
+    pub(crate) fn fly(&self, world: &mut World) {
+        if let Body::Raycast { chassis, .. } = self {
+            free_flight(&mut world.pw, *chassis);
         }
     }
 }
