@@ -18,6 +18,7 @@ pub mod api;
 pub mod check;
 pub mod heldout;
 pub mod pendulum;
+pub mod race_env;
 pub mod registry;
 pub mod sim_vehicle;
 pub mod task;
@@ -26,10 +27,12 @@ pub mod vec_env;
 pub mod wrappers;
 
 /// Order statistics (agvrl-sim's), for the crates above.
-pub use api::{BoxSpace, Control, Env, EnvError, Info, SensorFrame, Step, Vehicle};
+pub use api::{BoxSpace, Control, Env, EnvError, Info, MultiEnv, MultiStep, RaceSummary, SensorFrame, Step, Vehicle};
 pub use check::{CheckError, check_env};
+pub use race_env::{RaceEnv, RaceSettings};
 pub use registry::{
-    ENV_IDS, ENVS, EnvConfig, EnvSpec, TaskKind, TrackSetting, make, make_sim_car, make_task, make_vehicle,
+    ENV_IDS, ENVS, EnvConfig, EnvSpec, MULTI_ENV_IDS, TaskKind, TrackSetting, make, make_multi, make_race,
+    make_sim_car, make_task, make_vehicle,
 };
 pub use sim_vehicle::{Randomisation, SimCar, SimVehicle, SpawnMode};
 pub use task::ActionMapping;

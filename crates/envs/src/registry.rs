@@ -139,6 +139,9 @@ pub struct EnvConfig {
     /// Race on a track from a ROS map file instead of the env's own (racing envs): the map
     /// YAML's path, or the track loaded from it, as run configs and policy files carry it.
     pub track: Option<TrackSetting>,
+    /// Race settings of the multi-car envs ([`MULTI_ENV_IDS`]); unset, their defaults.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub race: Option<crate::race_env::RaceSettings>,
 }
 
 /// `EnvConfig::track`: a map YAML's path, or the track loaded from it.
@@ -180,6 +183,7 @@ impl Default for EnvConfig {
             new_layout_each_episode: false,
             held_out: false,
             track: None,
+            race: None,
         }
     }
 }
@@ -242,6 +246,11 @@ pub fn scene_of(id: &str) -> Option<&'static str> {
 }
 
 fn unknown(id: &str) -> EnvError {
+    if MULTI_ENV_IDS.contains(&id) {
+        return EnvError::Config(format!(
+            "{id} races several cars: build it with make_multi (Python: agvrl.make_multi)"
+        ));
+    }
     EnvError::UnknownId {
         id: id.to_string(),
         valid: ENV_IDS.iter().map(|s| s.to_string()).collect(),
@@ -259,6 +268,20 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn crate::Vehicle>
 /// ROS 2 robot). Everything else takes [`make_vehicle`].
 pub fn make_sim_car(id: &str, cfg: &EnvConfig) -> Result<SimCar, EnvError> {
     let spec = spec(id).filter(|s| s.scene.is_some()).ok_or_else(|| unknown(id))?;
+    let sim = sim_config(spec, cfg)?;
+    let v =
+        SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?.with_new_layout_each_episode(cfg.new_layout_each_episode);
+    Ok(if cfg.noise.is_off() {
+        SimCar::Exact(Box::new(v))
+    } else {
+        SimCar::Noisy(Box::new(Noisy::new(v, cfg.noise)))
+    })
+}
+
+/// The simulator's config for env `spec` with `cfg`: the scene (built-in, procedural or a
+/// map-file track) and the settings.
+fn sim_config(spec: &EnvSpec, cfg: &EnvConfig) -> Result<SimConfig, EnvError> {
+    let id = spec.id;
     let scene = spec.scene.unwrap_or_default();
     if cfg.track.is_some() && spec.task != TaskKind::Racing {
         return Err(EnvError::Config(format!(
@@ -290,16 +313,9 @@ pub fn make_sim_car(id: &str, cfg: &EnvConfig) -> Result<SimCar, EnvError> {
             "new_layout_each_episode needs layout_seed (a procedural map to redraw)".into(),
         ));
     }
-    let sim = SimConfig {
+    Ok(SimConfig {
         scene: source,
         settings: cfg.sim.clone(),
-    };
-    let v =
-        SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?.with_new_layout_each_episode(cfg.new_layout_each_episode);
-    Ok(if cfg.noise.is_off() {
-        SimCar::Exact(Box::new(v))
-    } else {
-        SimCar::Noisy(Box::new(Noisy::new(v, cfg.noise)))
     })
 }
 
@@ -381,6 +397,49 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
             steering_limit_rad,
         ))
     })
+}
+
+/// The multi-agent envs [`make_multi`] builds: `racing-duel`, cars racing on the oval or on
+/// `track` (two unless `race.cars` says otherwise).
+pub const MULTI_ENV_IDS: &[&str] = &["racing-duel"];
+
+/// Build the multi-agent env `id` with `cfg`: one racing task per car (the single-car task's
+/// observation, actions and safety filter), race rewards from `cfg.race`. Sensor noise is a
+/// single-car setting.
+pub fn make_multi(id: &str, cfg: &EnvConfig) -> Result<Box<dyn crate::api::MultiEnv>, EnvError> {
+    Ok(Box::new(make_race(id, cfg)?))
+}
+
+/// [`make_multi`]'s race, typed: viewers and plots reach its simulator.
+pub fn make_race(id: &str, cfg: &EnvConfig) -> Result<crate::race_env::RaceEnv, EnvError> {
+    if !MULTI_ENV_IDS.contains(&id) {
+        return Err(EnvError::UnknownId {
+            id: id.to_string(),
+            valid: MULTI_ENV_IDS.iter().map(|s| s.to_string()).collect(),
+        });
+    }
+    let settings = cfg.race.unwrap_or_default();
+    settings.validate()?;
+    if !cfg.noise.is_off() {
+        return Err(EnvError::Config(format!(
+            "{id}: sensor noise and latency are single-car settings; leave noise off"
+        )));
+    }
+    if cfg.layout_seed.is_some() {
+        return Err(EnvError::Config(format!(
+            "{id} races on a track: leave layout_seed unset"
+        )));
+    }
+    if cfg.max_steps == 0 {
+        return Err(EnvError::Config("max_steps must be at least 1".into()));
+    }
+    let racing = spec("racing-oval").ok_or(EnvError::Internal("racing-oval is registered"))?;
+    let sim = sim_config(racing, cfg)?;
+    let limit = cfg.sim.vehicle_model()?.spec.steering.max_rad;
+    let tasks = (0..settings.cars)
+        .map(|_| make_task(racing.id, cfg, limit))
+        .collect::<Result<Vec<_>, _>>()?;
+    crate::race_env::RaceEnv::new(sim, tasks, settings, cfg.randomisation, cfg.max_steps, cfg.held_out)
 }
 
 /// Build the env registered under `id` with `cfg` (`EnvConfig::default()` for the standard

@@ -52,7 +52,7 @@ impl Randomisation {
         }
     }
 
-    fn draw(&self, nominal: VehicleParams, rng: &mut StdRng) -> VehicleParams {
+    pub(crate) fn draw(&self, nominal: VehicleParams, rng: &mut StdRng) -> VehicleParams {
         let mut f = |x: f64| {
             if x > 0.0 {
                 rng.random_range(1.0 - x..1.0 + x)
@@ -96,7 +96,7 @@ pub struct SimVehicle {
 }
 
 /// Free cells, track and subjects of a built world.
-fn map_of(sim: &Sim) -> MapInfo {
+pub(crate) fn map_of(sim: &Sim) -> MapInfo {
     let half = sim.scene().half_extent_m();
     let oval = sim.scene().file.track.as_ref().map(|t| crate::api::OvalTrack {
         straight_m: t.straight_m,

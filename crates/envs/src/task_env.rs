@@ -120,6 +120,7 @@ impl<V: Vehicle, T: Task> Env for TaskEnv<V, T> {
                 final_obs: None,
                 corrected_action,
                 episode: None,
+                race: None,
             },
         })
     }

@@ -1334,3 +1334,228 @@ mod explored_observation {
         assert!(err.to_string().contains("radii_m"), "{err}");
     }
 }
+
+mod racing_against_others {
+    use super::*;
+    use agvrl_envs::api::{MultiStep, Track};
+    use std::path::Path;
+
+    fn track(name: &str) -> TrackSetting {
+        TrackSetting::Path(Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../assets/tracks/{name}.yaml")))
+    }
+
+    fn race(track_name: Option<&str>, cars: usize, max_steps: u64) -> RaceEnv {
+        let cfg = EnvConfig {
+            track: track_name.map(track),
+            race: Some(RaceSettings {
+                cars,
+                ..RaceSettings::default()
+            }),
+            max_steps,
+            ..EnvConfig::default()
+        };
+        make_race("racing-duel", &cfg).unwrap()
+    }
+
+    /// Pure pursuit of the line `offset_m` left of the centre line, from the simulator's pose:
+    /// the steering action.
+    fn steer_along(env: &RaceEnv, i: usize, offset_m: f32) -> f32 {
+        let t: &Track = env.track();
+        let p = env.sim().pose2_of(i);
+        let s = t.centreline_s(p.x_m, p.y_m);
+        let ([cx, cy], [dx, dy]) = t.centreline_at(s + 1.2);
+        let (tx, ty) = (cx - offset_m * dy, cy + offset_m * dx);
+        let alpha = (ty - p.y_m).atan2(tx - p.x_m) - p.yaw_rad;
+        let alpha = alpha.sin().atan2(alpha.cos());
+        ((2.0 * 0.33 * alpha.sin() / 1.2).atan() / 0.36).clamp(-1.0, 1.0)
+    }
+
+    fn distances(st: &MultiStep) -> Vec<f64> {
+        st.agents
+            .iter()
+            .map(|a| a.as_ref().unwrap().info.race.as_ref().unwrap().distance_m)
+            .collect()
+    }
+
+    /// The same seed and actions give the same race, bit for bit; the grid stands behind the
+    /// start line, a row per 0.8 m, and its order is drawn per race.
+    #[test]
+    fn a_race_is_seeded_and_draws_its_grid_order_per_race() {
+        let mut env = race(None, 3, 60);
+        assert_eq!(env.n_agents(), 3);
+        let run = |env: &mut RaceEnv, seed| {
+            let obs = env.reset(Some(seed)).unwrap();
+            let mut steps = vec![];
+            for k in 0..60 {
+                let a: Vec<Vec<f32>> = (0..3)
+                    .map(|i| vec![0.2 * i as f32, 0.1 * (k % 3) as f32 - 0.1])
+                    .collect();
+                steps.push(env.step(&a).unwrap());
+            }
+            (obs, steps)
+        };
+        let (a, b) = (run(&mut env, 7), run(&mut env, 7));
+        assert_eq!(a, b, "same seed, same race");
+        let last = a.1.last().unwrap();
+        assert!(last.over(), "the time limit ends every car's episode at once");
+        assert!(last.agents.iter().all(|s| s.as_ref().unwrap().truncated));
+        let mut orders = std::collections::BTreeSet::new();
+        for seed in 0..12 {
+            env.reset(Some(seed)).unwrap();
+            let st = env.step(&vec![vec![-1.0, 0.0]; 3]).unwrap();
+            let mut d = distances(&st);
+            assert!(
+                d.iter().all(|x| *x < 0.0),
+                "the grid stands behind the start line: {d:?}"
+            );
+            let order: Vec<usize> = {
+                let mut o: Vec<usize> = (0..3).collect();
+                o.sort_by(|&x, &y| d[y].total_cmp(&d[x]));
+                o
+            };
+            d.sort_by(f64::total_cmp);
+            assert!(
+                (d[1] - d[0] - 0.8).abs() < 0.05 && (d[2] - d[1] - 0.8).abs() < 0.05,
+                "rows 0.8 m apart: {d:?}"
+            );
+            orders.insert(order);
+        }
+        assert!(orders.len() >= 4, "grid orders drawn: {orders:?}");
+    }
+
+    /// On the oval (single file: the lane leaves no room for two columns) the car behind
+    /// drives into the stopped car ahead: both count the contact, the one whose front hit is
+    /// at fault and pays for it, and a car close by ends nobody's episode.
+    #[test]
+    fn a_car_that_drives_into_the_one_ahead_is_at_fault_and_pays_for_it() {
+        let mut env = race(None, 2, 200);
+        env.reset(Some(3)).unwrap();
+        let st = env.step(&vec![vec![-1.0, 0.0]; 2]).unwrap();
+        let d = distances(&st);
+        let (front, back) = if d[0] > d[1] { (0, 1) } else { (1, 0) };
+        let (mut paid, mut front_paid, mut last) = (0.0, 0.0, None);
+        for _ in 0..199 {
+            let mut a = vec![vec![-1.0, 0.0]; 2];
+            a[back] = vec![1.0, steer_along(&env, back, 0.0)];
+            let st = env.step(&a).unwrap();
+            paid += st.agents[back].as_ref().unwrap().info.reward_terms.car_contact;
+            front_paid += st.agents[front].as_ref().unwrap().info.reward_terms.car_contact;
+            assert!(
+                st.agents.iter().all(|s| !s.as_ref().unwrap().terminated),
+                "no one crashed"
+            );
+            last = Some(st);
+        }
+        let s = last.unwrap().summary.expect("the race ended at its time limit");
+        assert!(s.contacts[back] >= 1 && s.contacts[front] >= 1, "{s:?}");
+        assert_eq!((s.at_fault[back] >= 1, s.at_fault[front]), (true, 0), "{s:?}");
+        assert!(paid < 0.0 && front_paid == 0.0, "back paid {paid}, front {front_paid}");
+        assert!(s.time_lost_s[back] > 0.0, "{s:?}");
+    }
+
+    /// A car steered into the wall crashes: its episode ends with the crash penalty, it stands
+    /// where it stopped while the race goes on, and it finishes last.
+    #[test]
+    fn a_crashed_car_stays_where_it_stopped_until_the_race_ends() {
+        let mut env = race(Some("bean"), 2, 300);
+        env.reset(Some(1)).unwrap();
+        let mut crashed_at = None;
+        for k in 0..300 {
+            let a = vec![vec![0.0, 1.0], vec![0.0, steer_along(&env, 1, 0.0)]];
+            let st = env.step(&a).unwrap();
+            match crashed_at {
+                None => {
+                    let s0 = st.agents[0].as_ref().unwrap();
+                    if s0.terminated {
+                        assert_eq!(s0.info.reward_terms.collision, -50.0);
+                        assert!(s0.info.race.as_ref().unwrap().crashed);
+                        crashed_at = Some((k, env.sim().base_pose_of(0)));
+                    }
+                }
+                Some((_, pose)) => {
+                    assert!(st.agents[0].is_none(), "a crashed car drops out");
+                    assert_eq!(env.sim().base_pose_of(0), pose, "and stays put");
+                }
+            }
+            if let Some(s) = st.summary {
+                assert_eq!(k, 299);
+                assert!(s.crashed[0] && !s.crashed[1]);
+                assert_eq!(s.order, vec![1, 0]);
+                return;
+            }
+        }
+        panic!("car 0 crashed at {crashed_at:?} and the race never ended");
+    }
+
+    /// On the wide sweepers track two cars start side by side; the one behind, faster on
+    /// its own line, passes the other without touching it: one overtake, and it leads.
+    #[test]
+    fn a_faster_car_on_its_own_line_overtakes() {
+        let mut env = race(Some("sweepers"), 2, 600);
+        env.reset(Some(2)).unwrap();
+        let st = env.step(&vec![vec![-1.0, 0.0]; 2]).unwrap();
+        let d = distances(&st);
+        let (front, back) = if d[0] > d[1] { (0, 1) } else { (1, 0) };
+        // Each car keeps to its grid column's side.
+        let side = |env: &RaceEnv, i: usize| {
+            let t = env.track();
+            let p = env.sim().pose2_of(i);
+            let s = t.centreline_s(p.x_m, p.y_m);
+            let ([cx, cy], [dx, dy]) = t.centreline_at(s);
+            if (p.x_m - cx) * -dy + (p.y_m - cy) * dx > 0.0 {
+                0.3
+            } else {
+                -0.3
+            }
+        };
+        let (sf, sb) = (side(&env, front), side(&env, back));
+        assert!(sf != sb, "two columns on a 3 m track");
+        let mut summary = None;
+        for _ in 0..599 {
+            let mut a = vec![vec![]; 2];
+            a[front] = vec![-0.3, steer_along(&env, front, sf)];
+            a[back] = vec![1.0, steer_along(&env, back, sb)];
+            let st = env.step(&a).unwrap();
+            assert!(st.agents.iter().all(|s| !s.as_ref().unwrap().terminated));
+            summary = st.summary;
+        }
+        let s = summary.unwrap();
+        assert_eq!(s.overtakes[back], 1, "{s:?}");
+        assert_eq!(s.overtakes[front], 0, "{s:?}");
+        assert_eq!(s.order[0], back);
+        assert_eq!(s.contacts, vec![0, 0]);
+    }
+
+    #[test]
+    fn a_race_takes_two_to_eight_cars_and_is_no_single_agent_env() {
+        let e = make("racing-duel", &EnvConfig::default()).err().unwrap().to_string();
+        assert!(e.contains("make_multi"), "{e}");
+        for cars in [1, 9] {
+            let cfg = EnvConfig {
+                race: Some(RaceSettings {
+                    cars,
+                    ..RaceSettings::default()
+                }),
+                ..EnvConfig::default()
+            };
+            let e = make_multi("racing-duel", &cfg).err().unwrap().to_string();
+            assert!(e.contains("cars must be 2 to 8"), "{e}");
+        }
+        let e = make_multi("racing-oval", &EnvConfig::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("racing-duel"), "{e}");
+        let mut env = make_multi("racing-duel", &EnvConfig::default()).unwrap();
+        assert!(matches!(
+            env.step(&[vec![0.0, 0.0], vec![0.0, 0.0]]),
+            Err(EnvError::NeedsReset)
+        ));
+        env.reset(Some(0)).unwrap();
+        let e = env
+            .step(&[vec![f32::NAN, 0.0], vec![0.0, 0.0]])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("env 0") && e.contains("not finite"), "{e}");
+    }
+}

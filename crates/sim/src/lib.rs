@@ -27,5 +27,7 @@ pub mod world;
 
 pub use error::{InvalidSetting, SimError};
 pub use scene::{MapTrack, SCENE_IDS, Scene, SceneKind};
-pub use sim::{CarContact, MAX_CARS, PlanarPose, SceneSource, Sim, SimConfig, SimSettings, VehicleParams, VehicleSource};
+pub use sim::{
+    CarContact, MAX_CARS, PlanarPose, SceneSource, Sim, SimConfig, SimSettings, VehicleParams, VehicleSource,
+};
 pub use vehicle::{Control, DriveModel, DynamicsMode};

@@ -4,11 +4,11 @@ use crate::SimError;
 use crate::assets::AssetSource;
 use crate::msg::{GpsReading, ImuReading, LaserScan};
 use crate::scene::{MapTrack, Scene, SceneKind};
+use crate::sensors::fast_ray::FastRay;
 use crate::sensors::imu::ImuState;
 use crate::sensors::{GpsConfig, Lidar, LidarConfig, gps};
 use crate::vehicle::body::Body;
 use crate::vehicle::{BodyParams, Control, DriveModel, DynamicsMode, VehicleModel, ackermann_split};
-use crate::sensors::fast_ray::FastRay;
 use crate::world::{Movers, NearStatics, StaticEntry, World};
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -807,7 +807,10 @@ impl Sim {
                 // With free flight the colliders keep the pose of the last rapier step: place
                 // each from its body's pose now.
                 let pose = match co.parent() {
-                    Some(b) => *self.world.pw.bodies[b].position() * co.position_wrt_parent().copied().unwrap_or(Pose::IDENTITY),
+                    Some(b) => {
+                        *self.world.pw.bodies[b].position()
+                            * co.position_wrt_parent().copied().unwrap_or(Pose::IDENTITY)
+                    }
                     None => *co.position(),
                 };
                 let shape = co.shared_shape().clone();

@@ -1460,10 +1460,12 @@ mod several_cars {
             let m = [s.vehicle().mass_kg, 2.0 * s.vehicle().mass_kg];
             let top = s.vehicle().top_speed_mps();
             let model = s.vehicle().clone();
-            let drive_n = model.wheels.iter().filter(|w| w.driven).count() as f32 * model.spec.drive.max_torque_nm as f32
+            let drive_n = model.wheels.iter().filter(|w| w.driven).count() as f32
+                * model.spec.drive.max_torque_nm as f32
                 / model.drive_radius_m();
             // Car 1 faces car 0 from 16 m: both reach top speed before they meet.
-            s.reset_cars(&[at(-8.0, 0.0, 0.0), at(8.0, 0.0, std::f32::consts::PI)]).unwrap();
+            s.reset_cars(&[at(-8.0, 0.0, 0.0), at(8.0, 0.0, std::f32::consts::PI)])
+                .unwrap();
             let full = Control {
                 throttle: 1.0,
                 steering_rad: 0.0,
@@ -1476,7 +1478,10 @@ mod several_cars {
                 // The fronts (bumpers 0.415 m ahead of the base) may overlap by the contact's
                 // penetration at most.
                 let gap = s.pose2_of(1).x_m - s.pose2_of(0).x_m - 2.0 * 0.415;
-                assert!(gap > -0.02, "{mode:?}: the cars pass through each other, gap {gap} at step {step}");
+                assert!(
+                    gap > -0.02,
+                    "{mode:?}: the cars pass through each other, gap {gap} at step {step}"
+                );
                 if impact.is_none() && !a.is_empty() {
                     assert_eq!(b.len(), 1, "{mode:?}: car 1 must report the contact too");
                     assert_eq!((a[0].other, b[0].other), (1, 0));
@@ -1497,7 +1502,8 @@ mod several_cars {
             let _ = step;
             if mode == DynamicsMode::Raycast {
                 // Replay up to the impact, then until the closing speed is gone.
-                s.reset_cars(&[at(-8.0, 0.0, 0.0), at(8.0, 0.0, std::f32::consts::PI)]).unwrap();
+                s.reset_cars(&[at(-8.0, 0.0, 0.0), at(8.0, 0.0, std::f32::consts::PI)])
+                    .unwrap();
                 for _ in 0..step {
                     s.step_cars(&[full, full]).unwrap();
                 }
@@ -1699,7 +1705,10 @@ mod several_cars {
     #[test]
     fn a_world_holds_one_to_eight_cars_and_one_control_each() {
         for n in [0, 9] {
-            let e = Sim::with_cars(SimConfig::default(), n).err().expect("refused").to_string();
+            let e = Sim::with_cars(SimConfig::default(), n)
+                .err()
+                .expect("refused")
+                .to_string();
             assert!(e.contains("1 to 8 cars"), "{e}");
         }
         let mut s = Sim::with_cars(SimConfig::default(), 2).unwrap();

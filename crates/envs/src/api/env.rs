@@ -88,6 +88,10 @@ pub struct RewardTerms {
     pub coverage: f64,
     /// Penalty for a step whose control the safety filter changed (the `safe` search reward).
     pub filter: f64,
+    /// Progress along the centre line (racing against others).
+    pub progress: f64,
+    /// Penalty for touching another car with one's front (racing against others).
+    pub car_contact: f64,
 }
 
 /// Racing progress, reported every step of a racing task.
@@ -173,6 +177,30 @@ pub struct Info {
     /// Return and length of the episode that ended on this step (set by `TimeLimit`/`VecEnv`
     /// bookkeeping when the episode ends).
     pub episode: Option<EpisodeSummary>,
+    /// A car's standing in a race against others.
+    pub race: Option<RaceCarInfo>,
+}
+
+/// One car's standing in a race against others, reported every step.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RaceCarInfo {
+    /// Position in the race, 1 = leading (by distance along the centre line from the start
+    /// line; a crashed car ranks behind every running one).
+    pub position: usize,
+    /// Distance raced from the start line, metres (negative on the grid behind it).
+    pub distance_m: f64,
+    /// Contacts with other cars begun since the start.
+    pub contacts: u32,
+    /// Of those, the ones this car's front caused.
+    pub at_fault: u32,
+    /// Cars this car passed since the start (a pass counts once it leads by 0.5 m along the
+    /// centre line; crashed cars are not passed).
+    pub overtakes: u32,
+    /// Time lost to contacts: the integral of 1 - v / v_before over the two seconds after
+    /// each contact began, v_before the speed just before it, seconds.
+    pub time_lost_s: f64,
+    /// Whether the car has crashed (it then stands where it stopped).
+    pub crashed: bool,
 }
 
 /// The result of one `Env::step`.

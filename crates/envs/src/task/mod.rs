@@ -17,7 +17,7 @@ pub use action::ActionMapping;
 pub use explored::{ExploredMemory, ExploredObs};
 pub use observation::{ImageChannels, ImageObs, ObsConfig, RangeScale};
 use serde::{Deserialize, Serialize};
-pub use termination::{common_termination, min_range_ahead_m, min_range_m, terminate};
+pub use termination::{common_termination, min_range_ahead_m, min_range_m, min_static_range_m, terminate};
 
 pub use racing::Racing;
 pub use reward::{SafeShaping, SearchReward};

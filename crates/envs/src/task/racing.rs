@@ -2,7 +2,7 @@
 //! 0.8 m). Reports laps, lap times and progress along the centre line.
 
 use super::reward;
-use super::{CommonConfig, Intervention, Outcome, SafetyFilter, Task, min_range_m, terminate};
+use super::{CommonConfig, Intervention, Outcome, SafetyFilter, Task, min_static_range_m, terminate};
 use crate::api::{BoxSpace, Control, MapInfo, RacingInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -98,7 +98,9 @@ impl Task for Racing {
     }
 
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
-        let d = min_range_m(frame);
+        // Another car close by ends nothing (self-play would learn never to close in): only
+        // the walls count.
+        let d = min_static_range_m(frame);
         let c = frame.applied;
         let mut terms = reward::racing(d, c.throttle, c.steering_rad);
         let termination = terminate(&mut terms, frame, map, d, self.cfg.terminate_below_m, reward::PENALTY);

@@ -206,6 +206,8 @@ impl RewardTerms {
             + self.proximity
             + self.coverage
             + self.filter
+            + self.progress
+            + self.car_contact
     }
 }
 

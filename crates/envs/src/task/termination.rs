@@ -12,6 +12,17 @@ pub fn min_range_m(frame: &SensorFrame) -> f64 {
         .min(1e6) as f64
 }
 
+/// The minimum range to the static scene, metres: rays that met another car are left out (a
+/// world of several cars; one car's scans, simulated or real, name no car).
+pub fn min_static_range_m(frame: &SensorFrame) -> f64 {
+    frame
+        .scan
+        .as_ref()
+        .map(|s| s.min_static_range())
+        .unwrap_or(f32::INFINITY)
+        .min(1e6) as f64
+}
+
 /// The minimum range among the rays within `fov_deg / 2` of straight ahead, metres (the whole
 /// scan when `fov_deg` is 0; infinite without a scan).
 pub fn min_range_ahead_m(frame: &SensorFrame, fov_deg: f32) -> f64 {

@@ -1,0 +1,511 @@
+//! `RaceEnv`: several cars on one track in one world, each driven by its own racing task (the
+//! single-car task's observation, action mapping, safety filter and wall termination), with
+//! race rewards on top: progress, a penalty on the car whose front touches another, the crash
+//! penalty. A crashed car is parked where it stopped and stays an obstacle until the race ends.
+
+use crate::api::{
+    BoxSpace, Control, EnvError, EpisodeSummary, Info, MapInfo, MultiEnv, MultiStep, RaceCarInfo, RaceSummary,
+    RacingInfo, RewardTerms, SensorFrame, Step, Track, validate_action,
+};
+use crate::sim_vehicle::{Randomisation, map_of};
+use crate::task::Task;
+use agvrl_sim::{PlanarPose, Sim, SimConfig};
+use rand::rngs::StdRng;
+use rand::seq::SliceRandom;
+use rand::{RngExt, SeedableRng};
+use serde::{Deserialize, Serialize};
+
+/// Race settings (`EnvConfig::race`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RaceSettings {
+    /// Cars on the grid, 2 to 8.
+    pub cars: usize,
+    /// Reward per metre raced along the centre line.
+    pub progress_per_m: f64,
+    /// Reward on every step a car touches another with its front (a negative number).
+    pub contact_penalty: f64,
+    /// Reward on the step a car crashes into a wall (a negative number).
+    pub crash_penalty: f64,
+    /// Distance between grid rows along the centre line, metres.
+    pub grid_gap_m: f32,
+    /// Lateral offset of the two grid columns from the centre line, metres, at most: where the
+    /// track is too narrow for it (a slot must stand [`GRID_CLEARANCE_M`] from the walls) the
+    /// columns close in, down to single file.
+    pub grid_offset_m: f32,
+}
+
+impl Default for RaceSettings {
+    fn default() -> Self {
+        Self {
+            cars: 2,
+            progress_per_m: 1.0,
+            contact_penalty: -1.0,
+            crash_penalty: crate::task::reward::PENALTY,
+            grid_gap_m: 0.8,
+            grid_offset_m: 0.3,
+        }
+    }
+}
+
+impl RaceSettings {
+    /// Check the settings, naming what is wrong.
+    pub fn validate(&self) -> Result<(), EnvError> {
+        let bad = |m: String| Err(EnvError::Config(format!("race: {m}")));
+        if !(2..=agvrl_sim::MAX_CARS).contains(&self.cars) {
+            return bad(format!("cars must be 2 to {}, got {}", agvrl_sim::MAX_CARS, self.cars));
+        }
+        for (k, v) in [
+            ("progress_per_m", self.progress_per_m),
+            ("contact_penalty", self.contact_penalty),
+            ("crash_penalty", self.crash_penalty),
+        ] {
+            if !v.is_finite() {
+                return bad(format!("{k} must be finite, got {v}"));
+            }
+        }
+        if !(self.grid_gap_m >= 0.6 && self.grid_gap_m.is_finite()) {
+            return bad(format!(
+                "grid_gap_m must be at least 0.6 (a car's length), got {}",
+                self.grid_gap_m
+            ));
+        }
+        if !(self.grid_offset_m >= 0.0 && self.grid_offset_m.is_finite()) {
+            return bad(format!("grid_offset_m must be >= 0, got {}", self.grid_offset_m));
+        }
+        Ok(())
+    }
+}
+
+/// Clearance from a grid slot to the walls, metres: the racing task ends an episode at 0.8.
+pub const GRID_CLEARANCE_M: f32 = 0.95;
+
+/// A pass counts once the passing car leads by this much along the centre line, metres (and a
+/// pass back once it trails by as much): cars side by side do not swap places every step.
+const PASS_MARGIN_M: f64 = 0.5;
+/// How long after a contact begins its time loss is counted, seconds.
+const LOSS_WINDOW_S: f64 = 2.0;
+/// Length of XTENTH-CAR's chassis ahead of the base (rear axle) and behind it, metres: the
+/// contact point's place along the car says whose front hit.
+const FRONT_M: f32 = 0.415;
+const REAR_M: f32 = 0.085;
+
+/// One car's race bookkeeping.
+#[derive(Clone, Debug, Default)]
+struct Racer {
+    /// Arc length of the spawn, wrapped into (-lap/2, lap/2], metres.
+    offset_m: f64,
+    distance_m: f64,
+    laps: u32,
+    lap_start_s: Option<f64>,
+    last_lap_s: Option<f64>,
+    best_lap_s: Option<f64>,
+    contacts: u32,
+    at_fault: u32,
+    overtakes: u32,
+    time_lost_s: f64,
+    /// (speed before, steps left) of the contact whose loss is counted now.
+    loss: Option<(f64, u32)>,
+    touching: Vec<usize>,
+    crashed: bool,
+    done: bool,
+    ret: f64,
+    len: u64,
+}
+
+/// Several cars racing on one track.
+pub struct RaceEnv {
+    sim: Sim,
+    map: MapInfo,
+    track: Track,
+    tasks: Vec<Box<dyn Task>>,
+    settings: RaceSettings,
+    randomisation: Randomisation,
+    max_steps: u64,
+    held_out: bool,
+    rng: StdRng,
+    frames: Vec<SensorFrame>,
+    racers: Vec<Racer>,
+    /// `ahead[i][j]`: car i leads car j by the pass margin (as last decided).
+    ahead: Vec<Vec<bool>>,
+    /// The grid, pole first.
+    slots: Vec<PlanarPose>,
+    steps: u64,
+    ready: bool,
+}
+
+impl RaceEnv {
+    /// A race of `settings.cars` cars on the track of `sim` (a scene with a track), each car
+    /// driven by one of `tasks`.
+    pub fn new(
+        sim: SimConfig,
+        tasks: Vec<Box<dyn Task>>,
+        settings: RaceSettings,
+        randomisation: Randomisation,
+        max_steps: u64,
+        held_out: bool,
+    ) -> Result<Self, EnvError> {
+        settings.validate()?;
+        if tasks.len() != settings.cars {
+            return Err(EnvError::Internal("one task per car"));
+        }
+        let sim = Sim::with_cars(sim, settings.cars)?;
+        let map = map_of(&sim);
+        let track = map
+            .track
+            .clone()
+            .ok_or_else(|| EnvError::Config("a race needs a track (the oval or a map file)".into()))?;
+        let n = settings.cars;
+        let slots = grid(&sim, &track, &settings);
+        Ok(Self {
+            sim,
+            map,
+            track,
+            tasks,
+            settings,
+            randomisation,
+            max_steps,
+            held_out,
+            rng: StdRng::seed_from_u64(0),
+            frames: Vec::new(),
+            racers: vec![Racer::default(); n],
+            ahead: vec![vec![false; n]; n],
+            slots,
+            steps: 0,
+            ready: false,
+        })
+    }
+
+    /// The simulator (read-only): viewers and plots.
+    pub fn sim(&self) -> &Sim {
+        &self.sim
+    }
+
+    /// The track raced on.
+    pub fn track(&self) -> &Track {
+        &self.track
+    }
+
+    fn frame(&mut self, i: usize) -> SensorFrame {
+        let sim = &mut self.sim;
+        SensorFrame {
+            stamp_s: sim.time_s(),
+            scan: Some(sim.lidar_scan_of(i)),
+            imu: Some(sim.imu_of(i)),
+            gps: Some(sim.gps_of(i)),
+            image: sim.camera_frame_of(i).map(|f| f.frame),
+            contact: Some(!sim.contacts_of(i).is_empty()),
+            applied: sim.control_of(i),
+        }
+    }
+
+    /// Arc length of car `i`, metres.
+    fn arc_s(&self, i: usize) -> f64 {
+        let p = self.sim.pose2_of(i);
+        self.track.centreline_s(p.x_m, p.y_m) as f64
+    }
+
+    /// Where along the car (0 rear, 1 front) a world point lies.
+    fn along(&self, i: usize, p: [f32; 3]) -> f32 {
+        let pose = self.sim.pose2_of(i);
+        let (s, c) = pose.yaw_rad.sin_cos();
+        let x = (p[0] - pose.x_m) * c + (p[1] - pose.y_m) * s;
+        (x + REAR_M) / (FRONT_M + REAR_M)
+    }
+
+    fn positions(&self) -> Vec<usize> {
+        let mut order: Vec<usize> = (0..self.racers.len()).collect();
+        order.sort_by(|&a, &b| {
+            let (ra, rb) = (&self.racers[a], &self.racers[b]);
+            ra.crashed
+                .cmp(&rb.crashed)
+                .then(rb.distance_m.total_cmp(&ra.distance_m))
+                .then(a.cmp(&b))
+        });
+        order
+    }
+
+    fn summary(&self) -> RaceSummary {
+        let r = &self.racers;
+        RaceSummary {
+            order: self.positions(),
+            laps: r.iter().map(|c| c.laps).collect(),
+            best_lap_s: r.iter().map(|c| c.best_lap_s).collect(),
+            distance_m: r.iter().map(|c| c.distance_m).collect(),
+            overtakes: r.iter().map(|c| c.overtakes).collect(),
+            contacts: r.iter().map(|c| c.contacts).collect(),
+            at_fault: r.iter().map(|c| c.at_fault).collect(),
+            time_lost_s: r.iter().map(|c| c.time_lost_s).collect(),
+            crashed: r.iter().map(|c| c.crashed).collect(),
+        }
+    }
+}
+
+/// The grid slots, pole first: rows `grid_gap_m` apart behind the start line, columns
+/// alternating left and right of the centre line, as far apart as the track allows.
+fn grid(sim: &Sim, track: &Track, settings: &RaceSettings) -> Vec<PlanarPose> {
+    let slot = |k: usize, offset: f32| {
+        let s = -(0.5 * settings.grid_gap_m + settings.grid_gap_m * k as f32);
+        let ([x, y], [dx, dy]) = track.centreline_at(s.rem_euclid(track.lap_length_m()));
+        let side = if k % 2 == 0 { offset } else { -offset };
+        PlanarPose {
+            x_m: x - side * dy,
+            y_m: y + side * dx,
+            yaw_rad: dy.atan2(dx),
+        }
+    };
+    let mut offset = settings.grid_offset_m;
+    while offset > 0.0
+        && !(0..settings.cars).all(|k| {
+            let p = slot(k, offset);
+            sim.free_at(p.x_m, p.y_m, GRID_CLEARANCE_M)
+        })
+    {
+        offset = (offset - 0.05).max(0.0);
+    }
+    (0..settings.cars).map(|k| slot(k, offset)).collect()
+}
+
+/// `x` wrapped into (-lap/2, lap/2].
+fn wrap(x: f64, lap: f64) -> f64 {
+    let y = x.rem_euclid(lap);
+    if y > lap / 2.0 { y - lap } else { y }
+}
+
+impl MultiEnv for RaceEnv {
+    fn n_agents(&self) -> usize {
+        self.racers.len()
+    }
+
+    fn observation_space(&self) -> BoxSpace {
+        self.tasks[0].observation_space()
+    }
+
+    fn action_space(&self) -> BoxSpace {
+        BoxSpace::uniform(2, -1.0, 1.0)
+    }
+
+    fn reset(&mut self, seed: Option<u64>) -> Result<Vec<Vec<f32>>, EnvError> {
+        if let Some(s) = seed {
+            self.rng = StdRng::seed_from_u64(s);
+        }
+        let episode_seed = crate::heldout::split(self.rng.random(), self.held_out);
+        let mut rng = StdRng::seed_from_u64(episode_seed);
+        let n = self.racers.len();
+        // The grid order is drawn per race: slot k holds car order[k].
+        let mut order: Vec<usize> = (0..n).collect();
+        order.shuffle(&mut rng);
+        let mut poses = vec![PlanarPose::default(); n];
+        for (k, &car) in order.iter().enumerate() {
+            poses[car] = self.slots[k];
+        }
+        let nominal = self.sim.nominal_params();
+        for i in 0..n {
+            let p = self.randomisation.draw(nominal, &mut rng);
+            self.sim.set_params_of(i, p);
+        }
+        self.sim.reset_cars(&poses)?;
+        let lap = self.track.lap_length_m() as f64;
+        self.frames.clear();
+        self.racers = vec![Racer::default(); n];
+        let mut obs = Vec::with_capacity(n);
+        for i in 0..n {
+            let frame = self.frame(i);
+            self.tasks[i].needs().check(&frame)?;
+            self.tasks[i].reset(&frame, Some(&self.map));
+            obs.push(self.tasks[i].observe(&frame));
+            self.frames.push(frame);
+            let offset = wrap(self.arc_s(i), lap);
+            let r = &mut self.racers[i];
+            r.offset_m = offset;
+            r.distance_m = r.offset_m;
+        }
+        for i in 0..n {
+            for j in 0..n {
+                self.ahead[i][j] = self.racers[i].distance_m > self.racers[j].distance_m;
+            }
+        }
+        self.steps = 0;
+        self.ready = true;
+        Ok(obs)
+    }
+
+    fn step(&mut self, actions: &[Vec<f32>]) -> Result<MultiStep, EnvError> {
+        let n = self.racers.len();
+        if actions.len() != n {
+            return Err(EnvError::Config(format!("{} actions for {n} agents", actions.len())));
+        }
+        if !self.ready {
+            return Err(EnvError::NeedsReset);
+        }
+        let space = self.action_space();
+        let limit = self.sim.vehicle().spec.steering.max_rad;
+        let mut controls = vec![Control::default(); n];
+        let mut corrected = vec![None; n];
+        for i in (0..n).filter(|&i| !self.racers[i].done) {
+            validate_action(&space, &actions[i]).map_err(|e| EnvError::InEnv {
+                env: i,
+                source: Box::new(e),
+            })?;
+            let mut a = actions[i].clone();
+            space.clamp(&mut a);
+            controls[i] = self.tasks[i].control(&a, limit, &self.frames[i]);
+            corrected[i] = self.tasks[i].corrected_action();
+        }
+        let speed_before: Vec<f64> = (0..n).map(|i| self.sim.forward_speed_mps_of(i) as f64).collect();
+        self.sim.step_cars(&controls)?;
+        self.steps += 1;
+        let dt = self.dt_s();
+        let lap = self.track.lap_length_m() as f64;
+        // Contacts between cars, each pair once, and whose front caused each.
+        let mut fault = vec![false; n];
+        let mut touching = vec![Vec::new(); n];
+        for i in 0..n {
+            for c in self.sim.car_contacts_of(i) {
+                touching[i].push(c.other);
+                if c.other > i {
+                    let (fi, fj) = (self.along(i, c.point_w), self.along(c.other, c.point_w));
+                    // The car whose front is at the point hit; both fronts (head-on, side by
+                    // side), both did.
+                    fault[i] |= fi >= fj - 0.2 && fi > 0.5;
+                    fault[c.other] |= fj >= fi - 0.2 && fj > 0.5;
+                }
+            }
+        }
+        let mut agents: Vec<Option<Step>> = vec![None; n];
+        let truncate = self.steps >= self.max_steps;
+        for i in 0..n {
+            if self.racers[i].done {
+                continue;
+            }
+            let frame = self.frame(i);
+            self.tasks[i].needs().check(&frame)?;
+            let out = self.tasks[i].evaluate(&frame, Some(&self.map));
+            let obs = self.tasks[i].observe(&frame);
+            if !obs.iter().all(|v| v.is_finite()) {
+                return Err(EnvError::Vehicle(format!("car {i}: observation is not finite")));
+            }
+            self.frames[i] = frame;
+            let now = self.sim.time_s();
+            let progress_m = out.racing.as_ref().map_or(0.0, |r| r.progress_laps * lap);
+            let r = &mut self.racers[i];
+            let before = r.distance_m;
+            r.distance_m = r.offset_m + progress_m;
+            // Laps count start line crossings; the first crossing starts the first lap.
+            if before < 0.0 && r.distance_m >= 0.0 && r.lap_start_s.is_none() {
+                r.lap_start_s = Some(now);
+            }
+            while r.distance_m >= (r.laps as f64 + 1.0) * lap {
+                r.laps += 1;
+                if let Some(t0) = r.lap_start_s {
+                    let t = now - t0;
+                    r.last_lap_s = Some(t);
+                    r.best_lap_s = Some(r.best_lap_s.map_or(t, |b| b.min(t)));
+                }
+                r.lap_start_s = Some(now);
+            }
+            for &j in &touching[i] {
+                if !r.touching.contains(&j) {
+                    r.contacts += 1;
+                    r.at_fault += u32::from(fault[i]);
+                    let window = (LOSS_WINDOW_S / dt).round() as u32;
+                    let v0 = speed_before[i].max(r.loss.map_or(0.0, |l| l.0));
+                    r.loss = Some((v0, window));
+                }
+            }
+            r.touching = std::mem::take(&mut touching[i]);
+            if let Some((v0, left)) = r.loss {
+                if v0 > 0.1 {
+                    let v = self.sim.forward_speed_mps_of(i) as f64;
+                    r.time_lost_s += dt * (1.0 - v / v0).max(0.0);
+                }
+                r.loss = (left > 1).then_some((v0, left - 1));
+            }
+            let terminated = out.termination.is_some();
+            let terms = RewardTerms {
+                progress: self.settings.progress_per_m * (r.distance_m - before),
+                car_contact: if fault[i] && !r.touching.is_empty() {
+                    self.settings.contact_penalty
+                } else {
+                    0.0
+                },
+                collision: if terminated { self.settings.crash_penalty } else { 0.0 },
+                ..RewardTerms::default()
+            };
+            let reward = terms.total();
+            r.ret += reward;
+            r.len += 1;
+            if terminated {
+                r.crashed = true;
+                self.sim.park(i);
+            }
+            let truncated = truncate && !terminated;
+            let r = &mut self.racers[i];
+            r.done = terminated || truncated;
+            let info = Info {
+                reward_terms: terms,
+                termination: out.termination,
+                racing: Some(RacingInfo {
+                    laps: r.laps,
+                    last_lap_s: r.last_lap_s,
+                    best_lap_s: r.best_lap_s,
+                    progress_laps: r.distance_m / lap,
+                }),
+                corrected_action: corrected[i].take(),
+                episode: r.done.then_some(EpisodeSummary { ret: r.ret, len: r.len }),
+                ..Info::default()
+            };
+            agents[i] = Some(Step {
+                obs,
+                reward,
+                terminated,
+                truncated,
+                info,
+            });
+        }
+        // Passes between running cars.
+        for i in 0..n {
+            for j in 0..n {
+                let (a, b) = (&self.racers[i], &self.racers[j]);
+                if i == j || a.crashed || b.crashed {
+                    continue;
+                }
+                let lead = a.distance_m - b.distance_m;
+                if !self.ahead[i][j] && lead > PASS_MARGIN_M {
+                    self.ahead[i][j] = true;
+                    self.ahead[j][i] = false;
+                    self.racers[i].overtakes += 1;
+                } else if self.ahead[i][j] && lead < -PASS_MARGIN_M {
+                    self.ahead[i][j] = false;
+                }
+            }
+        }
+        let order = self.positions();
+        for (place, &i) in order.iter().enumerate() {
+            if let Some(st) = agents[i].as_mut() {
+                let r = &self.racers[i];
+                st.info.race = Some(RaceCarInfo {
+                    position: place + 1,
+                    distance_m: r.distance_m,
+                    contacts: r.contacts,
+                    at_fault: r.at_fault,
+                    overtakes: r.overtakes,
+                    time_lost_s: r.time_lost_s,
+                    crashed: r.crashed,
+                });
+            }
+        }
+        let over = self.racers.iter().all(|r| r.done);
+        if over {
+            self.ready = false;
+        }
+        Ok(MultiStep {
+            agents,
+            summary: over.then(|| self.summary()),
+        })
+    }
+
+    fn dt_s(&self) -> f64 {
+        self.sim.config().settings.control_period_s
+    }
+}
