@@ -84,6 +84,7 @@ pub(super) fn run(quick: bool) -> Vec<String> {
         }
         out.push(format!("{line} reps={reps}"));
     }
+    out.extend(races(steps, reps));
     out.extend(shipped_search(steps, reps));
     out.extend(camera_obs(steps, reps));
     for (id, n_envs) in [
@@ -94,6 +95,75 @@ pub(super) fn run(quick: bool) -> Vec<String> {
         ("pendulum", 8),
     ] {
         out.extend(vec_figures(id, n_envs, steps, if quick { 3 } else { 9 }));
+    }
+    out
+}
+
+/// Races of 1, 2, 4 and 8 cars on the shipped map-file tracks (read from the working
+/// directory): world steps per second with every car acting at random (sensors, tasks and race
+/// bookkeeping included) from the grid, a new race whenever a car crashes; `per_car` is
+/// cars x world steps/s over the lone car's. The four races are timed in turn in every
+/// repetition, so that all see the same machine.
+fn races(steps: usize, reps: usize) -> Vec<String> {
+    use agvrl_envs::MultiEnv as _;
+    let mut out = Vec::new();
+    for track in ["bean", "sweepers"] {
+        let yaml = std::path::PathBuf::from(format!("assets/tracks/{track}.yaml"));
+        let mut envs = Vec::new();
+        for cars in [1usize, 2, 4, 8] {
+            let cfg = agvrl_envs::EnvConfig {
+                track: Some(agvrl_envs::TrackSetting::Path(yaml.clone())),
+                race: Some(agvrl_envs::RaceSettings {
+                    cars,
+                    ..Default::default()
+                }),
+                ..Default::default()
+            };
+            match agvrl_envs::make_race("racing-duel", &cfg) {
+                Ok(mut e) => {
+                    let _ = e.reset(Some(0));
+                    envs.push((cars, e, 0usize, 0u64, Vec::new()));
+                }
+                Err(e) => out.push(format!(
+                    "race=track-{track} cars={cars} error={}",
+                    e.to_string().replace(' ', "_")
+                )),
+            }
+        }
+        let drive = |cars: usize, env: &mut agvrl_envs::RaceEnv, t: &mut usize, races: &mut u64, n: usize| {
+            for _ in 0..n {
+                *t += 1;
+                let a: Vec<Vec<f32>> = (0..cars)
+                    .map(|k| vec![action_elem(*t, 2 * k), action_elem(*t, 2 * k + 1)])
+                    .collect();
+                let again = match env.step(&a) {
+                    Ok(st) => st.agents.iter().any(|s| s.as_ref().is_none_or(|s| s.done())),
+                    Err(_) => true,
+                };
+                if again {
+                    *races += 1;
+                    let _ = env.reset(Some(*races));
+                }
+            }
+        };
+        for (cars, env, t, races, _) in envs.iter_mut() {
+            drive(*cars, env, t, races, steps / 5);
+        }
+        for _ in 0..reps {
+            for (cars, env, t, races, times) in envs.iter_mut() {
+                times.push(timed_s(|| drive(*cars, env, t, races, steps)));
+            }
+        }
+        let mut lone = None;
+        for (cars, env, t, races, times) in envs {
+            let rate = steps as f64 / median(times);
+            let base = *lone.get_or_insert(rate);
+            out.push(format!(
+                "race=track-{track} cars={cars} world_steps_per_s={rate:.0} per_car={:.2} free_flight_pct={:.1} races={races} reps={reps}",
+                cars as f64 * rate / base,
+                100.0 * env.sim().free_flight_steps() as f64 / (t as f64).max(1.0)
+            ));
+        }
     }
     out
 }

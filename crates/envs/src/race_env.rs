@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RaceSettings {
-    /// Cars on the grid, 2 to 8.
+    /// Cars on the grid, 1 to 8 (one: the lone car that race lap times compare with).
     pub cars: usize,
     /// Reward per metre raced along the centre line.
     pub progress_per_m: f64,
@@ -52,8 +52,8 @@ impl RaceSettings {
     /// Check the settings, naming what is wrong.
     pub fn validate(&self) -> Result<(), EnvError> {
         let bad = |m: String| Err(EnvError::Config(format!("race: {m}")));
-        if !(2..=agvrl_sim::MAX_CARS).contains(&self.cars) {
-            return bad(format!("cars must be 2 to {}, got {}", agvrl_sim::MAX_CARS, self.cars));
+        if !(1..=agvrl_sim::MAX_CARS).contains(&self.cars) {
+            return bad(format!("cars must be 1 to {}, got {}", agvrl_sim::MAX_CARS, self.cars));
         }
         for (k, v) in [
             ("progress_per_m", self.progress_per_m),

@@ -1527,10 +1527,10 @@ mod racing_against_others {
     }
 
     #[test]
-    fn a_race_takes_two_to_eight_cars_and_is_no_single_agent_env() {
+    fn a_race_takes_one_to_eight_cars_and_is_no_single_agent_env() {
         let e = make("racing-duel", &EnvConfig::default()).err().unwrap().to_string();
         assert!(e.contains("make_multi"), "{e}");
-        for cars in [1, 9] {
+        for cars in [0, 9] {
             let cfg = EnvConfig {
                 race: Some(RaceSettings {
                     cars,
@@ -1539,7 +1539,7 @@ mod racing_against_others {
                 ..EnvConfig::default()
             };
             let e = make_multi("racing-duel", &cfg).err().unwrap().to_string();
-            assert!(e.contains("cars must be 2 to 8"), "{e}");
+            assert!(e.contains("cars must be 1 to 8"), "{e}");
         }
         let e = make_multi("racing-oval", &EnvConfig::default())
             .err()

@@ -211,6 +211,8 @@ pub struct Sim {
     pristine: (crate::world::WorldSnapshot, Vec<Body>),
     /// Control steps taken without rapier's pipeline since the simulator was built.
     free_steps: u64,
+    /// Every car's shapes where they stand, for the sensors (empty with one car).
+    shapes: Movers,
 }
 
 /// Most cars one world holds.
@@ -335,6 +337,7 @@ impl Sim {
             steps: 0,
             pristine,
             free_steps: 0,
+            shapes: Movers::default(),
         };
         let poses: Vec<PlanarPose> = (0..n_cars)
             .map(|k| PlanarPose {
@@ -419,6 +422,7 @@ impl Sim {
         }
         self.time_s = 0.0;
         self.steps = 0;
+        self.place_shapes();
         Ok(())
     }
 
@@ -546,6 +550,7 @@ impl Sim {
             car.vel_w = (lin, ang);
             car.imu.update(lin, ang, t as f32);
         }
+        self.place_shapes();
         Ok(())
     }
 
@@ -769,9 +774,9 @@ impl Sim {
     /// Car `i`'s LiDAR scan: the scene and the other cars.
     pub fn lidar_scan_of(&mut self, i: usize) -> LaserScan {
         let pose = self.base_pose_of(i) * self.model.lidar_b;
-        let movers = self.movers(i);
         let car = &mut self.cars[i];
-        car.lidar.scan_with(&self.world.statics, &movers, &pose)
+        car.lidar
+            .scan_with(&self.world.statics, &self.shapes, Some(i as u32), &pose)
     }
 
     /// A LiDAR scan as if the LiDAR link were at `pose_w` (probing; the car does not move).
@@ -789,7 +794,10 @@ impl Sim {
     pub fn camera_frame_of(&self, i: usize) -> Option<crate::sensors::camera::RenderedFrame> {
         self.cfg.settings.camera.as_ref()?;
         let pose = self.camera_pose_of(i)?;
-        Some(self.camera.render_with(&self.world.statics, &self.movers(i), &pose))
+        Some(
+            self.camera
+                .render_with(&self.world.statics, &self.shapes, Some(i as u32), &pose),
+        )
     }
 
     /// Render the camera (configured, or the default 160x120) as if it stood at `pose_w`
@@ -798,15 +806,25 @@ impl Sim {
         self.camera.render(&self.world.statics, pose_w)
     }
 
-    /// Every car's collision shapes but car `i`'s, where they stand now.
-    fn movers(&self, i: usize) -> Movers {
-        let mut m = Movers::default();
-        for (j, car) in self.cars.iter().enumerate().filter(|(j, _)| *j != i) {
+    /// Place every car's collision shapes where the car stands now (worlds of several cars).
+    fn place_shapes(&mut self) {
+        let m = &mut self.shapes;
+        m.entries.clear();
+        m.car.clear();
+        if self.cars.len() < 2 {
+            return;
+        }
+        let color = self.model.body_shapes.first().map_or([0.5; 3], |s| s.color);
+        for (j, car) in self.cars.iter().enumerate() {
+            let base = *self.world.pw.bodies[car.body.base()].position();
             for &h in car.body.colliders() {
                 let co = &self.world.pw.colliders[h];
                 // With free flight the colliders keep the pose of the last rapier step: place
                 // each from its body's pose now.
                 let pose = match co.parent() {
+                    Some(b) if b == car.body.base() => {
+                        base * co.position_wrt_parent().copied().unwrap_or(Pose::IDENTITY)
+                    }
                     Some(b) => {
                         *self.world.pw.bodies[b].position()
                             * co.position_wrt_parent().copied().unwrap_or(Pose::IDENTITY)
@@ -815,17 +833,16 @@ impl Sim {
                 };
                 let shape = co.shared_shape().clone();
                 m.entries.push(StaticEntry {
-                    aabb: shape.compute_aabb(&pose),
+                    aabb: aabb_of(&shape, &pose),
                     fast: FastRay::new(&shape, &pose),
                     shape,
                     pose,
                     object_id: None,
-                    color: self.model.body_shapes.first().map_or([0.5; 3], |s| s.color),
+                    color,
                 });
                 m.car.push(j as u32);
             }
         }
-        m
     }
 
     /// The GPS reading.
@@ -876,6 +893,18 @@ impl Sim {
     /// `base_pose`.
     pub fn world(&self) -> &World {
         &self.world
+    }
+}
+
+/// A shape's world box; a cylinder's in closed form (parry finds it by support points).
+fn aabb_of(shape: &SharedShape, pose: &Pose) -> Aabb {
+    match shape.as_cylinder() {
+        Some(c) => {
+            let a = pose.rotation * Vector::Y;
+            let half = (a.abs() * c.half_height) + (Vector::ONE - a * a).max(Vector::ZERO).sqrt() * c.radius;
+            Aabb::new(pose.translation - half, pose.translation + half)
+        }
+        None => shape.compute_aabb(pose),
     }
 }
 

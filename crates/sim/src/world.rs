@@ -61,14 +61,24 @@ pub struct StaticIndex {
     pub entries: Vec<StaticEntry>,
 }
 
-/// The shapes of the other cars where they stand now, for one car's sensors (a handful of
-/// shapes a car: sensors test them all, after the static scene).
+/// Every car's shapes where they stand now, for the sensors of a world of several cars (a
+/// handful of shapes a car: sensors test them all, after the static scene, but their own).
 #[derive(Clone, Default)]
 pub struct Movers {
     /// The shapes; `object_id` is `None`.
     pub entries: Vec<StaticEntry>,
     /// The car each entry belongs to.
     pub car: Vec<u32>,
+}
+
+impl Movers {
+    /// The entries a sensor of car `own` sees (all but its own), with their index.
+    pub fn seen(&self, own: Option<u32>) -> impl Iterator<Item = (usize, &StaticEntry)> {
+        self.entries
+            .iter()
+            .enumerate()
+            .filter(move |(i, _)| Some(self.car[*i]) != own)
+    }
 }
 
 /// The rapier state plus the static index.

@@ -332,11 +332,18 @@ impl Camera {
     /// Render from a camera at `pose_w` looking along its x axis with z up (the ROS link
     /// convention of a camera mount).
     pub fn render(&self, statics: &StaticIndex, pose_w: &Pose) -> RenderedFrame {
-        self.render_with(statics, &Movers::default(), pose_w)
+        self.render_with(statics, &Movers::default(), None, pose_w)
     }
 
-    /// Render the static scene and the other cars' shapes (class `car`, segmentation 0).
-    pub fn render_with(&self, statics: &StaticIndex, movers: &Movers, pose_w: &Pose) -> RenderedFrame {
+    /// Render the static scene and the cars' shapes but car `own`'s (class `car`,
+    /// segmentation 0).
+    pub fn render_with(
+        &self,
+        statics: &StaticIndex,
+        movers: &Movers,
+        own: Option<u32>,
+        pose_w: &Pose,
+    ) -> RenderedFrame {
         let eye = pose_w.translation;
         let fwd = pose_w.rotation * Vector::X;
         let up = pose_w.rotation * Vector::Z;
@@ -371,7 +378,7 @@ impl Camera {
                 let r = rise(v);
                 for (z, a) in row.iter_mut().zip(&across) {
                     let (d, len) = ray(a, r);
-                    let (t, _, _) = self.nearest(statics, movers, &eye_g, d, self.cfg.far_m * len);
+                    let (t, _, _) = self.nearest(statics, movers, own, &eye_g, d, self.cfg.far_m * len);
                     *z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
                 }
             });
@@ -392,7 +399,7 @@ impl Camera {
                 let r = rise(v);
                 for (u, a) in across.iter().enumerate() {
                     let (d, len) = ray(a, r);
-                    let (t, color, id, c) = self.shade(statics, movers, &eye_g, d, self.cfg.far_m * len);
+                    let (t, color, id, c) = self.shade(statics, movers, own, &eye_g, d, self.cfg.far_m * len);
                     let z = (t / len).clamp(self.cfg.near_m, self.cfg.far_m);
                     depth_row[u] = z;
                     seg_row[u] = id;
@@ -415,6 +422,7 @@ impl Camera {
         &self,
         statics: &StaticIndex,
         movers: &Movers,
+        own: Option<u32>,
         eye: &Eye,
         d: Vector,
         max_t: f32,
@@ -466,7 +474,7 @@ impl Camera {
         if hit.is_some() {
             best = reach;
         }
-        for (m, e) in movers.entries.iter().enumerate() {
+        for (m, e) in movers.seen(own) {
             let inv = *inv.get_or_insert_with(|| slab_recip(d));
             if !crosses_box(o, inv, &e.aabb, best) {
                 continue;
@@ -487,13 +495,14 @@ impl Camera {
         &self,
         statics: &StaticIndex,
         movers: &Movers,
+        own: Option<u32>,
         eye: &Eye,
         d: Vector,
         max_t: f32,
     ) -> (f32, [f32; 3], u32, u8) {
         let sun = Vector::from_array(SUN).normalize();
         let o = eye.o;
-        let (best, hit, ground) = self.nearest(statics, movers, eye, d, max_t);
+        let (best, hit, ground) = self.nearest(statics, movers, own, eye, d, max_t);
         if let Some((k, n)) = hit {
             let (e, class): (&StaticEntry, u8) = match k.checked_sub(statics.entries.len()) {
                 None => (&statics.entries[k], self.classes[k]),

@@ -110,12 +110,12 @@ impl Lidar {
 
     /// Scan the static scene from `pose_w` (the LiDAR link's world pose).
     pub fn scan(&mut self, scene: &StaticIndex, pose_w: &Pose) -> LaserScan {
-        self.scan_with(scene, &Movers::default(), pose_w)
+        self.scan_with(scene, &Movers::default(), None, pose_w)
     }
 
-    /// Scan the static scene and the other cars' shapes from `pose_w`; with other cars the
-    /// scan's `car` names the car each ray hit.
-    pub fn scan_with(&mut self, scene: &StaticIndex, movers: &Movers, pose_w: &Pose) -> LaserScan {
+    /// Scan the static scene and the cars' shapes but car `own`'s from `pose_w`; with other
+    /// cars the scan's `car` names the car each ray hit.
+    pub fn scan_with(&mut self, scene: &StaticIndex, movers: &Movers, own: Option<u32>, pose_w: &Pose) -> LaserScan {
         let (angle_min, angle_increment) = self.cfg.angles();
         let origin = pose_w.translation;
         let rmax = self.cfg.range_max_m;
@@ -136,7 +136,7 @@ impl Lidar {
         let full = self.cfg.fov_deg >= 360.0;
         let mut best = vec![rmax; n];
         let mut best_id: Vec<Option<Option<u32>>> = vec![None; n];
-        let mut best_car: Vec<Option<u32>> = if movers.entries.is_empty() {
+        let mut best_car: Vec<Option<u32>> = if movers.seen(own).next().is_none() {
             Vec::new()
         } else {
             vec![None; n]
@@ -156,9 +156,7 @@ impl Lidar {
         let statics = scene.entries.len();
         self.candidates.extend(
             movers
-                .entries
-                .iter()
-                .enumerate()
+                .seen(own)
                 .filter(|(_, e)| e.aabb.intersects(&reach))
                 .map(|(i, e)| (distance_to_box(&e.aabb, origin), statics + i)),
         );
