@@ -7,11 +7,14 @@ and the Rust trainer.
     policy = agvrl.Policy.load("runs/x/policy.agvrl")
     r = agvrl.replay("drive", "runs/x/policy.agvrl")   # a recorded bag through the policy
     run = agvrl.train("configs/default.toml")       # same run directory as `agvrl train`
+    race = agvrl.make_multi("racing-duel")          # a pettingzoo.ParallelEnv (needs pettingzoo)
 
 Importing the package registers every env with Gymnasium as ``agvrl/<id>-v0``.
 """
 
-from agvrl._core import TERMINATION_CAUSES, env_ids as _env_ids
+from typing import Any
+
+from agvrl._core import TERMINATION_CAUSES, env_ids as _env_ids, multi_env_ids as _multi_env_ids
 from agvrl.bag import Bag, Replay, read_bag, replay
 from agvrl.env import AgvrlEnv, make
 from agvrl.policy import Policy
@@ -20,6 +23,22 @@ from agvrl.vector import AgvrlVectorEnv, make_vec
 
 #: Every env id, as ``agvrl envs`` lists them.
 ENV_IDS: tuple[str, ...] = tuple(_env_ids())
+#: The multi-agent env ids (``make_multi``).
+MULTI_ENV_IDS: tuple[str, ...] = tuple(_multi_env_ids())
+
+
+def make_multi(env_id: str, **env_config: Any):
+    """A race of several cars as a ``pettingzoo.ParallelEnv`` (see ``agvrl.multi``); needs
+    the ``pettingzoo`` package (``pip install agvrl[multi]``)."""
+    try:
+        from agvrl.multi import make_multi as _make
+    except ModuleNotFoundError as e:
+        if e.name != "pettingzoo":
+            raise
+        raise ModuleNotFoundError(
+            "agvrl.make_multi needs PettingZoo: pip install 'pettingzoo>=1.24'", name="pettingzoo"
+        ) from e
+    return _make(env_id, **env_config)
 
 
 def _register() -> None:
@@ -41,6 +60,7 @@ _register()
 
 __all__ = [
     "ENV_IDS",
+    "MULTI_ENV_IDS",
     "TERMINATION_CAUSES",
     "AgvrlEnv",
     "AgvrlVectorEnv",
@@ -49,6 +69,7 @@ __all__ = [
     "Replay",
     "RunResult",
     "make",
+    "make_multi",
     "make_vec",
     "read_bag",
     "replay",

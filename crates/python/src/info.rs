@@ -25,7 +25,7 @@ fn code(c: Option<TerminationCause>) -> i8 {
     })
 }
 
-fn terms(t: &RewardTerms) -> [(&'static str, f64); 9] {
+fn terms(t: &RewardTerms) -> [(&'static str, f64); 11] {
     [
         ("throttle", t.throttle),
         ("steering", t.steering),
@@ -36,6 +36,8 @@ fn terms(t: &RewardTerms) -> [(&'static str, f64); 9] {
         ("proximity", t.proximity),
         ("coverage", t.coverage),
         ("filter", t.filter),
+        ("progress", t.progress),
+        ("car_contact", t.car_contact),
     ]
 }
 
@@ -59,8 +61,9 @@ impl Kind {
 
 /// One env's info: `reward_terms` (a dict), `termination` (a cause name, on a terminating step),
 /// racing (`laps`, `progress_laps`, `last_lap_s`, `best_lap_s`) or search (`coverage`,
-/// `distance_m`, `subjects_found`, `subjects_total`, `find_times_s`, `filter_interventions`) metrics, and `episode`
-/// (`r`, `l`) on the step that ends an episode.
+/// `distance_m`, `subjects_found`, `subjects_total`, `find_times_s`, `filter_interventions`) metrics, a car's
+/// standing in a race (`race`: `position`, `distance_m`, `contacts`, `at_fault`, `overtakes`,
+/// `time_lost_s`, `crashed`), and `episode` (`r`, `l`) on the step that ends an episode.
 pub fn single<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let rt = PyDict::new(py);
@@ -88,6 +91,17 @@ pub fn single<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>>
         d.set_item("subjects_total", s.subjects_total)?;
         d.set_item("find_times_s", s.find_times_s.clone())?;
         d.set_item("filter_interventions", s.filter_interventions)?;
+    }
+    if let Some(r) = &info.race {
+        let race = PyDict::new(py);
+        race.set_item("position", r.position)?;
+        race.set_item("distance_m", r.distance_m)?;
+        race.set_item("contacts", r.contacts)?;
+        race.set_item("at_fault", r.at_fault)?;
+        race.set_item("overtakes", r.overtakes)?;
+        race.set_item("time_lost_s", r.time_lost_s)?;
+        race.set_item("crashed", r.crashed)?;
+        d.set_item("race", race)?;
     }
     if let Some(e) = &info.episode {
         let ep = PyDict::new(py);
@@ -224,5 +238,20 @@ pub fn batch<'py>(py: Python<'py>, kind: Kind, infos: &[Info], only: Option<&[bo
         d.set_item("final_info", fi)?;
         d.set_item("_final_info", PyArray1::from_vec(py, mask))?;
     }
+    Ok(d)
+}
+
+/// A race's results (`RaceSummary`) as a dict of per-car lists.
+pub fn race_summary<'py>(py: Python<'py>, s: &agvrl_envs::RaceSummary) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("order", s.order.clone())?;
+    d.set_item("laps", s.laps.clone())?;
+    d.set_item("best_lap_s", s.best_lap_s.clone())?;
+    d.set_item("distance_m", s.distance_m.clone())?;
+    d.set_item("overtakes", s.overtakes.clone())?;
+    d.set_item("contacts", s.contacts.clone())?;
+    d.set_item("at_fault", s.at_fault.clone())?;
+    d.set_item("time_lost_s", s.time_lost_s.clone())?;
+    d.set_item("crashed", s.crashed.clone())?;
     Ok(d)
 }

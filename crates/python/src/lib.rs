@@ -8,6 +8,7 @@
 
 mod config;
 mod info;
+mod multi;
 
 use agvrl::episode::{SimEnv, make_sim_env};
 use agvrl_envs::{Autoreset, Env as _, EnvConfig, EnvError, VecEnv as RustVecEnv, make};
@@ -799,6 +800,12 @@ fn cli(py: Python<'_>, argv: Vec<String>) -> PyResult<i32> {
     guard(|| Ok(py.detach(|| catch_unwind(|| agvrl::cli::main_with(argv)).unwrap_or(101))))
 }
 
+/// The multi-agent env ids (`agvrl.make_multi`).
+#[pyfunction]
+fn multi_env_ids(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
+    PyList::new(py, agvrl_envs::MULTI_ENV_IDS)
+}
+
 /// The registered env ids, as `agvrl envs` lists them.
 #[pyfunction]
 fn env_ids(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
@@ -809,10 +816,12 @@ fn env_ids(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Env>()?;
     m.add_class::<VecEnv>()?;
+    m.add_class::<multi::MultiEnv>()?;
     m.add_class::<Policy>()?;
     m.add_function(wrap_pyfunction!(train, m)?)?;
     m.add_function(wrap_pyfunction!(bench_rust, m)?)?;
     m.add_function(wrap_pyfunction!(env_ids, m)?)?;
+    m.add_function(wrap_pyfunction!(multi_env_ids, m)?)?;
     m.add_function(wrap_pyfunction!(cli, m)?)?;
     m.add_function(wrap_pyfunction!(bag_messages, m)?)?;
     m.add_function(wrap_pyfunction!(replay_bag, m)?)?;

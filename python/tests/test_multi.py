@@ -1,0 +1,81 @@
+"""Races of several cars: PettingZoo's own parallel API test, seeding, crashed cars leaving."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+import agvrl
+
+pettingzoo_test = pytest.importorskip("pettingzoo.test")
+
+from conftest import ROOT  # noqa: E402
+
+SWEEPERS = str(ROOT / "assets" / "tracks" / "sweepers.yaml")
+
+
+def test_a_race_passes_pettingzoos_parallel_api_test_without_warnings():
+    assert agvrl.MULTI_ENV_IDS == ("racing-duel",)
+    for cfg in ({"max_steps": 200}, {"max_steps": 200, "track": SWEEPERS, "race": {"cars": 4}}):
+        env = agvrl.make_multi("racing-duel", **cfg)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            pettingzoo_test.parallel_api_test(env, num_cycles=300)
+        assert len(env.possible_agents) == cfg.get("race", {}).get("cars", 2)
+
+
+def test_the_same_seed_and_actions_give_the_same_race():
+    def run():
+        env = agvrl.make_multi("racing-duel", track=SWEEPERS, max_steps=80)
+        obs, _ = env.reset(seed=5)
+        out = [obs]
+        rng = np.random.default_rng(1)
+        while env.agents:
+            acts = {a: rng.uniform(-1, 1, 2).astype(np.float32) for a in env.agents}
+            out.append(env.step(acts))
+        return out
+
+    a, b = run(), run()
+    assert len(a) == len(b) == 81
+    for x, y in zip(a[1:], b[1:]):
+        for da, db in zip(x, y):
+            assert da.keys() == db.keys()
+            for k in da:
+                if isinstance(da[k], np.ndarray):
+                    assert np.array_equal(da[k], db[k])
+                else:
+                    assert da[k] == db[k]
+
+
+def test_a_crashed_car_leaves_the_agents_and_the_race_goes_on():
+    env = agvrl.make_multi("racing-duel", track=SWEEPERS, max_steps=400)
+    env.reset(seed=0)
+    gone = None
+    for _ in range(400):
+        # car_0 steers hard left at half throttle; car_1 waits on the grid.
+        acts = {a: np.array([0.0, 1.0] if a == "car_0" else [-1.0, 0.0], np.float32) for a in env.agents}
+        obs, rew, term, trunc, info = env.step(acts)
+        if gone is None and term.get("car_0"):
+            assert info["car_0"]["reward_terms"]["collision"] == -50.0 and info["car_0"]["race"]["crashed"]
+            assert rew["car_0"] == pytest.approx(sum(info["car_0"]["reward_terms"].values()))
+            assert info["car_0"]["termination"] in agvrl.TERMINATION_CAUSES
+            gone = True
+            assert env.agents == ["car_1"]
+        if not env.agents:
+            assert trunc["car_1"]
+            summary = info["car_1"]["race_summary"]
+            assert summary["crashed"] == [True, False] and summary["order"] == [1, 0]
+            break
+    assert gone, "steering hard left crashes car_0"
+    with pytest.raises(KeyError, match="car_1"):
+        env.reset(seed=1)
+        env.step({"car_0": np.zeros(2, np.float32)})
+
+
+def test_bad_race_settings_read_as_the_cli_would():
+    with pytest.raises(ValueError, match="cars must be 1 to 8"):
+        agvrl.make_multi("racing-duel", race={"cars": 9})
+    with pytest.raises(ValueError, match="racing-duel"):
+        agvrl.make_multi("racing-oval")
+    with pytest.raises(ValueError, match="make_multi"):
+        agvrl.make("racing-duel")
