@@ -1,7 +1,7 @@
 //! The `agvrl` command line (the `agvrl` binary, and the `agvrl` script of the Python wheel).
 
 use crate::bench::{self, BenchPart};
-use crate::{eval, policy_file, probe, train, view};
+use crate::{eval, policy_file, probe, race, train, view};
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
@@ -20,6 +20,9 @@ enum Cmd {
     Eval(eval::EvalArgs),
     /// Drive one episode (a policy, or random actions) into the rerun viewer or an .rrd file.
     View(view::ViewArgs),
+    /// Race policies against each other on one track (held-out races, deterministic actions);
+    /// prints each car's wins, places, laps, passes and contacts.
+    Race(race::RaceArgs),
     /// Print the settings a policy file drives with (env id, env settings), or write a copy
     /// with other settings embedded (--settings, --set, --out).
     Policy(policy_file::PolicyArgs),
@@ -103,6 +106,7 @@ fn run(cli: Cli) -> Result<()> {
         Some(Cmd::Train(a)) => train::train(a),
         Some(Cmd::Eval(a)) => eval::eval(a),
         Some(Cmd::View(a)) => view::view(a),
+        Some(Cmd::Race(a)) => race::race(a),
         Some(Cmd::Policy(a)) => policy_file::policy(a),
         Some(Cmd::Envs) => envs(),
         Some(Cmd::Probe(a)) => probe::probe(a),
@@ -146,6 +150,22 @@ fn envs() -> Result<()> {
             format!("Box({}) in [{lo}, {hi}]", s.dim())
         };
         println!("{id:<20} obs={:<28} act={}  dt={:.4}s", fmt(&o), fmt(&a), env.dt_s());
+    }
+    for id in agvrl_envs::MULTI_ENV_IDS {
+        let env = agvrl_envs::make_multi(id, &agvrl_envs::EnvConfig::default())?;
+        let (o, a) = (env.observation_space(), env.action_space());
+        let fmt = |s: &agvrl_envs::BoxSpace| {
+            let lo = s.low.iter().cloned().fold(f32::INFINITY, f32::min);
+            let hi = s.high.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+            format!("Box({}) in [{lo}, {hi}]", s.dim())
+        };
+        println!(
+            "{id:<20} obs={:<28} act={}  dt={:.4}s  agents={} (multi-agent: agvrl race, agvrl.make_multi)",
+            fmt(&o),
+            fmt(&a),
+            env.dt_s(),
+            env.n_agents()
+        );
     }
     Ok(())
 }

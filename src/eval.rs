@@ -426,6 +426,7 @@ impl Watch {
             self.paths.push(Path2 {
                 xy: Vec::new(),
                 collided: false,
+                label: None,
             });
         }
         if v.episode < self.plot_episodes

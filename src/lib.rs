@@ -13,7 +13,9 @@ pub mod planner;
 pub mod plots;
 pub mod policy_file;
 pub mod probe;
+pub mod race;
 #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
+pub mod selfplay;
 pub mod sink;
 pub mod train;
 #[cfg_attr(not(feature = "rerun"), allow(dead_code))]

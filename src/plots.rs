@@ -189,6 +189,8 @@ pub fn coverage_over_time(path: &Path, series: &[(String, String)], title: &str)
 pub struct Path2 {
     pub xy: Vec<(f32, f32)>,
     pub collided: bool,
+    /// The legend's name (`None`: "episode k").
+    pub label: Option<String>,
 }
 
 /// A filled footprint in the top view.
@@ -413,8 +415,8 @@ pub fn trajectory(path: &Path, scene: &Scene, paths: &[Path2], title: &str) -> R
                 .draw_series(LineSeries::new(p.xy.iter().copied(), c.stroke_width(2)))
                 .map_err(e)?
                 .label(format!(
-                    "episode {}{}",
-                    k + 1,
+                    "{}{}",
+                    p.label.clone().unwrap_or_else(|| format!("episode {}", k + 1)),
                     if p.collided { " (collision)" } else { "" }
                 ))
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2)));

@@ -4,7 +4,9 @@
 use crate::config::{DEFAULT_TOML, RunConfig};
 use crate::eval::{Driver, Summary, Watch, evaluate};
 use crate::plots::{self};
+use crate::selfplay::{Pool, SelfPlayEnv};
 use crate::viz::{self, Recorder, Sink};
+use agvrl_envs::wrappers::TimeLimit;
 use agvrl_envs::{Env, VecEnv, make};
 use agvrl_rl::{Algorithm, Control, DeviceChoice, Learner, Policy, Ppo, Progress, Sac};
 use agvrl_run::{Run, RunDir, RunReport, files, stamp, write_atomic};
@@ -162,11 +164,30 @@ fn image_spec_from_env(cfg: &mut RunConfig) {
     cfg.sac.image = keep(cfg.sac.image);
 }
 
-fn vec_env(cfg: &RunConfig) -> Result<VecEnv<Box<dyn Env>>> {
+/// The training envs; a race's are self-play envs drawing opponents from `pool`.
+fn vec_env(cfg: &RunConfig, pool: &Pool) -> Result<VecEnv<Box<dyn Env>>> {
     let envs = (0..cfg.n_envs)
-        .map(|i| make(cfg.train_env_id(i), &cfg.train_env_config(i)))
-        .collect::<Result<Vec<_>, _>>()?;
+        .map(|i| -> Result<Box<dyn Env>> {
+            let (id, env_cfg) = (cfg.train_env_id(i), cfg.train_env_config(i));
+            Ok(match agvrl_envs::MULTI_ENV_IDS.contains(&id) {
+                true => Box::new(TimeLimit::new(
+                    SelfPlayEnv::new(id, &env_cfg, pool.clone())?,
+                    env_cfg.max_steps,
+                )),
+                false => make(id, &env_cfg)?,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
     Ok(VecEnv::new(envs, cfg.threads)?)
+}
+
+/// The opponent pool of a self-play run, holding `learner`'s first snapshot; `None` for
+/// other runs.
+fn pool_of(cfg: &RunConfig, pool: Pool, learner: &dyn Learner) -> Option<Pool> {
+    agvrl_envs::MULTI_ENV_IDS.contains(&cfg.env.as_str()).then(|| {
+        pool.push(learner.policy_data());
+        pool
+    })
 }
 
 pub fn train(a: TrainArgs) -> Result<()> {
@@ -193,17 +214,20 @@ pub fn train(a: TrainArgs) -> Result<()> {
         let run = RunDir::resume(dir)?;
         let cfg = RunConfig::load(&run.file(files::CONFIG))?;
         let ckpt = run.file(files::CHECKPOINT);
+        // A resumed self-play run's pool starts again from the resumed policy.
+        let pool = Pool::default();
         let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
             Box::new(ppo_with_threads(
-                Ppo::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?,
+                Ppo::load_checkpoint(&ckpt, vec_env(&cfg, &pool)?, &device)?,
                 &cfg,
             ))
         } else {
             Box::new(sac_with_threads(
-                Sac::load_checkpoint(&ckpt, vec_env(&cfg)?, &device)?,
+                Sac::load_checkpoint(&ckpt, vec_env(&cfg, &pool)?, &device)?,
                 &cfg,
             )?)
         };
+        let pool = pool_of(&cfg, pool, learner.as_ref());
         let target = match a.steps {
             Some(more) => learner.num_timesteps() + more,
             None => cfg.steps,
@@ -222,7 +246,16 @@ pub fn train(a: TrainArgs) -> Result<()> {
             learner.num_timesteps()
         );
         let files = |name: &str| run.file(name);
-        let report = run_learner(learner.as_mut(), &cfg, target, &files, &previous, &STOP, a.progress)?;
+        let report = run_learner(
+            learner.as_mut(),
+            &cfg,
+            target,
+            &files,
+            &previous,
+            &STOP,
+            a.progress,
+            pool.as_ref(),
+        )?;
         let dir = run.finish()?;
         println!("run_dir={}", dir.display());
         print!("{}", report.text());
@@ -297,19 +330,30 @@ pub fn train_run(
         "training {} on {} for {} steps (seed {}, {} envs)",
         cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs
     );
+    let pool = Pool::default();
     let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
         Box::new(ppo_with_threads(
-            Ppo::new(cfg.ppo.clone(), vec_env(&cfg)?, device, cfg.seed)?,
+            Ppo::new(cfg.ppo.clone(), vec_env(&cfg, &pool)?, device, cfg.seed)?,
             &cfg,
         ))
     } else {
         Box::new(sac_with_threads(
-            Sac::new(cfg.sac.clone(), vec_env(&cfg)?, device, cfg.seed)?,
+            Sac::new(cfg.sac.clone(), vec_env(&cfg, &pool)?, device, cfg.seed)?,
             &cfg,
         )?)
     };
+    let pool = pool_of(&cfg, pool, learner.as_ref());
     let files = |name: &str| run.file(name);
-    let report = run_learner(learner.as_mut(), &cfg, cfg.steps, &files, "", stop, progress)?;
+    let report = run_learner(
+        learner.as_mut(),
+        &cfg,
+        cfg.steps,
+        &files,
+        "",
+        stop,
+        progress,
+        pool.as_ref(),
+    )?;
     let dir = run.finish()?;
     Ok((dir, report))
 }
@@ -329,9 +373,11 @@ fn ppo_with_threads<E: Env>(mut ppo: Ppo<E>, cfg: &RunConfig) -> Ppo<E> {
 
 static STOP_HANDLER: std::sync::OnceLock<()> = std::sync::OnceLock::new();
 
-/// Train `learner` up to `target` steps (or a Ctrl-C), checkpointing every tenth; write
-/// checkpoint.ckpt, policy.agvrl, metrics.csv (after `previous_csv`), the deterministic
-/// evaluation (plots, recording), eval.txt and eval.json; returns the evaluation.
+/// Train `learner` up to `target` steps (or a Ctrl-C), checkpointing every tenth (and adding
+/// a snapshot to a self-play run's opponent `pool`); write checkpoint.ckpt, policy.agvrl,
+/// metrics.csv (after `previous_csv`), the deterministic evaluation (plots, recording),
+/// eval.txt and eval.json; returns the evaluation.
+#[allow(clippy::too_many_arguments)]
 fn run_learner(
     learner: &mut dyn Learner,
     cfg: &RunConfig,
@@ -340,9 +386,10 @@ fn run_learner(
     previous_csv: &str,
     stop: &AtomicBool,
     progress: ProgressMode,
+    pool: Option<&Pool>,
 ) -> Result<RunReport> {
     let t0 = Instant::now();
-    let rows = learn_in_chunks(learner, cfg, target, file, previous_csv, stop, progress)?;
+    let rows = learn_in_chunks(learner, cfg, target, file, previous_csv, stop, progress, pool)?;
     let policy_path = file(files::POLICY);
     // The policy file carries the settings it drives with: the run config.
     let mut policy_data = learner.policy_data();
@@ -368,8 +415,9 @@ fn run_learner(
 }
 
 /// `learn` in chunks up to `target` (at least every tenth of the run and every 50,000 steps a
-/// checkpoint), reporting progress as `progress` asks; stops early once `stop` is set. Returns
-/// a metrics row per update.
+/// checkpoint and a snapshot into `pool`), reporting progress as `progress` asks; stops early
+/// once `stop` is set. Returns a metrics row per update.
+#[allow(clippy::too_many_arguments)]
 fn learn_in_chunks(
     learner: &mut dyn Learner,
     cfg: &RunConfig,
@@ -378,6 +426,7 @@ fn learn_in_chunks(
     previous_csv: &str,
     stop: &AtomicBool,
     progress: ProgressMode,
+    pool: Option<&Pool>,
 ) -> Result<Vec<Row>> {
     let start = learner.num_timesteps();
     let bar = match progress {
@@ -434,6 +483,9 @@ fn learn_in_chunks(
         let csv = metrics_csv(previous_csv, &rows.borrow());
         write_atomic(&file(files::METRICS), csv.as_bytes())?;
         learner.save_checkpoint(&file(files::CHECKPOINT))?;
+        if let Some(p) = pool {
+            p.push(learner.policy_data());
+        }
     }
     learner.save_checkpoint(&file(files::CHECKPOINT))?;
     bar.finish_and_clear();
@@ -481,7 +533,7 @@ fn evaluate_run(cfg: &RunConfig, policy_path: &std::path::Path, file: &dyn Fn(&s
         plot_episodes: usize::MAX,
         ..Watch::default()
     };
-    if viz::ENABLED && agvrl_envs::registry::scene_of(&cfg.env).is_some() {
+    if viz::ENABLED && agvrl_envs::registry::scene_of(cfg.eval_env_id()).is_some() {
         watch.rec = Some(Recorder::new(
             Sink::File(file(files::RECORDING)),
             &format!("{}{} {} eval", cfg.env, cfg.env_config.track_suffix(), cfg.algo),
@@ -490,7 +542,7 @@ fn evaluate_run(cfg: &RunConfig, policy_path: &std::path::Path, file: &dyn Fn(&s
     }
     let summary = evaluate(
         Driver::Policy(&mut policy),
-        &cfg.env,
+        cfg.eval_env_id(),
         &cfg.eval_env_config(),
         cfg.eval_episodes,
         cfg.seeds().run_evaluation(),

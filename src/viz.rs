@@ -19,6 +19,8 @@ pub struct Recorder {
     /// Semantic class id of each scene object (segmentation pixel value - 1).
     class_of: Vec<u16>,
     trail: Vec<[f32; 3]>,
+    /// Each car's path in a race.
+    trails: Vec<Vec<[f32; 3]>>,
     step: i64,
     /// Log camera images every this many steps (they are large).
     pub image_every: u64,
@@ -125,6 +127,7 @@ impl Recorder {
             scene_logged: false,
             class_of: Vec::new(),
             trail: Vec::new(),
+            trails: Vec::new(),
             step: 0,
             image_every: 3,
         })
@@ -202,6 +205,12 @@ impl Recorder {
             return Ok(());
         }
         self.scene_logged = true;
+        self.scene_objects(sim)?;
+        self.vehicle_body(sim)
+    }
+
+    /// The ground, the scene's objects and the segmentation classes.
+    fn scene_objects(&mut self, sim: &Sim) -> Result<()> {
         let scene = sim.scene();
         let g = &scene.file.ground;
         self.rec.log_static(
@@ -247,7 +256,12 @@ impl Recorder {
                 )?;
             }
         }
-        // The car in its own frame: a chassis spanning the wheels, and the wheels.
+        Ok(())
+    }
+
+    /// The car in its own frame under `world/vehicle`: a chassis spanning the wheels, and the
+    /// wheels.
+    fn vehicle_body(&mut self, sim: &Sim) -> Result<()> {
         let v = sim.vehicle();
         let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
         for w in &v.wheels {
@@ -358,6 +372,89 @@ impl Recorder {
             rec.log(
                 "log",
                 &rerun::TextLog::new(format!("episode {} ended at step {}: {what}", v.episode, v.step)),
+            )?;
+        }
+        Ok(())
+    }
+
+    /// One step of race `race` (a race starts at `step == 0`): every car its own entity
+    /// `world/car_<i>` (its collision shapes, the upper deck included, in its frame, and the
+    /// wheels), its path `world/paths/car_<i>`, its LiDAR `world/lidar/car_<i>`, its speed in
+    /// `plots/speed_mps/car_<i>`.
+    pub fn race_step(
+        &mut self,
+        sim: &Sim,
+        scans: &[Option<&agvrl_sim::msg::LaserScan>],
+        race: usize,
+        step: u64,
+    ) -> Result<()> {
+        let palette = [
+            [0.12, 0.35, 0.85],
+            [0.85, 0.2, 0.2],
+            [0.1, 0.65, 0.3],
+            [0.9, 0.6, 0.1],
+            [0.55, 0.25, 0.75],
+            [0.1, 0.7, 0.75],
+            [0.4, 0.4, 0.4],
+            [0.95, 0.4, 0.7],
+        ];
+        let n = sim.n_cars();
+        if !self.scene_logged {
+            self.scene_logged = true;
+            self.scene_objects(sim)?;
+            let v = sim.vehicle();
+            for i in 0..n {
+                let c = palette[i % palette.len()];
+                for (k, s) in v.body_shapes.iter().enumerate() {
+                    self.log_shape(&format!("world/car_{i}/body/{k}"), &s.shape, &s.pose, c)?;
+                }
+                let q = q_of(Rotation::from_rotation_x(-std::f32::consts::FRAC_PI_2));
+                self.rec.log_static(
+                    format!("world/car_{i}/wheels"),
+                    &rerun::Cylinders3D::from_lengths_and_radii(
+                        v.wheels.iter().map(|w| w.width_m),
+                        v.wheels.iter().map(|w| w.radius_m),
+                    )
+                    .with_centers(v.wheels.iter().map(|w| [w.center_b.x, w.center_b.y, w.center_b.z]))
+                    .with_quaternions(v.wheels.iter().map(|_| q))
+                    .with_colors([rerun::Color::from_rgb(30, 30, 30)])
+                    .with_fill_mode(rerun::FillMode::Solid),
+                )?;
+            }
+        }
+        if step == 0 {
+            self.trails = vec![Vec::new(); n];
+        }
+        let rec = &self.rec;
+        rec.set_time_sequence("step", self.step);
+        rec.set_time_sequence("race", race as i64);
+        self.step += 1;
+        for i in 0..n {
+            let pose = sim.base_pose_of(i);
+            let t = pose.translation;
+            rec.log(
+                format!("world/car_{i}"),
+                &rerun::Transform3D::from_translation_rotation([t.x, t.y, t.z], q_of(pose.rotation)),
+            )?;
+            if let Some(trail) = self.trails.get_mut(i) {
+                trail.push([t.x, t.y, t.z + 0.02]);
+                rec.log(
+                    format!("world/paths/car_{i}"),
+                    &rerun::LineStrips3D::new([trail.clone()]).with_colors([color(palette[i % palette.len()])]),
+                )?;
+            }
+            if let Some(Some(scan)) = scans.get(i) {
+                log_scan(
+                    rec,
+                    &format!("world/lidar/car_{i}"),
+                    scan.origin_w,
+                    &scan.points_w,
+                    &scan.hit,
+                )?;
+            }
+            rec.log(
+                format!("plots/speed_mps/car_{i}"),
+                &rerun::Scalars::single(sim.forward_speed_mps_of(i) as f64),
             )?;
         }
         Ok(())

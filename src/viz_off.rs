@@ -21,6 +21,16 @@ impl Recorder {
         Ok(())
     }
 
+    pub fn race_step(
+        &mut self,
+        _sim: &agvrl_sim::Sim,
+        _scans: &[Option<&agvrl_sim::msg::LaserScan>],
+        _race: usize,
+        _step: u64,
+    ) -> Result<()> {
+        Ok(())
+    }
+
     pub fn finish(self) -> Result<Option<PathBuf>> {
         Ok(None)
     }

@@ -339,6 +339,7 @@ mod cli {
             "search-urban-50",
             "racing-oval",
             "pendulum",
+            "racing-duel",
         ] {
             assert!(out.contains(id), "{out}");
         }
@@ -1119,5 +1120,112 @@ mod trials {
             .filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().ends_with(".partial"))
             .count();
         assert_eq!(partial, 0);
+    }
+}
+
+mod racing_against_others {
+    use super::*;
+
+    fn key<'a>(line: &'a str, k: &str) -> &'a str {
+        line.split_whitespace()
+            .find_map(|kv| kv.strip_prefix(&format!("{k}=")))
+            .unwrap_or_else(|| panic!("no {k}= in {line}"))
+    }
+
+    /// configs/duel.toml trains by self-play (a tiny run, twice: the same policy file, bit for
+    /// bit); the policy drives alone in `eval`, and `agvrl race` races it against the shipped
+    /// single-car policy: a line per car, the first race's paths drawn, and a recording with
+    /// every car its own entity.
+    #[test]
+    fn self_play_trains_a_duel_policy_that_races_the_single_car_one() {
+        let d = tmp("duel");
+        let train = |out: &Path| {
+            let o = agvrl(&[
+                "train",
+                "--config",
+                "configs/duel.toml",
+                "--set",
+                "steps=1024",
+                "--set",
+                "n_envs=2",
+                "--set",
+                "ppo.n_steps=128",
+                "--set",
+                "ppo.batch_size=64",
+                "--set",
+                "ppo.n_epochs=1",
+                "--set",
+                "eval_episodes=1",
+                "--set",
+                "eval_max_steps=60",
+                "--set",
+                "env_config.max_steps=100",
+                "--out",
+                out.to_str().unwrap(),
+            ]);
+            assert!(o.status.success(), "{}", stderr(&o));
+            std::fs::read(out.join("policy.agvrl")).unwrap()
+        };
+        let (a, b) = (train(&d.path().join("a")), train(&d.path().join("b")));
+        assert!(a == b, "the same self-play run twice gives the same policy file");
+        let policy = d.path().join("a/policy.agvrl");
+        let eval = agvrl(&[
+            "eval",
+            "--policy",
+            policy.to_str().unwrap(),
+            "--episodes",
+            "1",
+            "--max-steps",
+            "50",
+        ]);
+        assert!(eval.status.success(), "{}", stderr(&eval));
+        assert!(stdout(&eval).contains("env=racing-oval") && stdout(&eval).contains("track=bean"));
+        let (png, rrd) = (d.path().join("race.png"), d.path().join("race.rrd"));
+        let o = agvrl(&[
+            "race",
+            "--policy",
+            policy.to_str().unwrap(),
+            "--policy",
+            "assets/policies/racing-oval-ppo.agvrl",
+            "--races",
+            "2",
+            "--max-steps",
+            "120",
+            "--plot",
+            png.to_str().unwrap(),
+            "--rerun",
+            rrd.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let out = stdout(&o);
+        let cars: Vec<&str> = out.lines().filter(|l| l.starts_with("car=")).collect();
+        assert_eq!(cars.len(), 2, "{out}");
+        assert!(out.contains("track=bean cars=2 races=2"), "{out}");
+        let wins: f64 = cars.iter().map(|l| key(l, "win_rate").parse::<f64>().unwrap()).sum();
+        assert!((wins - 1.0).abs() < 1e-9, "one winner a race: {out}");
+        for l in &cars {
+            for k in [
+                "mean_place",
+                "laps_per_race",
+                "overtakes_per_race",
+                "contacts_per_race",
+                "time_lost_s_per_race",
+                "crashes",
+            ] {
+                key(l, k);
+            }
+        }
+        let (w, h, colours) = png_summary(&png);
+        assert!(w > 400 && h > 300 && colours > 5, "{w}x{h}, {colours} colours");
+        rrd_check(
+            &rrd,
+            &["world/car_0", "world/car_1", "world/paths/car_1", "world/lidar/car_0"],
+        );
+        let o = agvrl(&["race", "--policy", "a.agvrl", "--policy", "b.agvrl", "--cars", "3"]);
+        assert!(!o.status.success());
+        assert_eq!(
+            stderr(&o).trim(),
+            "error: 2 policies for 3 cars: give one policy per car, or one for all"
+        );
     }
 }

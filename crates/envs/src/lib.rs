@@ -31,7 +31,7 @@ pub use api::{BoxSpace, Control, Env, EnvError, Info, MultiEnv, MultiStep, RaceS
 pub use check::{CheckError, check_env};
 pub use race_env::{RaceEnv, RaceSettings};
 pub use registry::{
-    ENV_IDS, ENVS, EnvConfig, EnvSpec, MULTI_ENV_IDS, TaskKind, TrackSetting, make, make_multi, make_race,
+    ENV_IDS, ENVS, EnvConfig, EnvSpec, MULTI_ENV_IDS, TaskKind, TrackSetting, lone_car_id, make, make_multi, make_race,
     make_sim_car, make_task, make_vehicle,
 };
 pub use sim_vehicle::{Randomisation, SimCar, SimVehicle, SpawnMode};

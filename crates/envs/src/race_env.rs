@@ -1,7 +1,8 @@
 //! `RaceEnv`: several cars on one track in one world, each driven by its own racing task (the
-//! single-car task's observation, action mapping, safety filter and wall termination), with
-//! race rewards on top: progress, a penalty on the car whose front touches another, the crash
-//! penalty. A crashed car is parked where it stopped and stays an obstacle until the race ends.
+//! single-car task's observation, action mapping, safety filter, reward and wall
+//! termination), with race terms on top: progress along the centre line, and a penalty on the
+//! car whose front touches another. A crashed car is parked where it stopped and stays an
+//! obstacle until the race ends.
 
 use crate::api::{
     BoxSpace, Control, EnvError, EpisodeSummary, Info, MapInfo, MultiEnv, MultiStep, RaceCarInfo, RaceSummary,
@@ -25,8 +26,6 @@ pub struct RaceSettings {
     pub progress_per_m: f64,
     /// Reward on every step a car touches another with its front (a negative number).
     pub contact_penalty: f64,
-    /// Reward on the step a car crashes into a wall (a negative number).
-    pub crash_penalty: f64,
     /// Distance between grid rows along the centre line, metres.
     pub grid_gap_m: f32,
     /// Lateral offset of the two grid columns from the centre line, metres, at most: where the
@@ -40,8 +39,7 @@ impl Default for RaceSettings {
         Self {
             cars: 2,
             progress_per_m: 1.0,
-            contact_penalty: -1.0,
-            crash_penalty: crate::task::reward::PENALTY,
+            contact_penalty: -2.0,
             grid_gap_m: 0.8,
             grid_offset_m: 0.3,
         }
@@ -58,7 +56,6 @@ impl RaceSettings {
         for (k, v) in [
             ("progress_per_m", self.progress_per_m),
             ("contact_penalty", self.contact_penalty),
-            ("crash_penalty", self.crash_penalty),
         ] {
             if !v.is_finite() {
                 return bad(format!("{k} must be finite, got {v}"));
@@ -100,6 +97,7 @@ struct Racer {
     lap_start_s: Option<f64>,
     last_lap_s: Option<f64>,
     best_lap_s: Option<f64>,
+    lap_times_s: Vec<f64>,
     contacts: u32,
     at_fault: u32,
     overtakes: u32,
@@ -176,6 +174,22 @@ impl RaceEnv {
         })
     }
 
+    /// Car `i`'s last observation (after the last reset or step): opponents driven in-process
+    /// act on it.
+    pub fn observation_of(&self, i: usize) -> Vec<f32> {
+        self.tasks[i].observe(&self.frames[i])
+    }
+
+    /// Car `i`'s last sensor frame.
+    pub fn frame_of(&self, i: usize) -> &SensorFrame {
+        &self.frames[i]
+    }
+
+    /// Whether car `i`'s episode has ended (crashed or out of time).
+    pub fn done(&self, i: usize) -> bool {
+        self.racers[i].done
+    }
+
     /// The simulator (read-only): viewers and plots.
     pub fn sim(&self) -> &Sim {
         &self.sim
@@ -231,6 +245,7 @@ impl RaceEnv {
             order: self.positions(),
             laps: r.iter().map(|c| c.laps).collect(),
             best_lap_s: r.iter().map(|c| c.best_lap_s).collect(),
+            lap_times_s: r.iter().map(|c| c.lap_times_s.clone()).collect(),
             distance_m: r.iter().map(|c| c.distance_m).collect(),
             overtakes: r.iter().map(|c| c.overtakes).collect(),
             contacts: r.iter().map(|c| c.contacts).collect(),
@@ -247,7 +262,7 @@ fn grid(sim: &Sim, track: &Track, settings: &RaceSettings) -> Vec<PlanarPose> {
     let slot = |k: usize, offset: f32| {
         let s = -(0.5 * settings.grid_gap_m + settings.grid_gap_m * k as f32);
         let ([x, y], [dx, dy]) = track.centreline_at(s.rem_euclid(track.lap_length_m()));
-        let side = if k % 2 == 0 { offset } else { -offset };
+        let side = if k.is_multiple_of(2) { offset } else { -offset };
         PlanarPose {
             x_m: x - side * dy,
             y_m: y + side * dx,
@@ -400,6 +415,7 @@ impl MultiEnv for RaceEnv {
                 if let Some(t0) = r.lap_start_s {
                     let t = now - t0;
                     r.last_lap_s = Some(t);
+                    r.lap_times_s.push(t);
                     r.best_lap_s = Some(r.best_lap_s.map_or(t, |b| b.min(t)));
                 }
                 r.lap_start_s = Some(now);
@@ -429,8 +445,7 @@ impl MultiEnv for RaceEnv {
                 } else {
                     0.0
                 },
-                collision: if terminated { self.settings.crash_penalty } else { 0.0 },
-                ..RewardTerms::default()
+                ..out.terms
             };
             let reward = terms.total();
             r.ret += reward;

@@ -403,6 +403,12 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
 /// `track` (two unless `race.cars` says otherwise).
 pub const MULTI_ENV_IDS: &[&str] = &["racing-duel"];
 
+/// The single-car env a policy of env `id` drives alone: a race's is `racing-oval` (on the
+/// same track), any other env its own.
+pub fn lone_car_id(id: &str) -> &str {
+    if MULTI_ENV_IDS.contains(&id) { "racing-oval" } else { id }
+}
+
 /// Build the multi-agent env `id` with `cfg`: one racing task per car (the single-car task's
 /// observation, actions and safety filter), race rewards from `cfg.race`. Sensor noise is a
 /// single-car setting.

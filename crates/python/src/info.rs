@@ -247,6 +247,7 @@ pub fn race_summary<'py>(py: Python<'py>, s: &agvrl_envs::RaceSummary) -> PyResu
     d.set_item("order", s.order.clone())?;
     d.set_item("laps", s.laps.clone())?;
     d.set_item("best_lap_s", s.best_lap_s.clone())?;
+    d.set_item("lap_times_s", s.lap_times_s.clone())?;
     d.set_item("distance_m", s.distance_m.clone())?;
     d.set_item("overtakes", s.overtakes.clone())?;
     d.set_item("contacts", s.contacts.clone())?;

@@ -137,11 +137,19 @@ impl RunConfig {
 
     /// Check values a typo would break.
     pub fn validate(&self) -> Result<()> {
-        if !agvrl_envs::ENV_IDS.contains(&self.env.as_str()) {
+        let multi = agvrl_envs::MULTI_ENV_IDS.contains(&self.env.as_str());
+        if !agvrl_envs::ENV_IDS.contains(&self.env.as_str()) && !multi {
             return Err(RunError::Config(format!(
-                "unknown env id '{}'; valid ids: {}",
+                "unknown env id '{}'; valid ids: {}, {}",
                 self.env,
-                agvrl_envs::ENV_IDS.join(", ")
+                agvrl_envs::ENV_IDS.join(", "),
+                agvrl_envs::MULTI_ENV_IDS.join(", ")
+            )));
+        }
+        if multi && (self.algo != Algorithm::Ppo || !self.train_envs.is_empty() || self.procedural_layouts > 0) {
+            return Err(RunError::Config(format!(
+                "{} trains one PPO policy by self-play: algo = \"ppo\", no train_envs, no procedural_layouts",
+                self.env
             )));
         }
         for id in &self.train_envs {
@@ -215,6 +223,12 @@ impl RunConfig {
     /// Which seed each use of this run's `seed` gets.
     pub fn seeds(&self) -> crate::Seeds {
         crate::Seeds::of(self.seed)
+    }
+
+    /// The env the run's evaluation drives: a race's policy alone on the same track
+    /// ([`agvrl_envs::lone_car_id`]).
+    pub fn eval_env_id(&self) -> &str {
+        agvrl_envs::lone_car_id(&self.env)
     }
 
     /// Env settings for evaluation episodes: the built-in map, held-out seeds.

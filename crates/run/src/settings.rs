@@ -114,11 +114,12 @@ impl PolicySettings {
         })
     }
 
-    /// The env to drive: `over` (`--env`), else the settings' env.
+    /// The env to drive: `over` (`--env`), else the settings' env (a race's policy drives
+    /// alone: [`RunConfig::eval_env_id`]).
     pub fn env_id(&self, over: Option<&str>) -> Result<String> {
         match (over, &self.run) {
             (Some(id), _) => Ok(id.to_string()),
-            (None, Some(run)) => Ok(run.env.clone()),
+            (None, Some(run)) => Ok(run.eval_env_id().to_string()),
             (None, None) => Err(RunError::Config(format!(
                 "--env is needed: {} carries no settings naming its env",
                 self.policy.display()

@@ -47,6 +47,8 @@ pub struct RaceSummary {
     pub laps: Vec<u32>,
     /// Fastest lap, seconds.
     pub best_lap_s: Vec<Option<f64>>,
+    /// Every completed lap's time, seconds, in order.
+    pub lap_times_s: Vec<Vec<f64>>,
     /// Distance raced from the start line, metres.
     pub distance_m: Vec<f64>,
     /// Cars passed.

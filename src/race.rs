@@ -1,0 +1,233 @@
+//! `agvrl race`: policies race each other (or themselves) on one track, deterministic actions,
+//! held-out races; prints each car's wins, places, laps, lap times, passes and contacts as
+//! `key=value` lines, and can draw the first race's paths and record it for rerun.
+
+use crate::plots::{self, Path2};
+use crate::viz::{self, Recorder};
+use agvrl_envs::{MultiEnv as _, RaceSettings};
+use agvrl_run::PolicySettings;
+use anyhow::{Result, bail};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct RaceArgs {
+    /// A policy file per car, or one for every car (repeat the flag).
+    #[arg(long = "policy", required = true)]
+    pub policies: Vec<PathBuf>,
+    /// Cars on the grid (default: one per policy, two for a single policy; 1 races a lone
+    /// car, the lap times to compare with).
+    #[arg(long)]
+    pub cars: Option<usize>,
+    /// Race on this map-file track (a map YAML) instead of the first policy's.
+    #[arg(long)]
+    pub track: Option<PathBuf>,
+    /// Races to run.
+    #[arg(long, default_value_t = 10)]
+    pub races: usize,
+    /// Seed of the first race (held-out races: the grid order and any randomisation).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Length of a race, control steps (default: the first policy's evaluation length).
+    #[arg(long)]
+    pub max_steps: Option<u64>,
+    /// Draw the first race's paths, every car's, into this PNG.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Record the first race for the rerun viewer into this .rrd file.
+    #[arg(long)]
+    pub rerun: Option<PathBuf>,
+    /// Override a setting of the first policy's env config (KEY=VALUE, repeatable).
+    #[arg(long = "set")]
+    pub set: Vec<String>,
+}
+
+/// One car's tally over the races.
+#[derive(Default)]
+struct Tally {
+    wins: usize,
+    place_sum: usize,
+    laps: u64,
+    lap_times: Vec<f64>,
+    best_lap_s: Option<f64>,
+    overtakes: u64,
+    contacts: u64,
+    at_fault: u64,
+    time_lost_s: f64,
+    crashes: usize,
+}
+
+pub fn race(a: RaceArgs) -> Result<()> {
+    if a.races == 0 {
+        bail!("--races must be at least 1");
+    }
+    let cars = a.cars.unwrap_or(a.policies.len().max(2));
+    if a.policies.len() > 1 && a.policies.len() != cars {
+        bail!(
+            "{} policies for {cars} cars: give one policy per car, or one for all",
+            a.policies.len()
+        );
+    }
+    let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
+    let mut policies = Vec::new();
+    let mut cfg = None;
+    for (k, p) in a.policies.iter().enumerate() {
+        let mut src = PolicySettings::resolve(None, Some(p), if k == 0 { &sets } else { &[] })?;
+        policies.push(src.load_policy()?);
+        if k == 0 {
+            cfg = Some(src.eval_env_config());
+        }
+    }
+    let Some(mut cfg) = cfg else {
+        bail!("--policy is needed");
+    };
+    cfg.held_out = true;
+    cfg.race = Some(RaceSettings {
+        cars,
+        ..cfg.race.unwrap_or_default()
+    });
+    if let Some(n) = a.max_steps {
+        if n == 0 {
+            bail!("--max-steps must be at least 1");
+        }
+        cfg.max_steps = n;
+    }
+    let mut env = agvrl_envs::make_race("racing-duel", &cfg)?;
+    for (k, p) in policies.iter().enumerate() {
+        p.check_spaces(&env.observation_space(), &env.action_space())
+            .map_err(|e| anyhow::anyhow!("{}: {e}", a.policies[k].display()))?;
+    }
+    let single = policies.len() == 1;
+    let driver = move |i: usize| if single { 0 } else { i };
+    let mut rec = match &a.rerun {
+        Some(path) if viz::ENABLED => Some(Recorder::new(
+            viz::Sink::File(path.clone()),
+            &format!("race of {cars} on {}", cfg.track_suffix().trim_start_matches(" on ")),
+            None,
+        )?),
+        Some(_) => bail!("this agvrl was built without rerun; rebuild with the default features"),
+        None => None,
+    };
+    let mut paths: Vec<Path2> = Vec::new();
+    let mut tally: Vec<Tally> = (0..cars).map(|_| Tally::default()).collect();
+    for r in 0..a.races {
+        let mut obs = env.reset(if r == 0 { Some(a.seed) } else { None })?;
+        let first = r == 0;
+        if first {
+            paths = (0..cars)
+                .map(|i| Path2 {
+                    xy: vec![],
+                    collided: false,
+                    label: Some(format!("car {i}: {}", name(&a.policies[driver(i)]))),
+                })
+                .collect();
+        }
+        let mut step = 0u64;
+        let summary = loop {
+            if first {
+                for (i, p) in paths.iter_mut().enumerate() {
+                    let q = env.sim().pose2_of(i);
+                    p.xy.push((q.x_m, q.y_m));
+                }
+                if let Some(rec) = rec.as_mut() {
+                    let scans: Vec<_> = (0..cars).map(|i| env.frame_of(i).scan.as_ref()).collect();
+                    rec.race_step(env.sim(), &scans, r, step)?;
+                }
+            }
+            let mut actions = Vec::with_capacity(cars);
+            for (i, o) in obs.iter().enumerate() {
+                actions.push(match env.done(i) {
+                    true => vec![0.0; 2],
+                    false => policies[driver(i)].act(o, true)?,
+                });
+            }
+            let st = env.step(&actions)?;
+            step += 1;
+            for (i, s) in st.agents.iter().enumerate() {
+                if let Some(s) = s {
+                    obs[i] = s.obs.clone();
+                    if first && s.terminated {
+                        paths[i].collided = true;
+                    }
+                }
+            }
+            if let Some(s) = st.summary {
+                break s;
+            }
+        };
+        for (place, &i) in summary.order.iter().enumerate() {
+            let t = &mut tally[i];
+            t.wins += usize::from(place == 0);
+            t.place_sum += place + 1;
+        }
+        for (i, t) in tally.iter_mut().enumerate() {
+            t.laps += summary.laps[i] as u64;
+            t.lap_times.extend(&summary.lap_times_s[i]);
+            if let Some(b) = summary.best_lap_s[i] {
+                t.best_lap_s = Some(t.best_lap_s.map_or(b, |x: f64| x.min(b)));
+            }
+            t.overtakes += summary.overtakes[i] as u64;
+            t.contacts += summary.contacts[i] as u64;
+            t.at_fault += summary.at_fault[i] as u64;
+            t.time_lost_s += summary.time_lost_s[i];
+            t.crashes += usize::from(summary.crashed[i]);
+        }
+    }
+    let track = match &cfg.track {
+        Some(t) => t.load()?.name,
+        None => "oval".into(),
+    };
+    let n = a.races as f64;
+    println!(
+        "env=racing-duel track={track} cars={cars} races={} seed={} max_steps={}",
+        a.races, a.seed, cfg.max_steps
+    );
+    for (i, t) in tally.iter().enumerate() {
+        let mean_lap = match t.lap_times.is_empty() {
+            true => "none".to_string(),
+            false => format!("{:.2}", t.lap_times.iter().sum::<f64>() / t.lap_times.len() as f64),
+        };
+        println!(
+            "car={i} policy={} wins={} win_rate={:.2} mean_place={:.2} laps_per_race={:.2} mean_lap_s={mean_lap} best_lap_s={} overtakes_per_race={:.2} contacts_per_race={:.2} at_fault_per_race={:.2} time_lost_s_per_race={:.2} crashes={}",
+            a.policies[driver(i)].display(),
+            t.wins,
+            t.wins as f64 / n,
+            t.place_sum as f64 / n,
+            t.laps as f64 / n,
+            t.best_lap_s.map_or("none".into(), |b| format!("{b:.2}")),
+            t.overtakes as f64 / n,
+            t.contacts as f64 / n,
+            t.at_fault as f64 / n,
+            t.time_lost_s / n,
+            t.crashes
+        );
+    }
+    if let Some(out) = &a.plot {
+        let scene = env.sim().scene().clone();
+        plots::trajectory(
+            out,
+            &scene,
+            &paths,
+            &format!("race of {cars} on {track}, seed {}", a.seed),
+        )?;
+        println!("plot={}", out.display());
+    }
+    if let Some(rec) = rec
+        && let Some(p) = rec.finish()?
+    {
+        println!("rerun={}", p.display());
+    }
+    Ok(())
+}
+
+/// A policy file's name without its directory (a run's policy.agvrl: the run's name).
+fn name(p: &std::path::Path) -> String {
+    match p.file_name().and_then(|f| f.to_str()) {
+        Some("policy.agvrl") => p
+            .parent()
+            .and_then(|d| d.file_name())
+            .map_or("policy.agvrl".into(), |d| d.to_string_lossy().into_owned()),
+        Some(f) => f.to_string(),
+        None => p.display().to_string(),
+    }
+}
