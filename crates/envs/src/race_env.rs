@@ -380,8 +380,8 @@ impl MultiEnv for RaceEnv {
                 touching[i].push(c.other);
                 if c.other > i {
                     let (fi, fj) = (self.along(i, c.point_w), self.along(c.other, c.point_w));
-                    // The car whose front is at the point hit; both fronts (head-on, side by
-                    // side), both did.
+                    // The car whose front half holds the point, nearer its front than the
+                    // other's (within a fifth of a car), hit; two fronts (head on), both did.
                     fault[i] |= fi >= fj - 0.2 && fi > 0.5;
                     fault[c.other] |= fj >= fi - 0.2 && fj > 0.5;
                 }
