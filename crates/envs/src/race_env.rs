@@ -82,10 +82,6 @@ pub const GRID_CLEARANCE_M: f32 = 0.95;
 const PASS_MARGIN_M: f64 = 0.5;
 /// How long after a contact begins its time loss is counted, seconds.
 const LOSS_WINDOW_S: f64 = 2.0;
-/// Length of XTENTH-CAR's chassis ahead of the base (rear axle) and behind it, metres: the
-/// contact point's place along the car says whose front hit.
-const FRONT_M: f32 = 0.415;
-const REAR_M: f32 = 0.085;
 
 /// One car's race bookkeeping.
 #[derive(Clone, Debug, Default)]
@@ -128,6 +124,9 @@ pub struct RaceEnv {
     ahead: Vec<Vec<bool>>,
     /// The grid, pole first.
     slots: Vec<PlanarPose>,
+    /// Where the car's body ends behind and ahead of its base along x, metres: the contact
+    /// point's place along the car says whose front hit.
+    body_x_m: (f32, f32),
     steps: u64,
     ready: bool,
 }
@@ -155,6 +154,18 @@ impl RaceEnv {
             .ok_or_else(|| EnvError::Config("a race needs a track (the oval or a map file)".into()))?;
         let n = settings.cars;
         let slots = grid(&sim, &track, &settings);
+        let model = sim.vehicle();
+        let mut body_x_m = model
+            .body_shapes
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), s| {
+                let b = s.shape.compute_aabb(&s.pose);
+                (lo.min(b.mins.x), hi.max(b.maxs.x))
+            });
+        if body_x_m.0 >= body_x_m.1 {
+            // A vehicle of wheels alone: its axles.
+            body_x_m = (0.0, model.wheelbase_m);
+        }
         Ok(Self {
             sim,
             map,
@@ -169,6 +180,7 @@ impl RaceEnv {
             racers: vec![Racer::default(); n],
             ahead: vec![vec![false; n]; n],
             slots,
+            body_x_m,
             steps: 0,
             ready: false,
         })
@@ -224,7 +236,8 @@ impl RaceEnv {
         let pose = self.sim.pose2_of(i);
         let (s, c) = pose.yaw_rad.sin_cos();
         let x = (p[0] - pose.x_m) * c + (p[1] - pose.y_m) * s;
-        (x + REAR_M) / (FRONT_M + REAR_M)
+        let (rear, front) = self.body_x_m;
+        (x - rear) / (front - rear).max(1e-3)
     }
 
     fn positions(&self) -> Vec<usize> {
