@@ -41,6 +41,21 @@ def make_multi(env_id: str, **env_config: Any):
     return _make(env_id, **env_config)
 
 
+def make_race_vec(env_id: str, num_races: int, **env_config: Any):
+    """``num_races`` races as a ``gymnasium.vector.VectorEnv`` with a row per car, for training
+    one shared policy on every car (see ``agvrl.multi.AgvrlRaceVectorEnv``); needs
+    ``pettingzoo``, as ``make_multi``."""
+    try:
+        from agvrl.multi import make_race_vec as _make
+    except ModuleNotFoundError as e:
+        if e.name != "pettingzoo":
+            raise
+        raise ModuleNotFoundError(
+            "agvrl.make_race_vec needs PettingZoo: pip install 'pettingzoo>=1.24'", name="pettingzoo"
+        ) from e
+    return _make(env_id, num_races, **env_config)
+
+
 def _register() -> None:
     import gymnasium
 
@@ -70,6 +85,7 @@ __all__ = [
     "RunResult",
     "make",
     "make_multi",
+    "make_race_vec",
     "make_vec",
     "read_bag",
     "replay",

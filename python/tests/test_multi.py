@@ -79,3 +79,31 @@ def test_bad_race_settings_read_as_the_cli_would():
         agvrl.make_multi("racing-oval")
     with pytest.raises(ValueError, match="make_multi"):
         agvrl.make("racing-duel")
+
+
+def test_races_as_a_vector_env_end_a_race_at_its_first_crash_and_start_it_again():
+    def run():
+        envs = agvrl.make_race_vec("racing-duel", 2, track=SWEEPERS, max_steps=300)
+        assert envs.num_envs == 4 and envs.cars == 2
+        obs, _ = envs.reset(seed=3)
+        assert obs.shape == (4,) + envs.single_observation_space.shape and obs.dtype == np.float32
+        out = []
+        # Race 0's car 0 steers hard left at half throttle; every other car waits on the grid.
+        acts = np.tile(np.array([-1.0, 0.0], np.float32), (4, 1))
+        acts[0] = [0.0, 1.0]
+        for _ in range(300):
+            obs, rew, term, trunc, info = envs.step(acts)
+            out.append((obs.copy(), rew.copy(), term.copy(), trunc.copy()))
+            if term[0]:
+                break
+        return out, info
+
+    (a, info), (b, _) = run(), run()
+    assert len(a) == len(b) and all(all(np.array_equal(x, y) for x, y in zip(p, q)) for p, q in zip(a, b))
+    obs, rew, term, trunc = a[-1]
+    assert term[0] and not term[1] and trunc[1], "the crash ends race 0: car 0 terminated, car 1 cut"
+    assert not (term[2:] | trunc[2:]).any(), "race 1 goes on"
+    assert list(info["_final_obs"]) == [True, True, False, False]
+    assert not np.array_equal(info["final_obs"][0], obs[0]), "race 0 started again on the same step"
+    assert info["final_info"][0]["termination"] in agvrl.TERMINATION_CAUSES
+    assert rew[0] == pytest.approx(sum(info["reward_terms"][k][0] for k in info["reward_terms"]))
