@@ -283,18 +283,7 @@ impl Recorder {
                 .with_colors([rerun::Color::from_rgb(30, 90, 200)])
                 .with_fill_mode(rerun::FillMode::Solid),
             )?;
-            let q = q_of(Rotation::from_rotation_x(-std::f32::consts::FRAC_PI_2));
-            self.rec.log_static(
-                "world/vehicle/wheels",
-                &rerun::Cylinders3D::from_lengths_and_radii(
-                    v.wheels.iter().map(|w| w.width_m),
-                    v.wheels.iter().map(|w| w.radius_m),
-                )
-                .with_centers(v.wheels.iter().map(|w| [w.center_b.x, w.center_b.y, w.center_b.z]))
-                .with_quaternions(v.wheels.iter().map(|_| q))
-                .with_colors([rerun::Color::from_rgb(30, 30, 30)])
-                .with_fill_mode(rerun::FillMode::Solid),
-            )?;
+            self.log_wheels("world/vehicle/wheels", v)?;
         }
         Ok(())
     }
@@ -377,6 +366,23 @@ impl Recorder {
         Ok(())
     }
 
+    /// A car's wheels in its own frame, under `path`.
+    fn log_wheels(&self, path: &str, v: &agvrl_sim::vehicle::VehicleModel) -> Result<()> {
+        let q = q_of(Rotation::from_rotation_x(-std::f32::consts::FRAC_PI_2));
+        self.rec.log_static(
+            path,
+            &rerun::Cylinders3D::from_lengths_and_radii(
+                v.wheels.iter().map(|w| w.width_m),
+                v.wheels.iter().map(|w| w.radius_m),
+            )
+            .with_centers(v.wheels.iter().map(|w| [w.center_b.x, w.center_b.y, w.center_b.z]))
+            .with_quaternions(v.wheels.iter().map(|_| q))
+            .with_colors([rerun::Color::from_rgb(30, 30, 30)])
+            .with_fill_mode(rerun::FillMode::Solid),
+        )?;
+        Ok(())
+    }
+
     /// One step of race `race` (a race starts at `step == 0`): every car its own entity
     /// `world/car_<i>` (its collision shapes, the upper deck included, in its frame, and the
     /// wheels), its path `world/paths/car_<i>`, its LiDAR `world/lidar/car_<i>`, its speed in
@@ -408,18 +414,7 @@ impl Recorder {
                 for (k, s) in v.body_shapes.iter().enumerate() {
                     self.log_shape(&format!("world/car_{i}/body/{k}"), &s.shape, &s.pose, c)?;
                 }
-                let q = q_of(Rotation::from_rotation_x(-std::f32::consts::FRAC_PI_2));
-                self.rec.log_static(
-                    format!("world/car_{i}/wheels"),
-                    &rerun::Cylinders3D::from_lengths_and_radii(
-                        v.wheels.iter().map(|w| w.width_m),
-                        v.wheels.iter().map(|w| w.radius_m),
-                    )
-                    .with_centers(v.wheels.iter().map(|w| [w.center_b.x, w.center_b.y, w.center_b.z]))
-                    .with_quaternions(v.wheels.iter().map(|_| q))
-                    .with_colors([rerun::Color::from_rgb(30, 30, 30)])
-                    .with_fill_mode(rerun::FillMode::Solid),
-                )?;
+                self.log_wheels(&format!("world/car_{i}/wheels"), v)?;
             }
         }
         if step == 0 {

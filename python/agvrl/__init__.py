@@ -27,33 +27,30 @@ ENV_IDS: tuple[str, ...] = tuple(_env_ids())
 MULTI_ENV_IDS: tuple[str, ...] = tuple(_multi_env_ids())
 
 
-def make_multi(env_id: str, **env_config: Any):
-    """A race of several cars as a ``pettingzoo.ParallelEnv`` (see ``agvrl.multi``); needs
-    the ``pettingzoo`` package (``pip install agvrl[multi]``)."""
+def _multi(name: str):
+    """``agvrl.multi``'s ``name``; the module needs PettingZoo."""
     try:
-        from agvrl.multi import make_multi as _make
+        from agvrl import multi
     except ModuleNotFoundError as e:
         if e.name != "pettingzoo":
             raise
         raise ModuleNotFoundError(
-            "agvrl.make_multi needs PettingZoo: pip install 'pettingzoo>=1.24'", name="pettingzoo"
+            f"agvrl.{name} needs PettingZoo: pip install 'pettingzoo>=1.24'", name="pettingzoo"
         ) from e
-    return _make(env_id, **env_config)
+    return getattr(multi, name)
+
+
+def make_multi(env_id: str, **env_config: Any):
+    """A race of several cars as a ``pettingzoo.ParallelEnv`` (see ``agvrl.multi``); needs
+    the ``pettingzoo`` package (``pip install agvrl[multi]``)."""
+    return _multi("make_multi")(env_id, **env_config)
 
 
 def make_race_vec(env_id: str, num_races: int, **env_config: Any):
     """``num_races`` races as a ``gymnasium.vector.VectorEnv`` with a row per car, for training
     one shared policy on every car (see ``agvrl.multi.AgvrlRaceVectorEnv``); needs
     ``pettingzoo``, as ``make_multi``."""
-    try:
-        from agvrl.multi import make_race_vec as _make
-    except ModuleNotFoundError as e:
-        if e.name != "pettingzoo":
-            raise
-        raise ModuleNotFoundError(
-            "agvrl.make_race_vec needs PettingZoo: pip install 'pettingzoo>=1.24'", name="pettingzoo"
-        ) from e
-    return _make(env_id, num_races, **env_config)
+    return _multi("make_race_vec")(env_id, num_races, **env_config)
 
 
 def _register() -> None:

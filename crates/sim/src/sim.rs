@@ -684,28 +684,29 @@ impl Sim {
 
     /// Scene objects car `i` touched in the last physics step.
     pub fn contacts_of(&self, i: usize) -> Vec<u32> {
-        let mut out = Vec::new();
         if self.steps == 0 {
-            return out;
+            return Vec::new();
         }
-        for &h in self.cars[i].body.colliders() {
-            for pair in self.world.pw.narrow_phase.contact_pairs_with(h) {
-                if !pair.has_any_active_contact() {
-                    continue;
-                }
-                let other = if pair.collider1 == h {
-                    pair.collider2
-                } else {
-                    pair.collider1
-                };
-                if let Some(id) = self.world.object_id(other) {
-                    out.push(id);
-                }
-            }
-        }
+        let mut out: Vec<u32> = self
+            .touched(i)
+            .filter_map(|(other, _)| self.world.object_id(other))
+            .collect();
         out.sort_unstable();
         out.dedup();
         out
+    }
+
+    /// The colliders car `i` touches in the last physics step (an active contact), each with
+    /// the pair.
+    fn touched(&self, i: usize) -> impl Iterator<Item = (ColliderHandle, &ContactPair)> + '_ {
+        self.cars[i].body.colliders().iter().flat_map(move |&h| {
+            self.world
+                .pw
+                .narrow_phase
+                .contact_pairs_with(h)
+                .filter(|p| p.has_any_active_contact())
+                .map(move |p| (if p.collider1 == h { p.collider2 } else { p.collider1 }, p))
+        })
     }
 
     /// The other cars car `i` touched in the last physics step, each once, with the deepest
@@ -716,35 +717,25 @@ impl Sim {
             return Vec::new();
         }
         let owner = |h: ColliderHandle| self.cars.iter().position(|c| c.body.colliders().contains(&h));
-        for &h in self.cars[i].body.colliders() {
-            for pair in self.world.pw.narrow_phase.contact_pairs_with(h) {
-                if !pair.has_any_active_contact() {
-                    continue;
-                }
-                let other = if pair.collider1 == h {
-                    pair.collider2
-                } else {
-                    pair.collider1
-                };
-                let Some(j) = owner(other).filter(|&j| j != i) else {
-                    continue;
-                };
-                let Some((_, pt)) = pair.find_deepest_contact() else {
-                    continue;
-                };
-                let Some(co1) = self.world.pw.colliders.get(pair.collider1) else {
-                    continue;
-                };
-                let p = *co1.position() * pt.local_p1;
-                let c = CarContact {
-                    other: j,
-                    point_w: p.to_array(),
-                };
-                match out.iter_mut().find(|(_, k)| k.other == j) {
-                    Some(slot) if pt.dist < slot.0 => *slot = (pt.dist, c),
-                    Some(_) => {}
-                    None => out.push((pt.dist, c)),
-                }
+        for (other, pair) in self.touched(i) {
+            let Some(j) = owner(other).filter(|&j| j != i) else {
+                continue;
+            };
+            let Some((_, pt)) = pair.find_deepest_contact() else {
+                continue;
+            };
+            let Some(co1) = self.world.pw.colliders.get(pair.collider1) else {
+                continue;
+            };
+            let p = *co1.position() * pt.local_p1;
+            let c = CarContact {
+                other: j,
+                point_w: p.to_array(),
+            };
+            match out.iter_mut().find(|(_, k)| k.other == j) {
+                Some(slot) if pt.dist < slot.0 => *slot = (pt.dist, c),
+                Some(_) => {}
+                None => out.push((pt.dist, c)),
             }
         }
         out.sort_by_key(|(_, c)| c.other);
