@@ -140,29 +140,24 @@ fn coverage_plot(out: &std::path::Path, title: &str, files: &[String]) -> Result
     Ok(())
 }
 
+/// `Box(DIM) in [LOW, HIGH]` of a space, for `agvrl envs`.
+fn space_line(s: &agvrl_envs::BoxSpace) -> String {
+    let lo = s.low.iter().cloned().fold(f32::INFINITY, f32::min);
+    let hi = s.high.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+    format!("Box({}) in [{lo}, {hi}]", s.dim())
+}
+
 fn envs() -> Result<()> {
     for id in agvrl_envs::ENV_IDS {
         let env = agvrl_envs::make(id, &agvrl_envs::EnvConfig::default())?;
-        let (o, a) = (env.observation_space(), env.action_space());
-        let fmt = |s: &agvrl_envs::BoxSpace| {
-            let lo = s.low.iter().cloned().fold(f32::INFINITY, f32::min);
-            let hi = s.high.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-            format!("Box({}) in [{lo}, {hi}]", s.dim())
-        };
-        println!("{id:<20} obs={:<28} act={}  dt={:.4}s", fmt(&o), fmt(&a), env.dt_s());
+        let (o, a) = (space_line(&env.observation_space()), space_line(&env.action_space()));
+        println!("{id:<20} obs={o:<28} act={a}  dt={:.4}s", env.dt_s());
     }
     for id in agvrl_envs::MULTI_ENV_IDS {
         let env = agvrl_envs::make_multi(id, &agvrl_envs::EnvConfig::default())?;
-        let (o, a) = (env.observation_space(), env.action_space());
-        let fmt = |s: &agvrl_envs::BoxSpace| {
-            let lo = s.low.iter().cloned().fold(f32::INFINITY, f32::min);
-            let hi = s.high.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-            format!("Box({}) in [{lo}, {hi}]", s.dim())
-        };
+        let (o, a) = (space_line(&env.observation_space()), space_line(&env.action_space()));
         println!(
-            "{id:<20} obs={:<28} act={}  dt={:.4}s  agents={} (multi-agent: agvrl race, agvrl.make_multi)",
-            fmt(&o),
-            fmt(&a),
+            "{id:<20} obs={o:<28} act={a}  dt={:.4}s  agents={} (multi-agent: agvrl race, agvrl.make_multi)",
             env.dt_s(),
             env.n_agents()
         );
