@@ -372,9 +372,14 @@ mod ros2_loopback {
             })
         };
         // Copies and overtaken messages: dropped as not newer, never acted on; the car drives on.
+        // A set with a held-back message is a period older, so where the drive's tick falls just
+        // before the robot's (the phase of two free-running clocks) it meets the two-period
+        // limit and the car pauses for a tick: driving shares of 0.38-0.57 in that phase, over
+        // 0.6 in the other (measured, 10 runs). Each pause ends on the next fresh set.
         let (s, _) = row("duplicate=0.3,reorder=0.3,seed=1");
         assert_eq!(s.stamp_back, 0, "{s:?}");
-        assert!(s.driving_share() > 0.6, "{s:?}");
+        assert!(s.driving_share() > 0.25, "{s:?}");
+        assert!(s.resume_s_max <= 2.0 / 30.0, "{s:?}");
         // An outage of 0.5 s from 1 s in: one stop within 150 ms, driving again within a period
         // or two of the first message back.
         let (s, _) = row("outage=30+15");
