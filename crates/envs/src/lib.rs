@@ -29,7 +29,7 @@ pub mod wrappers;
 /// Order statistics (agvrl-sim's), for the crates above.
 pub use api::{BoxSpace, Control, Env, EnvError, Info, MultiEnv, MultiStep, RaceSummary, SensorFrame, Step, Vehicle};
 pub use check::{CheckError, check_env};
-pub use race_env::{RaceEnv, RaceSettings};
+pub use race_env::{CarInput, RaceEnv, RaceSettings};
 pub use registry::{
     ENV_IDS, ENVS, EnvConfig, EnvSpec, MULTI_ENV_IDS, TaskKind, TrackSetting, lone_car_id, make, make_multi, make_race,
     make_sim_car, make_task, make_vehicle,

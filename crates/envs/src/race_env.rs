@@ -83,6 +83,17 @@ const PASS_MARGIN_M: f64 = 0.5;
 /// How long after a contact begins its time loss is counted, seconds.
 const LOSS_WINDOW_S: f64 = 2.0;
 
+/// What drives a car for one step of [`RaceEnv::step_inputs`].
+#[derive(Clone, Debug, PartialEq)]
+pub enum CarInput {
+    /// An action in the action space, through the car's task (its mapping and safety filter),
+    /// as [`MultiEnv::step`] takes.
+    Action(Vec<f32>),
+    /// A control applied as it is: a car driven from outside (`agvrl-drive --serve-sim`), whose
+    /// own stack has already mapped and filtered it.
+    Control(Control),
+}
+
 /// One car's race bookkeeping.
 #[derive(Clone, Debug, Default)]
 struct Racer {
@@ -359,9 +370,22 @@ impl MultiEnv for RaceEnv {
     }
 
     fn step(&mut self, actions: &[Vec<f32>]) -> Result<MultiStep, EnvError> {
+        let inputs: Vec<CarInput> = actions.iter().cloned().map(CarInput::Action).collect();
+        self.step_inputs(&inputs)
+    }
+
+    fn dt_s(&self) -> f64 {
+        self.sim.config().settings.control_period_s
+    }
+}
+
+impl RaceEnv {
+    /// One step with each car driven by an action or by a control of its own (see
+    /// [`CarInput`]); [`MultiEnv::step`] is every car by action.
+    pub fn step_inputs(&mut self, inputs: &[CarInput]) -> Result<MultiStep, EnvError> {
         let n = self.racers.len();
-        if actions.len() != n {
-            return Err(EnvError::Config(format!("{} actions for {n} agents", actions.len())));
+        if inputs.len() != n {
+            return Err(EnvError::Config(format!("{} actions for {n} agents", inputs.len())));
         }
         if !self.ready {
             return Err(EnvError::NeedsReset);
@@ -371,11 +395,24 @@ impl MultiEnv for RaceEnv {
         let mut controls = vec![Control::default(); n];
         let mut corrected = vec![None; n];
         for i in (0..n).filter(|&i| !self.racers[i].done) {
-            validate_action(&space, &actions[i]).map_err(|e| EnvError::InEnv {
+            let a = match &inputs[i] {
+                CarInput::Action(a) => a,
+                CarInput::Control(c) => {
+                    if !(c.throttle.is_finite() && c.steering_rad.is_finite()) {
+                        return Err(EnvError::Config(format!("car {i}: control is not finite: {c:?}")));
+                    }
+                    controls[i] = Control {
+                        throttle: c.throttle.clamp(-1.0, 1.0),
+                        steering_rad: c.steering_rad.clamp(-limit, limit),
+                    };
+                    continue;
+                }
+            };
+            validate_action(&space, a).map_err(|e| EnvError::InEnv {
                 env: i,
                 source: Box::new(e),
             })?;
-            let mut a = actions[i].clone();
+            let mut a = a.clone();
             space.clamp(&mut a);
             controls[i] = self.tasks[i].control(&a, limit, &self.frames[i]);
             corrected[i] = self.tasks[i].corrected_action();
@@ -531,9 +568,5 @@ impl MultiEnv for RaceEnv {
             agents,
             summary: over.then(|| self.summary()),
         })
-    }
-
-    fn dt_s(&self) -> f64 {
-        self.sim.config().settings.control_period_s
     }
 }

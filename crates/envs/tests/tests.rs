@@ -1558,4 +1558,41 @@ mod racing_against_others {
             .to_string();
         assert!(e.contains("env 0") && e.contains("not finite"), "{e}");
     }
+
+    /// A car driven by the controls its task would make races as it does by actions, bit for
+    /// bit (`agvrl-drive --serve-sim racing-duel` drives car 0 that way); a control that is not
+    /// finite is refused.
+    #[test]
+    fn a_car_driven_by_controls_races_as_it_does_by_actions() {
+        let (mut by_action, mut by_control) = (race(None, 2, 200), race(None, 2, 200));
+        by_action.reset(Some(3)).unwrap();
+        by_control.reset(Some(3)).unwrap();
+        for k in 0..200 {
+            let actions: Vec<Vec<f32>> = (0..2)
+                .map(|i| vec![0.4 + 0.2 * i as f32, steer_along(&by_action, i, 0.3 - 0.6 * i as f32)])
+                .collect();
+            let a = by_action.step(&actions).unwrap();
+            let inputs = vec![
+                CarInput::Control(by_action.sim().control_of(0)),
+                CarInput::Action(actions[1].clone()),
+            ];
+            let c = by_control.step_inputs(&inputs).unwrap();
+            assert_eq!(a, c, "step {k}");
+            if k == 0 {
+                assert!(by_action.sim().control_of(0).throttle > 0.0);
+            }
+        }
+        by_control.reset(Some(3)).unwrap();
+        let e = by_control
+            .step_inputs(&[
+                CarInput::Control(Control {
+                    throttle: f64::NAN,
+                    steering_rad: 0.0,
+                }),
+                CarInput::Action(vec![0.0, 0.0]),
+            ])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("car 0") && e.contains("not finite"), "{e}");
+    }
 }
