@@ -99,7 +99,7 @@ pub struct DriveBag {
     sim_time: bool,
 }
 
-fn transform(parent: &str, child: &str, stamp_s: f64, p: &rapier3d::prelude::Pose) -> msg::TransformStamped {
+pub(crate) fn transform(parent: &str, child: &str, stamp_s: f64, p: &rapier3d::prelude::Pose) -> msg::TransformStamped {
     let (t, r) = (p.translation, p.rotation);
     msg::TransformStamped {
         header: mapping::header(stamp_s, parent),

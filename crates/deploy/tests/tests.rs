@@ -595,6 +595,175 @@ mod ros2_loopback {
         assert!(moving >= 80, "the policy drove on {moving} of 90 ticks");
     }
 
+    /// A subscription on `name` of ROS type `ty` in `domain`, keeping everything received
+    /// (latched: transient local, as `/tf_static` is offered).
+    fn listen<M: serde::de::DeserializeOwned + 'static>(
+        node: &mut ros2_client::Node,
+        name: &str,
+        ty: (&str, &str),
+        latched: bool,
+    ) -> ros2_client::Subscription<M> {
+        use ros2_client::qos::{Durability, History, WhenFull};
+        let q = ros2_client::QosProfile::subscription_default()
+            .durability(if latched {
+                Durability::TransientLocal
+            } else {
+                Durability::Volatile
+            })
+            .history(History::KeepLast { depth: 5000 })
+            .reliability_reliable(WhenFull::DEFAULT);
+        let n = ros2_client::Name::parse(name).unwrap();
+        let t = node
+            .create_topic(&n, ros2_client::MessageTypeName::new(ty.0, ty.1), &q)
+            .unwrap();
+        node.create_subscription(&t, Some(q)).unwrap()
+    }
+
+    /// Every message waiting on `s` (none may fail to decode).
+    fn take_all<M: serde::de::DeserializeOwned + 'static>(s: &ros2_client::Subscription<M>) -> Vec<M> {
+        let mut out = vec![];
+        while let Some((m, _)) = s.take().unwrap() {
+            out.push(m);
+        }
+        out
+    }
+
+    /// A race served over DDS (`SimRobot::race`): car 0 driven by the shipped policy through
+    /// `/car0/...`, car 1 by the same policy in-process. The served car gets one period per
+    /// command and laps; car 1's sensors are on `/car1/...` in its own frames; `/tf` moves both
+    /// cars and `/tf_static` hangs each car's odom frame on `map` and its LiDAR on its base.
+    #[test]
+    fn a_served_race_drives_car0_over_dds_and_names_every_car_apart() {
+        use agvrl_deploy::hardware::msg;
+        let ticks = 1200; // 40 s; a lap of the oval takes about 31 s
+        let policy = || Policy::load(&shipped_policy("racing-oval-ppo")).unwrap();
+        let mut cfg = ros_cfg(InvalidRay::Stop);
+        // Writers that keep every set: lockstep outruns this listener, whose lost samples are
+        // then resent rather than overwritten.
+        cfg.qos.sensors.depth = 4096;
+        // Rows 2 m apart: this policy, trained alone, rams a car 0.8 m ahead. A race is
+        // 1,000 ticks (a lap and a bit), so the second starts on the grid mid-drive.
+        let env_cfg = EnvConfig {
+            race: Some(agvrl_envs::RaceSettings {
+                cars: 2,
+                grid_gap_m: 2.0,
+                ..Default::default()
+            }),
+            max_steps: 1000,
+            ..EnvConfig::default()
+        };
+        let ctx =
+            ros2_client::Context::with_options(ros2_client::ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
+        let mut node = ctx
+            .new_node(
+                ros2_client::NodeName::new("/", "race_listener").unwrap(),
+                ros2_client::NodeOptions::new().enable_rosout(false),
+            )
+            .unwrap();
+        let scan1 = listen::<msg::LaserScan>(&mut node, "/car1/scan", ("sensor_msgs", "LaserScan"), false);
+        let tf = listen::<msg::TFMessage>(&mut node, "/tf", ("tf2_msgs", "TFMessage"), false);
+        let tf_static = listen::<msg::TFMessage>(&mut node, "/tf_static", ("tf2_msgs", "TFMessage"), true);
+        let mut robot = SimRobot::race(&env_cfg, cfg.clone(), 0, Faults::default(), vec![policy()]).unwrap();
+        let h = robot.handle();
+        let th = std::thread::spawn(move || {
+            robot.run(Pace::Lockstep, 0).unwrap();
+            robot.blocked_messages()
+        });
+        // A reader of its own, as a team's tools would be: it takes what comes as it comes.
+        let listening = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+        let on = listening.clone();
+        let listener = std::thread::spawn(move || {
+            let (mut scans, mut moves, mut mounts) = (vec![], vec![], vec![]);
+            let mut quiet = std::time::Instant::now();
+            // Until stopped, then until nothing more comes for a second.
+            while on.load(Ordering::Relaxed) || quiet.elapsed().as_secs() < 1 {
+                let n = scans.len() + moves.len();
+                scans.extend(take_all(&scan1));
+                moves.extend(take_all(&tf));
+                mounts.extend(take_all(&tf_static));
+                if scans.len() + moves.len() > n {
+                    quiet = std::time::Instant::now();
+                }
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
+            (scans, moves, mounts)
+        });
+        let car0 = Ros2Config {
+            topics: cfg.topics.namespaced("car0"),
+            ..cfg.clone()
+        };
+        let v = Ros2Vehicle::new(car0, true, None).unwrap();
+        let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
+        let mut lp = DriveLoop::new(v, task, policy(), DriveConfig::default(), 0).unwrap();
+        for k in 0..ticks {
+            let t = lp.tick().unwrap();
+            assert!(t.event.is_none(), "tick {k}: {:?}", t.event);
+        }
+        drop(lp);
+        let t0 = std::time::Instant::now();
+        while h.stats().commands < ticks && t0.elapsed().as_secs() < 10 {
+            std::thread::yield_now();
+        }
+        h.stop();
+        let blocked = th.join().unwrap();
+        let stats = h.stats();
+        listening.store(false, Ordering::Relaxed);
+        let (scans, moves, mounts) = listener.join().unwrap();
+        assert_eq!(blocked, 0, "sensor messages dropped by the robot");
+        assert_eq!(stats.commands, ticks, "every command arrived once: {stats:?}");
+        assert_eq!(stats.ticks, ticks, "one control period per command: {stats:?}");
+        assert!(stats.laps >= 1, "the served car did not lap: {stats:?}");
+        assert_eq!(
+            (stats.races, stats.terminations, stats.car_contacts),
+            (1, 0, 0),
+            "{stats:?}"
+        );
+        assert!(scans.len() > 1000, "{} scans of car 1", scans.len());
+        assert!(scans.iter().all(|m| m.header.frame_id == "car1/laser"));
+        let stamps: Vec<f64> = scans.iter().map(|m| m.header.stamp.as_secs()).collect();
+        assert!(
+            stamps.windows(2).all(|w| w[1] >= w[0]),
+            "stamps go on rising over the new race"
+        );
+        let xs = |child: &str| -> Vec<f64> {
+            moves
+                .iter()
+                .flat_map(|m| &m.transforms)
+                .filter(|t| t.child_frame_id == child)
+                .map(|t| {
+                    assert_eq!(t.header.frame_id, child.replace("base_link", "odom"));
+                    t.transform.translation.x
+                })
+                .collect()
+        };
+        for car in ["car0/base_link", "car1/base_link"] {
+            let x = xs(car);
+            let span =
+                x.iter().copied().fold(f64::NEG_INFINITY, f64::max) - x.iter().copied().fold(f64::INFINITY, f64::min);
+            assert!(
+                x.len() > 100 && span > 2.0,
+                "{car}: {} transforms over {span} m",
+                x.len()
+            );
+        }
+        let mounts: Vec<(String, String)> = mounts
+            .iter()
+            .flat_map(|m| &m.transforms)
+            .map(|t| (t.header.frame_id.clone(), t.child_frame_id.clone()))
+            .collect();
+        for i in 0..2 {
+            let pair = |a: String, b: String| (a, b);
+            assert!(
+                mounts.contains(&pair("map".into(), format!("car{i}/odom"))),
+                "{mounts:?}"
+            );
+            assert!(
+                mounts.contains(&pair(format!("car{i}/base_link"), format!("car{i}/laser"))),
+                "{mounts:?}"
+            );
+        }
+    }
+
     #[test]
     fn a_bad_car_toml_is_one_clear_line() {
         let e = Ros2Config::from_toml("[scan]\nn_ray = 3\n").unwrap_err();
@@ -1275,4 +1444,36 @@ fn fuzz_regressions_replay_without_panic() {
         let bytes = agvrl_rl::fuzz::with_crc(&std::fs::read(&path).unwrap());
         agvrl_rl::PolicyData::from_bytes(&path, &bytes).unwrap();
     }
+}
+
+/// A served race's flags are checked before DDS starts, each refusal one clear line.
+#[test]
+fn a_served_race_refuses_bad_opponents_and_car_counts() {
+    let p = shipped_policy("racing-oval-ppo");
+    let p = p.as_os_str();
+    let run = |args: &[&str], extra: &[&std::ffi::OsStr]| {
+        let mut all: Vec<&std::ffi::OsStr> = args.iter().map(std::ffi::OsStr::new).collect();
+        all.extend_from_slice(extra);
+        let (ok, _, err) = drive_cli(&all);
+        assert!(!ok, "{args:?} was accepted");
+        err
+    };
+    let e = run(&["--serve-sim", "racing-duel"], &[]);
+    assert!(e.contains("--opponent FILE"), "{e}");
+    let e = run(&["--serve-sim", "racing-oval", "--opponent"], &[p]);
+    assert!(e.contains("--serve-sim racing-duel"), "{e}");
+    let e = run(&["--serve-sim", "racing-duel", "--cars", "9", "--opponent"], &[p]);
+    assert!(e.contains("--cars must be 2 to 8"), "{e}");
+    let e = run(
+        &["--serve-sim", "racing-duel", "--cars", "4", "--opponent"],
+        &[p, "--opponent".as_ref(), p],
+    );
+    assert!(e.contains("2 opponent policies for 3 opponents"), "{e}");
+    let e = run(&["--serve-sim", "racing-duel", "--opponent", "no-such.agvrl"], &[]);
+    assert!(e.contains("no-such.agvrl"), "{e}");
+    let e = run(
+        &["--serve-sim", "racing-duel", "--namespace", "car0", "--opponent"],
+        &[p],
+    );
+    assert!(e.contains("--namespace"), "{e}");
 }

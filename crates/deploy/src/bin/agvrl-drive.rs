@@ -77,9 +77,23 @@ struct Args {
     /// Override the config's DDS domain id.
     #[arg(long)]
     domain_id: Option<u16>,
-    /// Serve the simulated car of env ENV over ROS 2 instead of driving.
+    /// Serve the simulated car of env ENV over ROS 2 instead of driving. `racing-duel`: a race
+    /// whose car 0 is served under namespace car0 (`/car0/scan`, `/car0/drive`; every car's
+    /// sensors under its own) while --opponent policies drive the others in-process.
     #[arg(long, value_name = "ENV", conflicts_with = "vehicle")]
     serve_sim: Option<String>,
+    /// --serve-sim racing-duel: the policy file driving the opponents (repeat for one per
+    /// opponent); the race runs on the first one's env settings (its track unless --track).
+    #[arg(long = "opponent", value_name = "FILE", requires = "serve_sim")]
+    opponents: Vec<PathBuf>,
+    /// --serve-sim racing-duel: cars on the grid, the served one included (default: one per
+    /// opponent policy plus the served car).
+    #[arg(long, requires = "serve_sim")]
+    cars: Option<usize>,
+    /// --vehicle ros2: the car's topics under this namespace (`car0`: `/car0/scan`,
+    /// `/car0/drive`), as a served race names its cars.
+    #[arg(long, value_name = "NS", conflicts_with = "serve_sim")]
+    namespace: Option<String>,
     /// --serve-sim --realtime: faults on the wire, comma-separated KEY=VALUE (loss, delay_ms,
     /// jitter_ms, duplicate, reorder, outage=FROM+TICKS, mute=SENSOR@TICK,
     /// clock_step=SECONDS@TICK, seed); see docs/reliability.md.
@@ -183,6 +197,9 @@ fn ros2_config(a: &Args) -> Result<agvrl_deploy::hardware::Ros2Config> {
         c.domain_id = d;
         c.validate().map_err(|e| anyhow::anyhow!("--domain-id: {e}"))?;
     }
+    if let Some(ns) = &a.namespace {
+        c.topics = c.topics.namespaced(ns);
+    }
     Ok(c)
 }
 
@@ -201,6 +218,19 @@ fn run() -> Result<()> {
         }
         out!("reindexed {} messages={}", dir.display(), s.messages());
         return Ok(());
+    }
+    if let Some(id) = a
+        .serve_sim
+        .as_deref()
+        .filter(|id| agvrl_envs::MULTI_ENV_IDS.contains(id))
+    {
+        return serve_race(&a, id);
+    }
+    if !a.opponents.is_empty() || a.cars.is_some() {
+        bail!(
+            "--opponent and --cars set up a served race: --serve-sim {}",
+            agvrl_envs::MULTI_ENV_IDS.join(" | ")
+        );
     }
     let (src, env, env_cfg) = policy_and_env(&a)?;
     if let Some(sim_env) = &a.serve_sim {
@@ -607,20 +637,75 @@ fn check_trace(policy: &mut Policy, path: &Path, tolerance: f32) -> Result<()> {
 
 #[cfg(feature = "ros2")]
 fn serve_sim(a: &Args, env: &str, env_cfg: &EnvConfig) -> Result<()> {
-    use agvrl_deploy::hardware::{Faults, Pace, SimRobot};
-    let cfg = ros2_config(a)?;
-    let faults = Faults {
-        wire: a.faults.clone().unwrap_or_default(),
-        ..Faults::default()
+    use agvrl_deploy::hardware::SimRobot;
+    let robot = SimRobot::new(env, env_cfg, ros2_config(a)?, a.seed, faults(a))?;
+    eprintln!("serving {env} over ROS 2; Ctrl-C stops");
+    serve(a, robot, false)
+}
+
+/// `--serve-sim racing-duel --opponent FILE ...`: car 0 served, the opponents in-process.
+#[cfg(feature = "ros2")]
+fn serve_race(a: &Args, id: &str) -> Result<()> {
+    use agvrl_deploy::hardware::SimRobot;
+    let Some(first) = a.opponents.first() else {
+        bail!("--serve-sim {id}: give the opponents' policy with --opponent FILE (repeat for one each)");
     };
-    let mut robot = SimRobot::new(env, env_cfg, cfg, a.seed, faults)?;
+    let cars = a.cars.unwrap_or(a.opponents.len() + 1);
+    if !(2..=agvrl_sim::MAX_CARS).contains(&cars) {
+        bail!(
+            "--cars must be 2 to {} (the served car and its opponents)",
+            agvrl_sim::MAX_CARS
+        );
+    }
+    if a.opponents.len() > 1 && a.opponents.len() != cars - 1 {
+        bail!(
+            "{} opponent policies for {} opponents: give one for all, or one each",
+            a.opponents.len(),
+            cars - 1
+        );
+    }
+    // The race's settings: --policy's if given (the served stack's), else the first opponent's.
+    let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
+    let settings = a.policy.as_deref().unwrap_or(first);
+    let mut env_cfg = PolicySettings::resolve(None, Some(settings), &sets)?.eval_env_config();
+    env_cfg.race = Some(agvrl_envs::RaceSettings {
+        cars,
+        ..env_cfg.race.unwrap_or_default()
+    });
+    let mut opponents = Vec::new();
+    for p in &a.opponents {
+        opponents.push(PolicySettings::resolve(None, Some(p), &[])?.load_policy()?);
+    }
+    let robot = SimRobot::race(&env_cfg, ros2_config(a)?, a.seed, faults(a), opponents)?;
+    eprintln!("serving car 0 of a {cars}-car race over ROS 2 under /car0; Ctrl-C stops");
+    serve(a, robot, true)
+}
+
+#[cfg(feature = "ros2")]
+fn faults(a: &Args) -> agvrl_deploy::hardware::Faults {
+    agvrl_deploy::hardware::Faults {
+        wire: a.faults.clone().unwrap_or_default(),
+        ..Default::default()
+    }
+}
+
+/// Run a served robot for --steps ticks and print its summary line.
+#[cfg(feature = "ros2")]
+fn serve(a: &Args, mut robot: agvrl_deploy::hardware::SimRobot, race: bool) -> Result<()> {
+    use agvrl_deploy::hardware::Pace;
     let h = robot.handle();
     let pace = if a.realtime { Pace::Realtime } else { Pace::Lockstep };
-    eprintln!("serving {env} over ROS 2 ({pace:?}); Ctrl-C stops");
     robot.run(pace, a.steps)?;
     let (s, w) = (h.stats(), robot.wire_stats());
+    let race = match race {
+        true => format!(
+            " races={} wins={} car_contacts={} at_fault={} overtakes={}",
+            s.races, s.wins, s.car_contacts, s.at_fault, s.overtakes
+        ),
+        false => String::new(),
+    };
     out!(
-        "summary ticks={} stamp_s={:.3} commands={} laps={} best_lap_s={} terminations={} wire_offered={} wire_sent={} wire_lost={} wire_withheld={} wire_duplicated={} wire_held_back={}",
+        "summary ticks={} stamp_s={:.3} commands={} laps={} best_lap_s={} terminations={}{race} wire_offered={} wire_sent={} wire_lost={} wire_withheld={} wire_duplicated={} wire_held_back={}",
         s.ticks,
         s.stamp_s,
         s.commands,
@@ -639,6 +724,11 @@ fn serve_sim(a: &Args, env: &str, env_cfg: &EnvConfig) -> Result<()> {
 
 #[cfg(not(feature = "ros2"))]
 fn serve_sim(_: &Args, _: &str, _: &EnvConfig) -> Result<()> {
+    bail!("--serve-sim: this agvrl-drive was built without the `ros2` feature")
+}
+
+#[cfg(not(feature = "ros2"))]
+fn serve_race(_: &Args, _: &str) -> Result<()> {
     bail!("--serve-sim: this agvrl-drive was built without the `ros2` feature")
 }
 

@@ -80,6 +80,31 @@ impl Default for Topics {
     }
 }
 
+impl Topics {
+    /// These topics under namespace `ns` (`car0`: `/scan` becomes `/car0/scan`), and the
+    /// commands' frame under the same prefix (`car0/base_link`), as one car of several is
+    /// named; an empty `ns` changes nothing, an unnamed (empty) topic stays unnamed.
+    pub fn namespaced(&self, ns: &str) -> Topics {
+        let ns = ns.trim_matches('/');
+        if ns.is_empty() {
+            return self.clone();
+        }
+        let t = |name: &str| match name {
+            "" => String::new(),
+            n => format!("/{ns}/{}", n.trim_start_matches('/')),
+        };
+        Topics {
+            scan: t(&self.scan),
+            imu: t(&self.imu),
+            odom: t(&self.odom),
+            navsat: t(&self.navsat),
+            image: t(&self.image),
+            drive: t(&self.drive),
+            frame_id: format!("{ns}/{}", self.frame_id),
+        }
+    }
+}
+
 /// DDS reliability.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -426,5 +451,16 @@ mod tests {
             .unwrap()
             .top_speed_mps();
         assert!((top - XTENTH_TOP_SPEED_MPS).abs() < 0.01, "{top}");
+    }
+
+    #[test]
+    fn a_namespace_prefixes_every_named_topic_and_the_command_frame() {
+        let t = Topics::default().namespaced("/car1/");
+        assert_eq!(t.scan, "/car1/scan");
+        assert_eq!(t.drive, "/car1/drive");
+        assert_eq!(t.image, "/car1/zed/zed_node/depth/depth_registered");
+        assert_eq!(t.navsat, "", "an unnamed topic stays unnamed");
+        assert_eq!(t.frame_id, "car1/base_link");
+        assert_eq!(Topics::default().namespaced(""), Topics::default());
     }
 }

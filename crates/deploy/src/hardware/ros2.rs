@@ -38,6 +38,7 @@ pub(crate) const ODOM_TYPE: (&str, &str) = ("nav_msgs", "Odometry");
 pub(crate) const NAVSAT_TYPE: (&str, &str) = ("sensor_msgs", "NavSatFix");
 pub(crate) const IMAGE_TYPE: (&str, &str) = ("sensor_msgs", "Image");
 pub(crate) const DRIVE_TYPE: (&str, &str) = ("ackermann_msgs", "AckermannDriveStamped");
+pub(crate) const TF_TYPE: (&str, &str) = ("tf2_msgs", "TFMessage");
 
 fn dds_err(what: &str, e: impl std::fmt::Display) -> DeployError {
     DeployError::Vehicle(format!("DDS {what}: {e}"))
@@ -121,6 +122,21 @@ pub(crate) fn publisher<M: serde::Serialize>(
     q: TopicQos,
 ) -> Result<Publisher<M>, DeployError> {
     let q = qos(q);
+    let t = topic(node, name, ty, &q)?;
+    node.create_publisher(&t, Some(q)).map_err(|e| dds_err(name, e))
+}
+
+/// A latched publisher on `name` (reliable, transient local, keep last 1), as `/tf_static`
+/// is: a reader that joins later still gets the last message.
+pub(crate) fn latched_publisher<M: serde::Serialize>(
+    node: &mut Node,
+    name: &str,
+    ty: (&str, &str),
+) -> Result<Publisher<M>, DeployError> {
+    let q = QosProfile::subscription_default()
+        .durability(Durability::TransientLocal)
+        .history(History::KeepLast { depth: 1 })
+        .reliability_reliable(WhenFull::DEFAULT);
     let t = topic(node, name, ty, &q)?;
     node.create_publisher(&t, Some(q)).map_err(|e| dds_err(name, e))
 }
