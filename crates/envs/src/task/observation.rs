@@ -1,9 +1,10 @@
 //! How a frame becomes the observation vector: LiDAR ranges (scaled), speed, yaw rate, the
-//! applied steering and throttle, the explored-ground memory, and camera channels, as
-//! `ObsConfig` composes them.
+//! applied steering and throttle, the explored-ground memory, free lengths along steering arcs,
+//! and camera channels, as `ObsConfig` composes them.
 
 use super::explored::{ExploredMemory, ExploredObs};
 use crate::api::{BoxSpace, SensorFrame, SensorNeeds};
+use agvrl_sim::msg::LaserScan;
 use serde::{Deserialize, Serialize};
 
 /// How LiDAR ranges enter the observation.
@@ -22,7 +23,7 @@ pub enum RangeScale {
 
 /// Composition of the observation vector: the LiDAR ranges, then the enabled extras in this
 /// order (speed / 2 m/s, yaw rate / 2 rad/s, steering / limit, throttle, the explored-ground
-/// fractions, camera channels).
+/// fractions, the arcs' free lengths, camera channels).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ObsConfig {
@@ -39,8 +40,119 @@ pub struct ObsConfig {
     /// The unexplored fraction of the ground around the car, by sector and ring (search only;
     /// needs the GPS / pose fix).
     pub explored: ExploredObs,
+    /// Free lengths along steering arcs, from the LiDAR (left out of the settings when off, so
+    /// a policy file written without them reads the same).
+    #[serde(skip_serializing_if = "ArcObs::is_empty")]
+    pub arcs: ArcObs,
     /// Camera channels appended after everything else (needs the vehicle camera).
     pub image: ImageObs,
+}
+
+/// Free path lengths along arcs (`[env_config.observation.arcs]`): for `n` steering angles
+/// evenly from full left to full right, how far the car could drive along that arc before a
+/// LiDAR return comes within `half_width_m` of its path, over `max_m` (1: free that far). The
+/// ranges hold the same distances; these are the form a stopping decision reads. The arcs start
+/// at the LiDAR and bend with curvature tan(steering) / `wheelbase_m` (the bicycle model with
+/// its rear axle taken at the LiDAR: an approximation, the same on the car as in training).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ArcObs {
+    /// Arcs (0: off); one arc is straight ahead.
+    pub n: usize,
+    /// A return this close to the arc's centre line blocks it, metres (half the car's width
+    /// and a margin).
+    pub half_width_m: f32,
+    /// Wheelbase of the bicycle model, metres.
+    pub wheelbase_m: f32,
+    /// The length that reads 1, metres.
+    pub max_m: f32,
+}
+
+impl Default for ArcObs {
+    /// Off; XTENTH-CAR's geometry (0.33 m wheelbase, 0.30 m wide) with 0.1 m of margin.
+    fn default() -> Self {
+        Self {
+            n: 0,
+            half_width_m: 0.25,
+            wheelbase_m: 0.33,
+            max_m: 4.0,
+        }
+    }
+}
+
+impl ArcObs {
+    /// Values appended.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether it is off.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// An error for settings that cannot work.
+    pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        if self.n <= 32 && positive(self.half_width_m) && positive(self.wheelbase_m) && positive(self.max_m) {
+            Ok(())
+        } else {
+            Err(agvrl_sim::InvalidSetting::new(
+                "observation.arcs",
+                format!("observation.arcs needs n <= 32 and positive half_width_m, wheelbase_m, max_m; got {self:?}"),
+            ))
+        }
+    }
+
+    /// The free length along the arc of curvature `c` (1/m, positive left) among `points`
+    /// (x ahead, y left, metres, from the arc's start), at most `max_m`.
+    pub fn free_length(&self, c: f32, points: impl Iterator<Item = (f32, f32)>) -> f32 {
+        let (w, mut free) = (self.half_width_m, self.max_m);
+        if c.abs() < 1e-4 {
+            for (x, y) in points {
+                if x > 0.0 && y.abs() < w {
+                    free = free.min(x);
+                }
+            }
+            return free;
+        }
+        // The centre of the turn is (0, r); the angle about it from the start, in the direction
+        // of travel, times the radius is the length driven to pass the point.
+        let r = 1.0 / c;
+        for (x, y) in points {
+            if ((y - r).hypot(x) - r.abs()).abs() >= w {
+                continue;
+            }
+            let turned = if r > 0.0 { x.atan2(r - y) } else { x.atan2(y - r) };
+            free = free.min(turned.rem_euclid(std::f32::consts::TAU) * r.abs());
+        }
+        free
+    }
+
+    fn append(&self, scan: Option<&LaserScan>, steering_limit_rad: f64, out: &mut Vec<f32>) {
+        let Some(s) = scan else {
+            out.extend(std::iter::repeat_n(0.0, self.n));
+            return;
+        };
+        let points: Vec<(f32, f32)> = s
+            .ranges
+            .iter()
+            .enumerate()
+            .filter(|&(k, &r)| r.is_finite() && s.hit.get(k).copied().unwrap_or(r < s.range_max))
+            .map(|(k, &r)| {
+                let (sa, ca) = (s.angle_min + s.angle_increment * k as f32).sin_cos();
+                (r * ca, r * sa)
+            })
+            .collect();
+        for k in 0..self.n {
+            let steer = match self.n {
+                1 => 0.0,
+                n => steering_limit_rad as f32 * (1.0 - 2.0 * k as f32 / (n - 1) as f32),
+            };
+            let c = steer.tan() / self.wheelbase_m;
+            out.push(self.free_length(c, points.iter().copied()) / self.max_m);
+        }
+    }
 }
 
 /// Which camera channels enter the observation.
@@ -157,6 +269,7 @@ impl Default for ObsConfig {
             steering: true,
             throttle: true,
             explored: ExploredObs::default(),
+            arcs: ArcObs::default(),
             image: ImageObs::default(),
         }
     }
@@ -172,6 +285,7 @@ impl ObsConfig {
             steering: false,
             throttle: false,
             explored: ExploredObs::default(),
+            arcs: ArcObs::default(),
             image: ImageObs::default(),
         }
     }
@@ -212,7 +326,7 @@ impl ObsConfig {
                 s.high.push(hi);
             }
         }
-        let n01 = self.explored.len() + self.image.len();
+        let n01 = self.explored.len() + self.arcs.len() + self.image.len();
         s.low.extend(std::iter::repeat_n(0.0, n01));
         s.high.extend(std::iter::repeat_n(1.0, n01));
         s
@@ -249,9 +363,104 @@ impl ObsConfig {
                 None => out.extend(std::iter::repeat_n(0.0, self.explored.len())),
             }
         }
+        if !self.arcs.is_empty() {
+            self.arcs.append(frame.scan.as_ref(), steering_limit_rad, &mut out);
+        }
         if !self.image.is_empty() {
             self.image.append(frame.image.as_ref(), &mut out);
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f32::consts::PI;
+
+    fn arcs(n: usize) -> ArcObs {
+        ArcObs { n, ..ArcObs::default() }
+    }
+
+    /// Straight ahead the free length is the nearest return within the half width; on a turn
+    /// of radius R, a return on the arc a quarter turn on is blocked at pi R / 2 (closed form).
+    #[test]
+    fn an_arc_is_free_up_to_the_first_return_within_its_half_width() {
+        let a = arcs(1);
+        let pts = [(3.0, 0.1), (2.0, 0.3), (-1.0, 0.0), (5.0, 0.0)];
+        assert_eq!(
+            a.free_length(0.0, pts.into_iter()),
+            3.0,
+            "(2, 0.3) passes 0.05 m wide of the car's half width"
+        );
+        assert_eq!(a.free_length(0.0, [(9.0, 0.0)].into_iter()), a.max_m, "beyond max_m");
+        for r in [2.0_f32, -2.0] {
+            // A quarter turn left (right) about (0, r) puts the car at (|r|, r).
+            let on = (r.abs(), r);
+            let s = a.free_length(1.0 / r, [on].into_iter());
+            assert!((s - PI * r.abs() / 2.0).abs() < 1e-5, "radius {r}: {s}");
+            // The same point mirrored is off the arc (the other side), and a point 0.2 m
+            // inside the circle still blocks it, 0.3 m inside does not.
+            assert_eq!(a.free_length(1.0 / r, [(r.abs(), -r)].into_iter()), a.max_m);
+            let inside = |d: f32| (r.abs() - d, r);
+            assert!(a.free_length(1.0 / r, [inside(0.2)].into_iter()) < a.max_m);
+            assert_eq!(a.free_length(1.0 / r, [inside(0.3)].into_iter()), a.max_m);
+        }
+    }
+
+    /// In the observation: one value per arc, full left first, each in [0, 1], the space's
+    /// length; a wall 2 m ahead blocks the straight arc at 2 m and the full-lock arcs later or not
+    /// at all; rays without a return block nothing.
+    #[test]
+    fn arcs_enter_the_observation_left_to_right() {
+        let cfg = ObsConfig {
+            arcs: arcs(5),
+            ..ObsConfig::default()
+        };
+        cfg.arcs.validate().unwrap();
+        let n_rays = 271;
+        let inc = 1.5 * PI / (n_rays - 1) as f32;
+        let angle = |k: usize| -0.75 * PI + inc * k as f32;
+        // A wall across the way at x = 2 m, seen by the rays pointing ahead.
+        let ranges: Vec<f32> = (0..n_rays)
+            .map(|k| match angle(k).cos() {
+                c if c > 0.05 => (2.0 / c).min(12.0),
+                _ => 12.0,
+            })
+            .collect();
+        let frame = SensorFrame {
+            scan: Some(LaserScan {
+                angle_min: angle(0),
+                angle_increment: inc,
+                range_max: 12.0,
+                hit: ranges.iter().map(|&r| r < 12.0).collect(),
+                ranges,
+                ..LaserScan::default()
+            }),
+            ..SensorFrame::default()
+        };
+        let obs = cfg.observe(&frame, 0.36, None);
+        assert_eq!(obs.len(), cfg.space(n_rays, 12.0).dim());
+        let tail = &obs[obs.len() - 5..];
+        assert!(tail.iter().all(|v| (0.0..=1.0).contains(v)), "{tail:?}");
+        assert!((tail[2] - 2.0 / 4.0).abs() < 0.01, "straight ahead: {tail:?}");
+        assert!(
+            tail[0] > tail[2] && tail[4] > tail[2] && (tail[0] - tail[4]).abs() < 1e-3,
+            "{tail:?}"
+        );
+        let mut open = frame.clone();
+        if let Some(s) = open.scan.as_mut() {
+            s.hit.iter_mut().for_each(|h| *h = false);
+        }
+        let obs = cfg.observe(&open, 0.36, None);
+        assert!(obs[obs.len() - 5..].iter().all(|v| *v == 1.0));
+        assert!(
+            ArcObs {
+                n: 40,
+                ..ArcObs::default()
+            }
+            .validate()
+            .is_err()
+        );
     }
 }
