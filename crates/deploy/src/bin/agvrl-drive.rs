@@ -657,13 +657,6 @@ fn serve_race(a: &Args, id: &str) -> Result<()> {
             agvrl_sim::MAX_CARS
         );
     }
-    if a.opponents.len() > 1 && a.opponents.len() != cars - 1 {
-        bail!(
-            "{} opponent policies for {} opponents: give one for all, or one each",
-            a.opponents.len(),
-            cars - 1
-        );
-    }
     // The race's settings: --policy's if given (the served stack's), else the first opponent's.
     let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
     let settings = a.policy.as_deref().unwrap_or(first);
