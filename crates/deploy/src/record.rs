@@ -269,19 +269,11 @@ impl DriveBag {
 
 /// odom to base_link: the pose of an Odometry message.
 fn odom_tf(o: &msg::Odometry) -> msg::TFMessage {
-    let p = o.pose.pose;
     msg::TFMessage {
         transforms: vec![msg::TransformStamped {
             header: mapping::header(o.header.stamp.as_secs(), ODOM_FRAME),
             child_frame_id: BASE_FRAME.into(),
-            transform: msg::Transform {
-                translation: msg::Vector3 {
-                    x: p.position.x,
-                    y: p.position.y,
-                    z: p.position.z,
-                },
-                rotation: p.orientation,
-            },
+            transform: mapping::odom_transform(o),
         }],
     }
 }

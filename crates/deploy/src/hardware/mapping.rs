@@ -280,6 +280,19 @@ pub fn odom_msg(g: &GpsReading, i: &ImuReading, stamp_s: f64, child_frame_id: &s
     }
 }
 
+/// An Odometry message's pose as the transform from its frame to its child frame.
+pub fn odom_transform(o: &msg::Odometry) -> msg::Transform {
+    let p = o.pose.pose;
+    msg::Transform {
+        translation: msg::Vector3 {
+            x: p.position.x,
+            y: p.position.y,
+            z: p.position.z,
+        },
+        rotation: p.orientation,
+    }
+}
+
 /// A simulated geodetic fix as `sensor_msgs/NavSatFix`.
 pub fn navsat_msg(g: &Geodetic, stamp_s: f64, frame_id: &str) -> msg::NavSatFix {
     msg::NavSatFix {

@@ -656,18 +656,10 @@ fn send<M: serde::Serialize>(p: &Option<Publisher<M>>, m: M, name: &str, blocked
 
 /// odom to base_link on `/tf`, from an Odometry message (its own frames), stamped `stamp_s`.
 fn odom_tf(o: &msg::Odometry, stamp_s: f64) -> msg::TransformStamped {
-    let p = o.pose.pose;
     msg::TransformStamped {
         header: mapping::header(stamp_s, &o.header.frame_id),
         child_frame_id: o.child_frame_id.clone(),
-        transform: msg::Transform {
-            translation: msg::Vector3 {
-                x: p.position.x,
-                y: p.position.y,
-                z: p.position.z,
-            },
-            rotation: p.orientation,
-        },
+        transform: mapping::odom_transform(o),
     }
 }
 
