@@ -84,11 +84,11 @@ const PASS_MARGIN_M: f64 = 0.5;
 const LOSS_WINDOW_S: f64 = 2.0;
 
 /// What drives a car for one step of [`RaceEnv::step_inputs`].
-#[derive(Clone, Debug, PartialEq)]
-pub enum CarInput {
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CarInput<'a> {
     /// An action in the action space, through the car's task (its mapping and safety filter),
     /// as [`MultiEnv::step`] takes.
-    Action(Vec<f32>),
+    Action(&'a [f32]),
     /// A control applied as it is: a car driven from outside (`agvrl-drive --serve-sim`), whose
     /// own stack has already mapped and filtered it.
     Control(Control),
@@ -370,7 +370,7 @@ impl MultiEnv for RaceEnv {
     }
 
     fn step(&mut self, actions: &[Vec<f32>]) -> Result<MultiStep, EnvError> {
-        let inputs: Vec<CarInput> = actions.iter().cloned().map(CarInput::Action).collect();
+        let inputs: Vec<CarInput> = actions.iter().map(|a| CarInput::Action(a)).collect();
         self.step_inputs(&inputs)
     }
 
@@ -382,7 +382,7 @@ impl MultiEnv for RaceEnv {
 impl RaceEnv {
     /// One step with each car driven by an action or by a control of its own (see
     /// [`CarInput`]); [`MultiEnv::step`] is every car by action.
-    pub fn step_inputs(&mut self, inputs: &[CarInput]) -> Result<MultiStep, EnvError> {
+    pub fn step_inputs(&mut self, inputs: &[CarInput<'_>]) -> Result<MultiStep, EnvError> {
         let n = self.racers.len();
         if inputs.len() != n {
             return Err(EnvError::Config(format!("{} actions for {n} agents", inputs.len())));
@@ -395,7 +395,7 @@ impl RaceEnv {
         let mut controls = vec![Control::default(); n];
         let mut corrected = vec![None; n];
         for i in (0..n).filter(|&i| !self.racers[i].done) {
-            let a = match &inputs[i] {
+            let a = match inputs[i] {
                 CarInput::Action(a) => a,
                 CarInput::Control(c) => {
                     if !(c.throttle.is_finite() && c.steering_rad.is_finite()) {
@@ -412,7 +412,7 @@ impl RaceEnv {
                 env: i,
                 source: Box::new(e),
             })?;
-            let mut a = a.clone();
+            let mut a = a.to_vec();
             space.clamp(&mut a);
             controls[i] = self.tasks[i].control(&a, limit, &self.frames[i]);
             corrected[i] = self.tasks[i].corrected_action();

@@ -1574,7 +1574,7 @@ mod racing_against_others {
             let a = by_action.step(&actions).unwrap();
             let inputs = vec![
                 CarInput::Control(by_action.sim().control_of(0)),
-                CarInput::Action(actions[1].clone()),
+                CarInput::Action(&actions[1]),
             ];
             let c = by_control.step_inputs(&inputs).unwrap();
             assert_eq!(a, c, "step {k}");
@@ -1589,7 +1589,7 @@ mod racing_against_others {
                     throttle: f64::NAN,
                     steering_rad: 0.0,
                 }),
-                CarInput::Action(vec![0.0, 0.0]),
+                CarInput::Action(&[0.0, 0.0]),
             ])
             .unwrap_err()
             .to_string();

@@ -674,10 +674,9 @@ impl Race {
         s: &mut RobotStats,
     ) -> Result<Option<TerminationCause>, DeployError> {
         let n = frames.len();
-        let mut inputs = Vec::with_capacity(n);
-        inputs.push(CarInput::Control(c));
+        let mut actions = Vec::with_capacity(n);
         for i in 1..n {
-            inputs.push(CarInput::Action(match self.env.done(i) {
+            actions.push(match self.env.done(i) {
                 true => vec![0.0; 2],
                 false => {
                     let k = if self.opponents.len() == 1 { 0 } else { i - 1 };
@@ -685,8 +684,11 @@ impl Race {
                         .act(&self.obs[i], true)
                         .map_err(|e| DeployError::Vehicle(format!("car {i}'s policy: {e}")))?
                 }
-            }));
+            });
         }
+        let inputs: Vec<CarInput> = std::iter::once(CarInput::Control(c))
+            .chain(actions.iter().map(|a| CarInput::Action(a)))
+            .collect();
         let st = self.env.step_inputs(&inputs)?;
         for (i, a) in st.agents.iter().enumerate() {
             if let Some(a) = a {
