@@ -574,30 +574,45 @@ mod cli {
             .unwrap_or_else(|| panic!("{k}= missing in:\n{out}"))
     }
 
+    /// The policy carries its own safety: without the filter it drives 3 held-out outdoor-20
+    /// episodes to the time limit, and with it the filter steers or brakes at most 20 of its
+    /// 1,000 controls per episode (the search targets' bound).
     #[test]
     fn shipped_search_policy_drives_held_out_outdoor_episodes_without_a_termination() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
         let policy = root.join("assets/policies/search.agvrl");
-        let o = agvrl(&[
-            "eval",
-            "--policy",
-            policy.to_str().unwrap(),
-            "--env",
-            "search-outdoor-20",
-            "--episodes",
-            "3",
-            "--seed",
-            "7",
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let out = stdout(&o);
-        assert_eq!(key(&out, "episodes"), "3");
+        let eval = |filter: &[&str]| {
+            let mut args = vec![
+                "eval",
+                "--policy",
+                policy.to_str().unwrap(),
+                "--env",
+                "search-outdoor-20",
+                "--episodes",
+                "3",
+                "--seed",
+                "7",
+            ];
+            args.extend_from_slice(filter);
+            let o = agvrl(&args);
+            assert!(o.status.success(), "{}", stderr(&o));
+            stdout(&o)
+        };
+        let bare = eval(&["--safety-filter", "off"]);
+        assert_eq!(key(&bare, "safety_filter"), "off");
+        assert_eq!(key(&bare, "ended"), "time_limit,time_limit,time_limit", "{bare}");
         // Its embedded settings turn the safety filter on.
+        let out = eval(&[]);
+        assert_eq!(key(&out, "episodes"), "3");
         assert_eq!(key(&out, "safety_filter"), "on");
         assert_eq!(key(&out, "ended"), "time_limit,time_limit,time_limit", "{out}");
         assert_eq!(key(&out, "collisions"), "0");
+        let corrections: f64 = key(&out, "filter_corrections_per_episode").parse().unwrap();
+        assert!(corrections <= 20.0, "{out}");
         let cov: f64 = key(&out, "coverage").parse().unwrap();
         assert!(cov > 0.2, "coverage {cov}");
+        let bare_cov: f64 = key(&bare, "coverage").parse().unwrap();
+        assert!(bare_cov >= 0.95 * cov, "bare coverage {bare_cov}, filtered {cov}");
         // The same policy fits every search scene's spaces.
         for env in ["search-urban-20", "search-outdoor-50", "search-urban-50"] {
             let o = agvrl(&[
@@ -668,6 +683,10 @@ mod cli {
             "2",
             "--max-steps",
             "300",
+            // Episodes where the filter corrects the policy (13 times), so the replay checks
+            // its verdicts too.
+            "--seed",
+            "2",
             "--record",
             bags.to_str().unwrap(),
         ]);
@@ -715,7 +734,6 @@ mod cli {
         }
         assert_eq!(key(&out, "bag_messages"), messages.to_string());
         assert_ne!(first_odom[0], first_odom[1], "each episode its own start");
-        // Among new buildings the filter corrects some controls: the replay covers them.
         assert!(filtered > 0, "no filtered control to replay");
         let again = agvrl(&[
             "eval",
