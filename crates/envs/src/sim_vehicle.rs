@@ -17,7 +17,15 @@ pub enum SpawnMode {
     Random,
     /// AutoVRL's fixed spawn of the scene.
     Fixed,
+    /// Seeded over free space, facing an obstacle between [`RECOVERY_SPAWN_M`]'s bounds within
+    /// the spawn view: every episode starts with a recovery (turn away or reverse). Random's
+    /// rule where no such pose turns up.
+    NearObstacle,
 }
+
+/// Nearest return within the spawn view of a [`SpawnMode::NearObstacle`] start, metres: beyond
+/// the search task's 0.6 m termination, within a braking car's reach.
+pub const RECOVERY_SPAWN_M: std::ops::Range<f32> = 0.7..1.5;
 
 /// Per-episode domain randomisation: each factor is drawn uniformly in `[1 - x, 1 + x]`, the
 /// steering offset in `[-x, x]` rad. All zero: off.
@@ -260,6 +268,24 @@ impl Vehicle for SimVehicle {
                 }
             }
             SpawnMode::Fixed => self.sim.reset(self.sim.default_spawn())?,
+            SpawnMode::NearObstacle => {
+                let mut open = None;
+                for _ in 0..1000 {
+                    let pose = self.random_pose();
+                    self.sim.reset(pose)?;
+                    let near = self.sim.lidar_scan().min_range_within(SPAWN_VIEW_HALF_RAD);
+                    if RECOVERY_SPAWN_M.contains(&near) {
+                        open = None;
+                        break;
+                    }
+                    if open.is_none() && near >= SPAWN_VIEW_M {
+                        open = Some(pose);
+                    }
+                }
+                if let Some(pose) = open {
+                    self.sim.reset(pose)?;
+                }
+            }
         }
         Ok(self.frame())
     }

@@ -205,6 +205,30 @@ mod episodes {
     }
 
     #[test]
+    fn recovery_spawns_face_an_obstacle_inside_braking_reach() {
+        let cfg = EnvConfig {
+            spawn: SpawnMode::NearObstacle,
+            ..quick_cfg()
+        };
+        for id in ["search-outdoor-20", "search-urban-20"] {
+            let mut v = make_vehicle(id, &cfg).unwrap();
+            let mut poses = std::collections::HashSet::new();
+            for seed in 0..30 {
+                let f = v.reset(seed).unwrap();
+                let near = f.scan.unwrap().min_range();
+                assert!(
+                    agvrl_envs::sim_vehicle::RECOVERY_SPAWN_M.contains(&near),
+                    "{id} seed {seed}: {near} m ahead"
+                );
+                let g = f.gps.unwrap();
+                poses.insert(((g.position_m[0] * 10.0) as i32, (g.position_m[1] * 10.0) as i32));
+                assert_eq!(v.reset(seed).unwrap().gps.unwrap().position_m, g.position_m);
+            }
+            assert!(poses.len() > 25, "{id}: spawns must spread ({} distinct)", poses.len());
+        }
+    }
+
+    #[test]
     fn layout_seeds_give_other_maps_of_the_same_kind() {
         let scan_at_origin = |id: &str, layout_seed: Option<u64>| {
             let cfg = EnvConfig {

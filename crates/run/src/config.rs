@@ -36,6 +36,10 @@ pub struct RunConfig {
     /// the policy's own controls drive there and can end episodes, while the filter's
     /// corrections still reach the learner (`ppo.correction_coef`). Evaluation never advises.
     pub advisory_filter_envs: Vec<usize>,
+    /// Training envs (by index) whose episodes start facing an obstacle 0.7-1.5 m ahead
+    /// (`SpawnMode::NearObstacle`), so the policy practises recoveries. Evaluation never does.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub recovery_spawn_envs: Vec<usize>,
     /// Deterministic episodes evaluated after training.
     pub eval_episodes: usize,
     /// Time limit of evaluation episodes, control steps (default: the training limit).
@@ -60,6 +64,7 @@ impl Default for RunConfig {
             threads: 2,
             procedural_layouts: 0,
             advisory_filter_envs: Vec::new(),
+            recovery_spawn_envs: Vec::new(),
             eval_episodes: 3,
             eval_max_steps: None,
             env_config: EnvConfig::default(),
@@ -174,11 +179,16 @@ impl RunConfig {
                 self.procedural_layouts, self.n_envs
             )));
         }
-        if let Some(i) = self.advisory_filter_envs.iter().find(|i| **i >= self.n_envs) {
-            return Err(RunError::Config(format!(
-                "advisory_filter_envs: env {i} does not exist (n_envs = {})",
-                self.n_envs
-            )));
+        for (key, envs) in [
+            ("advisory_filter_envs", &self.advisory_filter_envs),
+            ("recovery_spawn_envs", &self.recovery_spawn_envs),
+        ] {
+            if let Some(i) = envs.iter().find(|i| **i >= self.n_envs) {
+                return Err(RunError::Config(format!(
+                    "{key}: env {i} does not exist (n_envs = {})",
+                    self.n_envs
+                )));
+            }
         }
         if self.env_config.track.is_some() && self.procedural_layouts > 0 {
             return Err(RunError::Config(
@@ -209,6 +219,9 @@ impl RunConfig {
             cfg.new_layout_each_episode = false;
         }
         cfg.safety_filter.advisory |= self.advisory_filter_envs.contains(&i);
+        if self.recovery_spawn_envs.contains(&i) {
+            cfg.spawn = agvrl_envs::SpawnMode::NearObstacle;
+        }
         cfg
     }
 

@@ -67,3 +67,38 @@ fn a_track_path_is_loaded_into_the_config_and_travels_without_the_files() {
         .to_string();
     assert!(e.contains("track is a racing setting"), "{e}");
 }
+
+/// Per-env training keys reach only the envs they name, and never evaluation: the recovery
+/// spawns and the advising filter; an index past `n_envs` is refused by key.
+#[test]
+fn per_env_training_keys_reach_their_envs_and_never_evaluation() {
+    use agvrl_envs::SpawnMode;
+    let text = "env = \"search-urban-20\"\nn_envs = 4\nadvisory_filter_envs = [1]\nrecovery_spawn_envs = [0, 2]\n\
+                [env_config]\nbrake_mps2 = 3.0\n[env_config.safety_filter]\nenabled = true\n";
+    let c = RunConfig::from_toml(&text, "x.toml").unwrap();
+    let spawns: Vec<SpawnMode> = (0..4).map(|i| c.train_env_config(i).spawn).collect();
+    assert_eq!(
+        spawns,
+        [
+            SpawnMode::NearObstacle,
+            SpawnMode::Random,
+            SpawnMode::NearObstacle,
+            SpawnMode::Random
+        ]
+    );
+    let advising: Vec<bool> = (0..4).map(|i| c.train_env_config(i).safety_filter.advisory).collect();
+    assert_eq!(advising, [false, true, false, false]);
+    assert_eq!(c.eval_env_config().spawn, SpawnMode::Random);
+    assert!(!c.eval_env_config().safety_filter.advisory);
+    assert_eq!(RunConfig::from_toml(&c.to_toml().unwrap(), "back").unwrap(), c);
+    // Left out of the written config when unused, so earlier policy files keep their bytes.
+    let plain = RunConfig::from_toml("env = \"search-urban-20\"\n", "p.toml").unwrap();
+    assert!(!plain.to_toml().unwrap().contains("recovery_spawn_envs"));
+    let e = RunConfig::from_toml(&text.replace("[0, 2]", "[4]"), "y.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("y.toml: recovery_spawn_envs: env 4 does not exist"),
+        "{e}"
+    );
+}
