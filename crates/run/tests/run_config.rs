@@ -75,7 +75,7 @@ fn per_env_training_keys_reach_their_envs_and_never_evaluation() {
     use agvrl_envs::SpawnMode;
     let text = "env = \"search-urban-20\"\nn_envs = 4\nadvisory_filter_envs = [1]\nrecovery_spawn_envs = [0, 2]\n\
                 [env_config]\nbrake_mps2 = 3.0\n[env_config.safety_filter]\nenabled = true\n";
-    let c = RunConfig::from_toml(&text, "x.toml").unwrap();
+    let c = RunConfig::from_toml(text, "x.toml").unwrap();
     let spawns: Vec<SpawnMode> = (0..4).map(|i| c.train_env_config(i).spawn).collect();
     assert_eq!(
         spawns,
