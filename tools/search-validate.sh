@@ -5,7 +5,9 @@
 # 1,000,000 (docs/search.md's table uses seed base 0, so the choice never sees the table's
 # episodes). The rule: among the trainings within 2 terminations of the fewest, the one with the
 # highest mean coverage ships (terminations first, since every target bounds them; coverage
-# next, since the coverage targets are the ones a fresh training misses).
+# next, since the coverage targets are the ones a fresh training misses). It also prints the
+# terminations of the same episodes without the filter (validation_bare_terminations), which
+# the rule does not read.
 #   tools/search-validate.sh POLICY [POLICY ...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,11 +20,15 @@ row() {
   out=$("$bin" "${row_args[@]}")
   total=$((total + $(key collisions "$out")))
   coverage+=("$(key coverage "$out")")
+  # The same episodes without the filter: reported beside the score, not part of the rule.
+  out=$("$bin" "${row_args[@]}" --safety-filter off)
+  bare=$((bare + $(key collisions "$out")))
 }
 for policy in "$@"; do
   total=0
+  bare=0
   coverage=()
   search_rows row
   mean=$(python3 -c "import sys; v = [float(x) for x in sys.argv[1:]]; print(f'{sum(v) / len(v):.3f}')" "${coverage[@]}")
-  echo "policy=$policy validation_terminations=$total validation_mean_coverage=$mean episodes=800"
+  echo "policy=$policy validation_terminations=$total validation_mean_coverage=$mean validation_bare_terminations=$bare episodes=800"
 done
