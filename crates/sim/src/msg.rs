@@ -97,9 +97,20 @@ impl LaserScan {
         self.ranges
             .iter()
             .enumerate()
-            .filter(|(i, _)| (self.angle_min + *i as f32 * self.angle_increment).abs() <= half_width_rad + 1e-6)
+            .filter(|(i, _)| self.bearing(*i).abs() <= half_width_rad + 1e-6)
             .map(|(_, r)| *r)
             .fold(self.range_max, f32::min)
+    }
+
+    /// Direction of ray `i` in the sensor frame, rad (positive left).
+    pub fn bearing(&self, i: usize) -> f32 {
+        self.angle_min + self.angle_increment * i as f32
+    }
+
+    /// Whether ray `i` returned from something: its `hit` flag, or for a scan without flags
+    /// (a car's LaserScan), a range short of `range_max`.
+    pub fn hit_at(&self, i: usize) -> bool {
+        self.hit.get(i).copied().unwrap_or(self.ranges[i] < self.range_max)
     }
 }
 

@@ -170,10 +170,10 @@ impl ExploredMemory {
             if !r.is_finite() {
                 continue;
             }
-            let hit = scan.hit.get(k).copied().unwrap_or(r < scan.range_max);
+            let hit = scan.hit_at(k);
             // Stop short of the cell holding the hit.
             let end = if hit { r - self.cfg.cell_m } else { r }.min(SEE_WITHIN_M);
-            let b = yaw + (scan.angle_min + scan.angle_increment * k as f32) as f64;
+            let b = yaw + scan.bearing(k) as f64;
             let (sb, cb) = b.sin_cos();
             let mut d = step;
             while d <= end {

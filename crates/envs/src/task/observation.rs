@@ -138,9 +138,9 @@ impl ArcObs {
             .ranges
             .iter()
             .enumerate()
-            .filter(|&(k, &r)| r.is_finite() && s.hit.get(k).copied().unwrap_or(r < s.range_max))
+            .filter(|&(k, &r)| r.is_finite() && s.hit_at(k))
             .map(|(k, &r)| {
-                let (sa, ca) = (s.angle_min + s.angle_increment * k as f32).sin_cos();
+                let (sa, ca) = s.bearing(k).sin_cos();
                 (r * ca, r * sa)
             })
             .collect();

@@ -516,11 +516,11 @@ impl SafetyFilter {
         if let Some(scan) = &frame.scan {
             let (s, c) = self.pose[2].sin_cos();
             for (i, &r) in scan.ranges.iter().enumerate() {
-                let hit = scan.hit.get(i).copied().unwrap_or(r < scan.range_max);
+                let hit = scan.hit_at(i);
                 if !hit || !r.is_finite() || r > REMEMBER_WITHIN_M {
                     continue;
                 }
-                let b = scan.angle_min + scan.angle_increment * i as f32;
+                let b = scan.bearing(i);
                 let (px, py) = ((self.cfg.lidar_x_m + r * b.cos()) as f64, (r * b.sin()) as f64);
                 let wx = self.pose[0] + c * px - s * py;
                 let wy = self.pose[1] + s * px + c * py;
