@@ -275,8 +275,7 @@ impl Vehicle for SimVehicle {
                     self.sim.reset(pose)?;
                     let near = self.sim.lidar_scan().min_range_within(SPAWN_VIEW_HALF_RAD);
                     if RECOVERY_SPAWN_M.contains(&near) {
-                        open = None;
-                        break;
+                        return Ok(self.frame());
                     }
                     if open.is_none() && near >= SPAWN_VIEW_M {
                         open = Some(pose);
