@@ -66,7 +66,28 @@ pub struct ArcObs {
     pub wheelbase_m: f32,
     /// The length that reads 1, metres.
     pub max_m: f32,
+    /// 0: a return within `half_width_m` of the centre line blocks the arc. Positive: the arc
+    /// is free until a return would come this close inside `too_close_fov_deg` ahead of the car
+    /// driving along it, the search task's `too_close` termination (0.6 m over 90 degrees);
+    /// `half_width_m` is then unused. A return beside the car that the turn never brings into
+    /// that cone blocks nothing.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub too_close_m: f32,
+    /// The cone of `too_close_m`, degrees, centred ahead.
+    #[serde(skip_serializing_if = "is_ninety")]
+    pub too_close_fov_deg: f32,
 }
+
+fn is_zero(v: &f32) -> bool {
+    *v == 0.0
+}
+
+fn is_ninety(v: &f32) -> bool {
+    *v == 90.0
+}
+
+/// The step along an arc at which `too_close_m` arcs check the cone, metres.
+const TOO_CLOSE_STEP_M: f32 = 0.05;
 
 impl Default for ArcObs {
     /// Off; XTENTH-CAR's geometry (0.33 m wheelbase, 0.30 m wide) with 0.1 m of margin.
@@ -76,6 +97,8 @@ impl Default for ArcObs {
             half_width_m: 0.25,
             wheelbase_m: 0.33,
             max_m: 4.0,
+            too_close_m: 0.0,
+            too_close_fov_deg: 90.0,
         }
     }
 }
@@ -94,12 +117,16 @@ impl ArcObs {
     /// An error for settings that cannot work.
     pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
         let positive = |v: f32| v.is_finite() && v > 0.0;
-        if self.n <= 32 && positive(self.half_width_m) && positive(self.wheelbase_m) && positive(self.max_m) {
+        let cone = self.too_close_m == 0.0
+            || (positive(self.too_close_m) && self.too_close_fov_deg > 0.0 && self.too_close_fov_deg < 180.0);
+        if self.n <= 32 && positive(self.half_width_m) && positive(self.wheelbase_m) && positive(self.max_m) && cone {
             Ok(())
         } else {
             Err(agvrl_sim::InvalidSetting::new(
                 "observation.arcs",
-                format!("observation.arcs needs n <= 32 and positive half_width_m, wheelbase_m, max_m; got {self:?}"),
+                format!(
+                    "observation.arcs needs n <= 32, positive half_width_m, wheelbase_m, max_m, and too_close_m 0 or positive with too_close_fov_deg in (0, 180); got {self:?}"
+                ),
             ))
         }
     }
@@ -107,6 +134,9 @@ impl ArcObs {
     /// The free length along the arc of curvature `c` (1/m, positive left) among `points`
     /// (x ahead, y left, metres, from the arc's start), at most `max_m`.
     pub fn free_length(&self, c: f32, points: impl Iterator<Item = (f32, f32)>) -> f32 {
+        if self.too_close_m > 0.0 {
+            return self.free_length_to_too_close(c, points);
+        }
         let (w, mut free) = (self.half_width_m, self.max_m);
         if c.abs() < 1e-4 {
             for (x, y) in points {
@@ -125,6 +155,64 @@ impl ArcObs {
             }
             let turned = if r > 0.0 { x.atan2(r - y) } else { x.atan2(y - r) };
             free = free.min(turned.rem_euclid(std::f32::consts::TAU) * r.abs());
+        }
+        free
+    }
+
+    /// `free_length` for `too_close_m` arcs: the first pose along the arc, every
+    /// `TOO_CLOSE_STEP_M`, at which a point lies within `too_close_m` and inside the cone ahead
+    /// (so at most one step past the exact length; the cone's edge is widened by a step, so a
+    /// return up to about a step outside it may block). Only the poses within `too_close_m` of
+    /// a point are checked for it.
+    fn free_length_to_too_close(&self, c: f32, points: impl Iterator<Item = (f32, f32)>) -> f32 {
+        let (reach, ds) = (self.too_close_m, TOO_CLOSE_STEP_M);
+        let tan_half = (0.5 * self.too_close_fov_deg).to_radians().tan();
+        let n = (self.max_m / ds).floor() as usize;
+        // Poses after j steps: position and heading (cos, sin), by rotating one step at a time.
+        let (sd, cd) = (ds * c).sin_cos();
+        let mut poses = Vec::with_capacity(n + 1);
+        let (mut cs, mut sn) = (1.0_f32, 0.0_f32);
+        for j in 0..=n {
+            let (x, y) = if c.abs() < 1e-4 {
+                (j as f32 * ds, 0.0)
+            } else {
+                (sn / c, (1.0 - cs) / c)
+            };
+            poses.push((x, y, cs, sn));
+            (cs, sn) = (cs * cd - sn * sd, sn * cd + cs * sd);
+        }
+        let mut free = self.max_m;
+        for (px, py) in points {
+            // The arc lengths at which the car is within reach of the point.
+            let (lo, hi) = if c.abs() < 1e-4 {
+                if py.abs() >= reach {
+                    continue;
+                }
+                (px - reach, px + reach)
+            } else {
+                let r = 1.0 / c;
+                let rho = (py - r).hypot(px);
+                let k = (rho * rho + r * r - reach * reach) / (2.0 * rho * r.abs());
+                if k >= 1.0 {
+                    continue;
+                }
+                let turned = if r > 0.0 { px.atan2(r - py) } else { px.atan2(py - r) };
+                let turned = turned.rem_euclid(std::f32::consts::TAU);
+                let beta = k.max(-1.0).acos();
+                ((turned - beta) * r.abs(), (turned + beta) * r.abs())
+            };
+            let first = (lo.max(0.0) / ds).ceil() as usize;
+            let last = ((hi.min(free) / ds).floor() as usize).min(n);
+            for (j, &(x, y, cs, sn)) in poses.iter().enumerate().take(last + 1).skip(first) {
+                let (dx, dy) = (px - x, py - y);
+                let (qx, qy) = (cs * dx + sn * dy, cs * dy - sn * dx);
+                // The cone's edge widened by one step, so that a pass through the cone shorter
+                // than a step is not missed between two poses.
+                if qx > 0.0 && qx * qx + qy * qy < reach * reach && qy.abs() <= (qx + ds) * tan_half {
+                    free = free.min(j as f32 * ds);
+                    break;
+                }
+            }
         }
         free
     }
@@ -406,6 +494,46 @@ mod tests {
             assert!(a.free_length(1.0 / r, [inside(0.2)].into_iter()) < a.max_m);
             assert_eq!(a.free_length(1.0 / r, [inside(0.3)].into_iter()), a.max_m);
         }
+    }
+
+    /// With `too_close_m`, an arc ends where the task would terminate: straight ahead, a return
+    /// at (x, y) enters the 0.6 m cone at x - sqrt(0.36 - y^2), but only when |y| < 0.6 / sqrt 2
+    /// (closed form); one beside the car never enters it; on a turn of radius R a return on the
+    /// arc a quarter turn on is reached when the chord to it is 0.6 m, at R (pi / 2 - 2 asin(0.3
+    /// / R)). The sampled length is at most one step past each.
+    #[test]
+    fn too_close_arcs_end_where_the_termination_cone_would_reach_a_return() {
+        let a = ArcObs {
+            n: 1,
+            too_close_m: 0.6,
+            ..ArcObs::default()
+        };
+        a.validate().unwrap();
+        let near = |got: f32, want: f32| (0.0..=TOO_CLOSE_STEP_M + 1e-4).contains(&(got - want));
+        for (x, y) in [(3.0_f32, 0.2_f32), (2.0, -0.4), (1.0, 0.0)] {
+            let want = x - (0.36 - y * y).sqrt();
+            let got = a.free_length(0.0, [(x, y)].into_iter());
+            assert!(near(got, want), "({x}, {y}): {got} against {want}");
+        }
+        // Passes 0.45 m wide: r_m never falls under 0.6 m (the band rule at 0.43 m blocked it).
+        assert_eq!(a.free_length(0.0, [(3.0, 0.45)].into_iter()), a.max_m);
+        // 0.36 m from the car, 74 degrees to the left: out of the cone, and driving on leaves it so.
+        assert_eq!(a.free_length(0.0, [(0.1, 0.35)].into_iter()), a.max_m);
+        for r in [2.0_f32, -2.0] {
+            let want = r.abs() * (PI / 2.0 - 2.0 * (0.3 / r.abs()).asin());
+            let got = a.free_length(1.0 / r, [(r.abs(), r)].into_iter());
+            assert!(near(got, want), "radius {r}: {got} against {want}");
+            assert_eq!(
+                a.free_length(1.0 / r, [(r.abs(), -r)].into_iter()),
+                a.max_m,
+                "the other side"
+            );
+        }
+        let bad = ArcObs {
+            too_close_fov_deg: 180.0,
+            ..a
+        };
+        assert!(bad.validate().is_err());
     }
 
     /// In the observation: one value per arc, full left first, each in [0, 1], the space's
