@@ -515,7 +515,7 @@ mod tests {
             let got = a.free_length(0.0, [(x, y)].into_iter());
             assert!(near(got, want), "({x}, {y}): {got} against {want}");
         }
-        // Passes 0.45 m wide: r_m never falls under 0.6 m (the band rule at 0.43 m blocked it).
+        // Passes 0.45 m wide: r_m never falls under 0.6 m (a 0.5 m band blocks it).
         assert_eq!(a.free_length(0.0, [(3.0, 0.45)].into_iter()), a.max_m);
         // 0.36 m from the car, 74 degrees to the left: out of the cone, and driving on leaves it so.
         assert_eq!(a.free_length(0.0, [(0.1, 0.35)].into_iter()), a.max_m);
