@@ -365,9 +365,11 @@ fn sac_with_threads<E: Env>(mut sac: Sac<E>, cfg: &RunConfig) -> Result<Sac<E>> 
     Ok(sac)
 }
 
-/// `ppo` splitting each image minibatch over the run's `threads`.
+/// `ppo` splitting each image minibatch over the run's `threads`, its learning rate scheduled
+/// over the run's `steps` (`ppo.learning_rate_final`).
 fn ppo_with_threads<E: Env>(mut ppo: Ppo<E>, cfg: &RunConfig) -> Ppo<E> {
     ppo.set_threads(cfg.threads);
+    ppo.set_schedule_steps(cfg.steps);
     ppo
 }
 

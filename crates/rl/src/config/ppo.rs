@@ -61,6 +61,11 @@ pub struct PpoConfig {
     /// (0: off, SB3's loss; not an SB3 setting).
     #[serde(skip_serializing_if = "is_zero")]
     pub correction_coef: f64,
+    /// Anneal the learning rate linearly from `learning_rate` at step 0 to this at the run's
+    /// last step (rl-zoo3's `lin_` schedules when 0; None: constant, SB3's default). The run's
+    /// length comes from [`crate::Ppo::set_schedule_steps`]; `agvrl train` passes its `steps`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub learning_rate_final: Option<f64>,
 }
 
 fn is_zero(v: &f64) -> bool {
@@ -92,6 +97,7 @@ impl Default for PpoConfig {
             normalize_obs: false,
             image: None,
             correction_coef: 0.0,
+            learning_rate_final: None,
         }
     }
 }
@@ -119,6 +125,9 @@ impl PpoConfig {
             || self.n_epochs == 0
         {
             return bad("learning_rate, n_steps, batch_size and n_epochs must be > 0");
+        }
+        if self.learning_rate_final.is_some_and(|f| f.is_nan() || f < 0.0) {
+            return bad("learning_rate_final must be >= 0");
         }
         if !(0.0..=1.0).contains(&self.gamma) || !(0.0..=1.0).contains(&self.gae_lambda) {
             return bad("gamma and gae_lambda must lie in [0, 1]");

@@ -20,7 +20,7 @@ pub use update::GradientProbe;
 
 use crate::adam::Adam;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter, Common};
-use crate::error::Result;
+use crate::error::{Result, RlError};
 use crate::gaussian::{self, HALF_LN_2PI_F32};
 use crate::nets::{HostParams, Init, MlpSpec, init_layer};
 use crate::normalize::ObsNormalizer;
@@ -135,6 +135,8 @@ pub struct Ppo<E: Env> {
     shuffle: bool,
     /// Threads an image minibatch is split over (see [`Ppo::set_threads`]).
     threads: usize,
+    /// The run's length for `learning_rate_final` (see [`Ppo::set_schedule_steps`]).
+    schedule_steps: Option<u64>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -264,6 +266,7 @@ impl<E: Env> Ppo<E> {
             last: None,
             shuffle: true,
             threads: 1,
+            schedule_steps: None,
         })
     }
 
@@ -285,6 +288,26 @@ impl<E: Env> Ppo<E> {
     /// minibatches are too small to gain).
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads.max(1);
+    }
+
+    /// The run's length in env steps, over which `learning_rate_final` anneals the learning
+    /// rate (needed when it is set; a resumed run passes its length again).
+    pub fn set_schedule_steps(&mut self, steps: u64) {
+        self.schedule_steps = Some(steps);
+    }
+
+    /// With `learning_rate_final`, the learning rate of the update after `num_timesteps` steps:
+    /// linear from `learning_rate` at step 0 to `learning_rate_final` at the run's last step
+    /// and after.
+    fn scheduled_learning_rate(&self) -> Result<Option<f64>> {
+        let Some(last) = self.cfg.learning_rate_final else {
+            return Ok(None);
+        };
+        let steps = self.schedule_steps.ok_or_else(|| {
+            RlError::Config("PPO: learning_rate_final needs the run's length (Ppo::set_schedule_steps)".into())
+        })?;
+        let done = (self.num_timesteps as f64 / steps.max(1) as f64).min(1.0);
+        Ok(Some(self.cfg.learning_rate + done * (last - self.cfg.learning_rate)))
     }
 
     /// The configuration.
@@ -316,6 +339,10 @@ impl<E: Env> Ppo<E> {
         let target = self.num_timesteps + steps;
         while self.num_timesteps < target {
             let rollout = self.collect_rollout()?;
+            // As SB3: the rate at the progress after the rollout just collected.
+            if let Some(lr) = self.scheduled_learning_rate()? {
+                self.opt.lr = lr;
+            }
             self.update(&rollout)?;
             let progress = Progress {
                 algorithm: Algorithm::Ppo,
@@ -604,5 +631,39 @@ mod tests {
         assert_eq!(r.advantages, vec![1.25, 0.0625, 1.0, 0.25, 2.5, 1.0]);
         assert_eq!(r.returns, vec![1.75, 0.0625, 2.0, 0.25, 4.0, 1.0]);
         assert_eq!(r.gae_inputs[3], vec![2.0, 5.0]);
+    }
+
+    /// `learning_rate_final` anneals the rate linearly over the run's length: each update uses
+    /// the rate at the steps taken after its rollout (SB3's progress), and past the length the
+    /// final rate; without the length it is an error, not a silently constant rate.
+    #[test]
+    fn learning_rate_final_anneals_linearly_over_the_schedule_steps() {
+        use super::{Control, Ppo, PpoConfig};
+        let cfg = PpoConfig {
+            n_steps: 16,
+            batch_size: 16,
+            n_epochs: 1,
+            learning_rate: 1e-3,
+            learning_rate_final: Some(2e-4),
+            ..Default::default()
+        };
+        let device = crate::device::default_device();
+        let envs = || crate::learning::pendulum_envs(2).unwrap();
+        let mut unset = Ppo::new(cfg.clone(), envs(), &device, 1).unwrap();
+        assert!(unset.learn(32, &mut |_| Control::Continue).is_err());
+
+        let mut ppo = Ppo::new(cfg, envs(), &device, 1).unwrap();
+        ppo.set_schedule_steps(128);
+        // 32 steps a rollout (2 envs x 16): the updates see 32, 64, ..., 192 steps taken.
+        for k in 1..=6u64 {
+            ppo.learn(32, &mut |_| Control::Continue).unwrap();
+            let done = ((32 * k) as f64 / 128.0).min(1.0);
+            let want = 1e-3 + done * (2e-4 - 1e-3);
+            assert!(
+                (ppo.opt.lr - want).abs() < 1e-15,
+                "update {k}: {} against {want}",
+                ppo.opt.lr
+            );
+        }
     }
 }
