@@ -683,7 +683,7 @@ mod cli {
             "2",
             "--max-steps",
             "300",
-            // Episodes where the filter corrects the policy (13 times), so the replay checks
+            // Episodes where the filter corrects the policy (6 times), so the replay checks
             // its verdicts too.
             "--seed",
             "2",
