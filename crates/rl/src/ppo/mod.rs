@@ -337,6 +337,8 @@ impl<E: Env> Ppo<E> {
     /// `callback` sees progress after every rollout + update and can stop early.
     pub fn learn(&mut self, steps: u64, callback: &mut dyn FnMut(&Progress<'_>) -> Control) -> Result<()> {
         let target = self.num_timesteps + steps;
+        // A schedule without the run's length fails here, before any env step.
+        self.scheduled_learning_rate()?;
         while self.num_timesteps < target {
             let rollout = self.collect_rollout()?;
             // As SB3: the rate at the progress after the rollout just collected.
