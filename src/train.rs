@@ -458,6 +458,8 @@ fn learn_in_chunks(
                     "updates": p.updates,
                     "episodes": p.episodes,
                     "mean_return": mean.filter(|m| m.is_finite()),
+                    "corrected_fraction": Some(p.losses.corrected_fraction).filter(|v| v.is_finite()),
+                    "correction_lambda": Some(p.losses.correction_lambda).filter(|v| v.is_finite()),
                     "wall_s": t0.elapsed().as_secs_f64(),
                 })
             );

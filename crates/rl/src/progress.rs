@@ -34,6 +34,8 @@ pub struct Losses {
     /// PPO: fraction of the rollout's steps whose action the env corrected
     /// (`Info::corrected_action`).
     pub corrected_fraction: f64,
+    /// PPO with `correction_limit`: the mean of the envs' multipliers after the rollout.
+    pub correction_lambda: f64,
 }
 
 impl Default for Losses {
@@ -50,6 +52,7 @@ impl Default for Losses {
             grad_norm: f64::NAN,
             correction: f64::NAN,
             corrected_fraction: f64::NAN,
+            correction_lambda: f64::NAN,
         }
     }
 }

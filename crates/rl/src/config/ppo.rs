@@ -66,10 +66,25 @@ pub struct PpoConfig {
     /// length comes from [`crate::Ppo::set_schedule_steps`]; `agvrl train` passes its `steps`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub learning_rate_final: Option<f64>,
+    /// The env's corrections as a constraint (Reward Constrained Policy Optimisation, Tessler
+    /// et al. 2019): each env's reward is charged its multiplier `lambda_e` on every step it
+    /// corrected the policy's action (`Info::corrected_action`), and after every rollout
+    /// `lambda_e` moves by `correction_lambda_lr * (env e's corrected fraction - this)`,
+    /// floored at 0, so the charge grows only where the policy is corrected more often than
+    /// this fraction of its steps, and only as far as needed (None: off; not an SB3 setting).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub correction_limit: Option<f64>,
+    /// The multipliers' step per rollout per unit of excess corrected fraction (1.0).
+    #[serde(skip_serializing_if = "is_one")]
+    pub correction_lambda_lr: f64,
 }
 
 fn is_zero(v: &f64) -> bool {
     *v == 0.0
+}
+
+fn is_one(v: &f64) -> bool {
+    *v == 1.0
 }
 
 impl Default for PpoConfig {
@@ -98,6 +113,8 @@ impl Default for PpoConfig {
             image: None,
             correction_coef: 0.0,
             learning_rate_final: None,
+            correction_limit: None,
+            correction_lambda_lr: 1.0,
         }
     }
 }
@@ -144,6 +161,12 @@ impl PpoConfig {
         }
         if !(self.correction_coef.is_finite() && self.correction_coef >= 0.0) {
             return bad("correction_coef must be finite and >= 0");
+        }
+        if self.correction_limit.is_some_and(|l| !(0.0..=1.0).contains(&l)) {
+            return bad("correction_limit must lie in [0, 1] (a fraction of the steps)");
+        }
+        if !(self.correction_lambda_lr.is_finite() && self.correction_lambda_lr > 0.0) {
+            return bad("correction_lambda_lr must be finite and > 0");
         }
         if let Some(image) = &self.image {
             image.conv_shapes()?;

@@ -137,6 +137,8 @@ pub struct Ppo<E: Env> {
     threads: usize,
     /// The run's length for `learning_rate_final` (see [`Ppo::set_schedule_steps`]).
     schedule_steps: Option<u64>,
+    /// With `correction_limit`, each env's multiplier: the charge per corrected step.
+    lambdas: Vec<f64>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -146,6 +148,25 @@ struct Header {
     #[serde(flatten)]
     common: Common,
     opt: AdamMeta,
+    /// The envs' correction multipliers (`correction_limit`; absent in older checkpoints).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    correction_lambdas: Vec<f64>,
+}
+
+/// Charge each env's reward its multiplier on a step where the env corrected the policy
+/// (`corrected[e]` is 1), as RCPO's penalised reward `r - lambda c`.
+fn charge_corrections(rewards: &mut [f32], corrected: &[f32], lambdas: &[f64]) {
+    for ((r, c), l) in rewards.iter_mut().zip(corrected).zip(lambdas) {
+        *r -= (*c as f64 * *l) as f32;
+    }
+}
+
+/// RCPO's multiplier step after a rollout of `n_steps` per env: `lambda_e += lr *
+/// (corrected_e / n_steps - limit)`, floored at 0.
+fn step_multipliers(lambdas: &mut [f64], corrected: &[usize], n_steps: usize, limit: f64, lr: f64) {
+    for (l, c) in lambdas.iter_mut().zip(corrected) {
+        *l = (*l + lr * (*c as f64 / n_steps.max(1) as f64 - limit)).max(0.0);
+    }
 }
 
 impl checkpoint::Header for Header {
@@ -211,6 +232,7 @@ impl<E: Env> Ppo<E> {
             }
             None => (obs_dim, obs_dim),
         };
+        let n_envs = env.n_envs();
         let mut rng = Rng::new(seed);
         let mut sizes = vec![mlp_in];
         sizes.extend(&cfg.net_arch);
@@ -267,6 +289,7 @@ impl<E: Env> Ppo<E> {
             shuffle: true,
             threads: 1,
             schedule_steps: None,
+            lambdas: vec![0.0; n_envs],
         })
     }
 
@@ -395,6 +418,7 @@ impl<E: Env> Ppo<E> {
             gae_inputs: Default::default(),
         };
         let mut rewards = Vec::with_capacity(total);
+        let mut corrected_per_env = vec![0usize; n_envs];
         let mut values = Vec::with_capacity(total);
         let mut episode_starts = Vec::with_capacity(total);
         let space = self.env.action_space().clone();
@@ -461,17 +485,21 @@ impl<E: Env> Ppo<E> {
             }
             r.obs.extend_from_slice(&x);
             r.actions.extend_from_slice(&actions);
-            for info in &st.infos {
+            for (e, info) in st.infos.iter().enumerate() {
                 match info.corrected_action.as_deref().filter(|c| c.len() == a) {
                     Some(c) => {
                         r.corrected_actions.extend_from_slice(c);
                         r.corrected.push(1.0);
+                        corrected_per_env[e] += 1;
                     }
                     None => {
                         r.corrected_actions.extend(std::iter::repeat_n(0.0, a));
                         r.corrected.push(0.0);
                     }
                 }
+            }
+            if self.cfg.correction_limit.is_some() {
+                charge_corrections(&mut rew, &r.corrected[r.corrected.len() - n_envs..], &self.lambdas);
             }
             rewards.extend_from_slice(&rew);
             values.extend_from_slice(&value);
@@ -492,6 +520,16 @@ impl<E: Env> Ppo<E> {
             self.cfg.gae_lambda as f32,
         );
         self.last = Some((obs, starts));
+        if let Some(limit) = self.cfg.correction_limit {
+            step_multipliers(
+                &mut self.lambdas,
+                &corrected_per_env,
+                n_steps,
+                limit,
+                self.cfg.correction_lambda_lr,
+            );
+            self.losses.correction_lambda = self.lambdas.iter().sum::<f64>() / n_envs.max(1) as f64;
+        }
         Ok(r)
     }
 
@@ -578,6 +616,11 @@ impl<E: Env> Ppo<E> {
                 &self.normalizer,
             ),
             opt,
+            correction_lambdas: if self.cfg.correction_limit.is_some() {
+                self.lambdas.clone()
+            } else {
+                vec![]
+            },
         };
         checkpoint::write(path, &header, &w)
     }
@@ -596,6 +639,9 @@ impl<E: Env> Ppo<E> {
         s.num_timesteps = h.common.num_timesteps;
         s.n_updates = h.common.n_updates;
         s.normalizer = h.common.normalizer;
+        if h.correction_lambdas.len() == s.lambdas.len() {
+            s.lambdas = h.correction_lambdas;
+        }
         Ok(s)
     }
 
@@ -633,6 +679,85 @@ mod tests {
         assert_eq!(r.advantages, vec![1.25, 0.0625, 1.0, 0.25, 2.5, 1.0]);
         assert_eq!(r.returns, vec![1.75, 0.0625, 2.0, 0.25, 4.0, 1.0]);
         assert_eq!(r.gae_inputs[3], vec![2.0, 5.0]);
+    }
+
+    /// RCPO's multiplier step, by hand: the excess corrected fraction times the rate, floored
+    /// at 0.
+    #[test]
+    fn multipliers_step_by_the_excess_corrected_fraction_and_stay_non_negative() {
+        let mut l = vec![0.0, 0.5, 0.01];
+        // 8 steps: fractions 0.5, 0, 0; limit 0.25, rate 2.
+        super::step_multipliers(&mut l, &[4, 0, 0], 8, 0.25, 2.0);
+        assert_eq!(l, vec![0.5, 0.0, 0.0]);
+        let mut r = vec![1.0f32, 1.0, 1.0];
+        super::charge_corrections(&mut r, &[1.0, 0.0, 1.0], &[0.5, 3.0, 0.0]);
+        assert_eq!(r, vec![0.5, 1.0, 1.0]);
+    }
+
+    /// Corrects every action of the wrapped env (the action sent stays the policy's).
+    struct AlwaysCorrected(Box<dyn agvrl_envs::Env>);
+
+    impl agvrl_envs::Env for AlwaysCorrected {
+        fn observation_space(&self) -> agvrl_envs::BoxSpace {
+            self.0.observation_space()
+        }
+        fn action_space(&self) -> agvrl_envs::BoxSpace {
+            self.0.action_space()
+        }
+        fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f32>, agvrl_envs::Info), agvrl_envs::EnvError> {
+            self.0.reset(seed)
+        }
+        fn step(&mut self, action: &[f32]) -> Result<agvrl_envs::Step, agvrl_envs::EnvError> {
+            let mut st = self.0.step(action)?;
+            st.info.corrected_action = Some(action.to_vec());
+            Ok(st)
+        }
+        fn dt_s(&self) -> f64 {
+            self.0.dt_s()
+        }
+    }
+
+    /// With `correction_limit`, a rollout charges each env's reward its multiplier on every
+    /// corrected step and nothing else (the same seed without the limit gives the uncharged
+    /// rewards), then steps the multipliers by the envs' corrected fractions; a checkpoint
+    /// keeps them.
+    #[test]
+    fn correction_limit_charges_corrected_steps_and_steps_each_envs_multiplier() {
+        use super::{Ppo, PpoConfig};
+        let envs = || {
+            let make = || agvrl_envs::registry::make("pendulum", &agvrl_envs::EnvConfig::default()).unwrap();
+            let v: Vec<Box<dyn agvrl_envs::Env>> = vec![Box::new(AlwaysCorrected(make())), make()];
+            agvrl_envs::VecEnv::new(v, 1).unwrap()
+        };
+        let cfg = PpoConfig {
+            n_steps: 8,
+            batch_size: 16,
+            n_epochs: 1,
+            ..Default::default()
+        };
+        let limited = PpoConfig {
+            correction_limit: Some(0.25),
+            correction_lambda_lr: 0.5,
+            ..cfg.clone()
+        };
+        let device = crate::device::default_device();
+        let mut plain = Ppo::new(cfg, envs(), &device, 7).unwrap();
+        let mut rcpo = Ppo::new(limited, envs(), &device, 7).unwrap();
+        rcpo.lambdas = vec![2.0, 0.1];
+        let (a, b) = (plain.collect_rollout().unwrap(), rcpo.collect_rollout().unwrap());
+        assert_eq!(a.actions, b.actions);
+        for (k, (ra, rb)) in a.gae_inputs[0].iter().zip(&b.gae_inputs[0]).enumerate() {
+            let want = if k % 2 == 0 { ra - 2.0 } else { *ra };
+            assert!((rb - want).abs() < 1e-5, "step {k}: {rb} against {want}");
+        }
+        // Env 0: 2 + 0.5 * (1 - 0.25); env 1: 0.1 + 0.5 * (0 - 0.25) floors at 0.
+        assert_eq!(rcpo.lambdas, vec![2.375, 0.0]);
+        assert_eq!(rcpo.losses.correction_lambda, 2.375 / 2.0);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("ppo.ckpt");
+        rcpo.save_checkpoint(&path).unwrap();
+        let back = Ppo::load_checkpoint(&path, envs(), &device).unwrap();
+        assert_eq!(back.lambdas, vec![2.375, 0.0]);
     }
 
     /// `learning_rate_final` anneals the rate linearly over the run's length: each update uses
