@@ -37,6 +37,9 @@ pub enum Switch {
     On,
     /// Off.
     Off,
+    /// The training envs' filter (`train_safety_filter`, else the policy's own): the one the
+    /// planners were tuned behind.
+    Train,
 }
 
 /// The name a value enum has on the command line (and in eval's output).
@@ -77,7 +80,8 @@ pub struct EvalArgs {
     #[arg(long, value_enum)]
     pub preset: Option<Preset>,
     /// Turn the LiDAR safety filter between policy and drive on or off, whatever the policy's
-    /// settings say (`off`: the network's own actions reach the drive).
+    /// settings say (`off`: the network's own actions reach the drive), or drive behind the
+    /// filter the policy was trained behind (`train`).
     #[arg(long, value_enum)]
     pub safety_filter: Option<Switch>,
     /// Episode length limit, control steps (default: the run's evaluation limit).
@@ -481,10 +485,17 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         env_cfg.noise = s2r.noise;
         env_cfg.randomisation = s2r.randomisation;
     }
-    if let Some(f) = &a.safety_filter {
-        env_cfg.safety_filter.enabled = *f == Switch::On;
-        env_cfg.safety_filter.advisory = false;
+    match a.safety_filter {
+        Some(Switch::Train) => {
+            let Some(run) = &src.run else {
+                bail!("--safety-filter train needs a policy that carries its training settings");
+            };
+            env_cfg.safety_filter = run.train_filter();
+        }
+        Some(f) => env_cfg.safety_filter.enabled = f == Switch::On,
+        None => {}
     }
+    env_cfg.safety_filter.advisory = false;
     if let Some(n) = a.max_steps {
         if n == 0 {
             bail!("--max-steps must be at least 1");
@@ -559,7 +570,11 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     }
     println!(
         "safety_filter={}",
-        if env_cfg.safety_filter.enabled { "on" } else { "off" }
+        match (env_cfg.safety_filter.enabled, a.safety_filter) {
+            (false, _) => "off",
+            (true, Some(Switch::Train)) => "train",
+            (true, _) => "on",
+        }
     );
     for l in s.report().lines() {
         println!("{l}");

@@ -5,6 +5,7 @@
 
 use crate::error::{Result, RunError};
 use agvrl_envs::EnvConfig;
+use agvrl_envs::task::SafetyFilterConfig;
 use agvrl_rl::{Algorithm, PpoConfig, SacConfig};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -40,6 +41,12 @@ pub struct RunConfig {
     /// (`SpawnMode::NearObstacle`), so the policy practises recoveries. Evaluation never does.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub recovery_spawn_envs: Vec<usize>,
+    /// The safety filter of the training envs, where it differs from
+    /// `env_config.safety_filter` (the one the policy drives behind: evaluation, the car). A
+    /// wider filter in training (the shield) teaches the policy margins that a looser one
+    /// behind it (the backstop) then seldom has to enforce. Evaluation never uses it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub train_safety_filter: Option<SafetyFilterConfig>,
     /// Deterministic episodes evaluated after training.
     pub eval_episodes: usize,
     /// Time limit of evaluation episodes, control steps (default: the training limit).
@@ -65,6 +72,7 @@ impl Default for RunConfig {
             procedural_layouts: 0,
             advisory_filter_envs: Vec::new(),
             recovery_spawn_envs: Vec::new(),
+            train_safety_filter: None,
             eval_episodes: 3,
             eval_max_steps: None,
             env_config: EnvConfig::default(),
@@ -195,9 +203,19 @@ impl RunConfig {
                 "procedural_layouts draws layouts of the env's own map; env_config.track is a fixed map".into(),
             ));
         }
-        if !self.advisory_filter_envs.is_empty() && !self.env_config.safety_filter.enabled {
+        if let Some(mut f) = self.train_safety_filter {
+            // As the env resolves it: 0 brakes at the drive's rate.
+            if f.decel_mps2 == 0.0 {
+                f.decel_mps2 = self.env_config.sim.brake_mps2 as f32;
+            }
+            f.validate()
+                .map_err(|e| RunError::Config(format!("train_safety_filter: {e}")))?;
+        }
+        if !self.advisory_filter_envs.is_empty() && !self.train_filter().enabled {
             return Err(RunError::Config(
-                "advisory_filter_envs needs env_config.safety_filter.enabled = true".into(),
+                "advisory_filter_envs needs the training envs' safety filter enabled \
+                 (env_config.safety_filter or train_safety_filter)"
+                    .into(),
             ));
         }
         Ok(())
@@ -218,11 +236,17 @@ impl RunConfig {
         } else {
             cfg.new_layout_each_episode = false;
         }
+        cfg.safety_filter = self.train_filter();
         cfg.safety_filter.advisory |= self.advisory_filter_envs.contains(&i);
         if self.recovery_spawn_envs.contains(&i) {
             cfg.spawn = agvrl_envs::SpawnMode::NearObstacle;
         }
         cfg
+    }
+
+    /// The safety filter the training envs drive behind.
+    pub fn train_filter(&self) -> SafetyFilterConfig {
+        self.train_safety_filter.unwrap_or(self.env_config.safety_filter)
     }
 
     /// Env id of training env `i`.

@@ -102,3 +102,42 @@ fn per_env_training_keys_reach_their_envs_and_never_evaluation() {
         "{e}"
     );
 }
+
+/// `train_safety_filter` is the filter of every training env (advising where
+/// `advisory_filter_envs` says) and never of evaluation, which drives behind
+/// `env_config.safety_filter`; it survives the written config, and bad values are refused by key.
+#[test]
+fn train_safety_filter_shields_training_envs_and_never_evaluation() {
+    let text = "env = \"search-urban-20\"\nn_envs = 2\nadvisory_filter_envs = [1]\n\
+                [env_config]\nbrake_mps2 = 3.0\n\
+                [env_config.safety_filter]\nenabled = true\nclearance_m = 0.7\nlookahead_m = 0.0\n\
+                [train_safety_filter]\nenabled = true\nclearance_m = 0.85\n";
+    let c = RunConfig::from_toml(text, "x.toml").unwrap();
+    let train: Vec<_> = (0..2).map(|i| c.train_env_config(i).safety_filter).collect();
+    assert_eq!((train[0].clearance_m, train[0].lookahead_m), (0.85, 0.25));
+    assert!(!train[0].advisory && train[1].advisory);
+    assert_eq!(train[1].clearance_m, 0.85);
+    let eval = c.eval_env_config().safety_filter;
+    assert_eq!((eval.clearance_m, eval.lookahead_m, eval.advisory), (0.7, 0.0, false));
+    assert_eq!(c.drive_env_config().safety_filter.clearance_m, 0.7);
+    assert_eq!(RunConfig::from_toml(&c.to_toml().unwrap(), "back").unwrap(), c);
+    // Without it the training envs drive behind env_config's filter, and the key is not written.
+    let plain = RunConfig::from_toml(
+        &text.replace("[train_safety_filter]\nenabled = true\nclearance_m = 0.85\n", ""),
+        "p.toml",
+    )
+    .unwrap();
+    assert_eq!(plain.train_env_config(0).safety_filter.clearance_m, 0.7);
+    assert!(!plain.to_toml().unwrap().contains("train_safety_filter"));
+    let e = RunConfig::from_toml(&text.replace("clearance_m = 0.85", "clearance_m = -1.0"), "y.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("train_safety_filter") && e.contains("clearance_m"), "{e}");
+    // The advising envs need a filter in training, wherever it is set.
+    let off = text.replace(
+        "[train_safety_filter]\nenabled = true",
+        "[train_safety_filter]\nenabled = false",
+    );
+    let e = RunConfig::from_toml(&off, "z.toml").unwrap_err().to_string();
+    assert!(e.contains("advisory_filter_envs"), "{e}");
+}
