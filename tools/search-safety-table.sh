@@ -3,7 +3,8 @@
 # off (the bare network) and on, on the same 100 held-out episodes (1,000 steps) of every search scene, on
 # the built-in maps and on new procedural layouts, without and with sim2real noise and
 # randomisation; beside it the frontier explorer and the map-aware planner on the same car and
-# episodes (filter on).
+# episodes, behind the filter they were tuned behind (the policy's training shield,
+# `--safety-filter train`: they drive at full throttle and leave braking to the filter).
 #   tools/search-safety-table.sh [POLICY] [EPISODES] [SEED]
 # POLICY defaults to the shipped assets/policies/search.agvrl; SEED is the base of the
 # evaluation seeds (`agvrl eval --seed`). PLANNERS=off skips the two planners (their columns
@@ -33,10 +34,10 @@ row() { # env layouts preset
   f=$(run policy --safety-filter on)
   bc=$(key coverage "$b"); fc=$(key coverage "$f")
   if [ "${PLANNERS:-on}" != off ]; then
-    q=$(run frontier --safety-filter on --planner frontier)
+    q=$(run frontier --safety-filter train --planner frontier)
     fr="$(key collisions "$q"), $(key coverage "$q")"
     pf=$(ratio "$fc" "$(key coverage "$q")")
-    m=$(run planner --safety-filter on --planner map)
+    m=$(run planner --safety-filter train --planner map)
     pl=$(key coverage "$m")
   fi
   echo "| $env | $layouts | $preset | $(key collisions "$b") | $bc | $(ratio "$bc" "$fc") | $(key collisions "$f") | $fc | $(key filter_corrections_per_episode "$f") | $(key filter_backouts_per_episode "$f") ($(key filter_backout_ticks_per_episode "$f")) | $(key clearance_mean_m "$b") / $(key clearance_p5_m "$b"); $(key clearance_mean_m "$f") / $(key clearance_p5_m "$f") | $(key steering_change_mean_rad "$b"); $(key steering_change_mean_rad "$f") | $fr | $pf | $pl |"
