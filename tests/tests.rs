@@ -706,10 +706,10 @@ mod cli {
             "2",
             "--max-steps",
             "300",
-            // Episodes where the filter corrects the policy (6 times), so the replay checks
+            // Episodes where the filter corrects the policy (16 times), so the replay checks
             // its verdicts too.
             "--seed",
-            "2",
+            "11",
             "--record",
             bags.to_str().unwrap(),
         ]);
