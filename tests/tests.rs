@@ -581,15 +581,15 @@ mod cli {
     fn shipped_search_policy_drives_held_out_outdoor_episodes_without_a_termination() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
         let policy = root.join("assets/policies/search.agvrl");
-        let eval = |filter: &[&str]| {
+        let eval_on = |env: &str, episodes: &str, filter: &[&str]| {
             let mut args = vec![
                 "eval",
                 "--policy",
                 policy.to_str().unwrap(),
                 "--env",
-                "search-outdoor-20",
+                env,
                 "--episodes",
-                "3",
+                episodes,
                 "--seed",
                 "7",
             ];
@@ -598,6 +598,7 @@ mod cli {
             assert!(o.status.success(), "{}", stderr(&o));
             stdout(&o)
         };
+        let eval = |filter: &[&str]| eval_on("search-outdoor-20", "3", filter);
         let bare = eval(&["--safety-filter", "off"]);
         assert_eq!(key(&bare, "safety_filter"), "off");
         assert_eq!(key(&bare, "ended"), "time_limit,time_limit,time_limit", "{bare}");
@@ -616,21 +617,7 @@ mod cli {
         // Among buildings, the wider shield it was trained behind steps in more often than the
         // backstop it drives behind.
         let urban = |filter: &str| {
-            let o = agvrl(&[
-                "eval",
-                "--policy",
-                policy.to_str().unwrap(),
-                "--env",
-                "search-urban-20",
-                "--episodes",
-                "1",
-                "--seed",
-                "7",
-                "--safety-filter",
-                filter,
-            ]);
-            assert!(o.status.success(), "{}", stderr(&o));
-            let out = stdout(&o);
+            let out = eval_on("search-urban-20", "1", &["--safety-filter", filter]);
             assert_eq!(key(&out, "safety_filter"), filter);
             key(&out, "filter_corrections_per_episode").parse::<f64>().unwrap()
         };

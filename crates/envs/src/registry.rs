@@ -355,10 +355,7 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
             )));
         }
     }
-    let mut safety_filter = cfg.safety_filter;
-    if safety_filter.decel_mps2 == 0.0 {
-        safety_filter.decel_mps2 = cfg.sim.brake_mps2 as f32;
-    }
+    let safety_filter = cfg.safety_filter.on_drive(cfg.sim.brake_mps2);
     safety_filter.validate()?;
     let ends_below_m = match spec.task {
         TaskKind::Racing => RacingConfig::default().terminate_below_m,

@@ -203,12 +203,9 @@ impl RunConfig {
                 "procedural_layouts draws layouts of the env's own map; env_config.track is a fixed map".into(),
             ));
         }
-        if let Some(mut f) = self.train_safety_filter {
-            // As the env resolves it: 0 brakes at the drive's rate.
-            if f.decel_mps2 == 0.0 {
-                f.decel_mps2 = self.env_config.sim.brake_mps2 as f32;
-            }
-            f.validate()
+        if let Some(f) = self.train_safety_filter {
+            f.on_drive(self.env_config.sim.brake_mps2)
+                .validate()
                 .map_err(|e| RunError::Config(format!("train_safety_filter: {e}")))?;
         }
         if !self.advisory_filter_envs.is_empty() && !self.train_filter().enabled {

@@ -91,6 +91,14 @@ impl Default for SafetyFilterConfig {
 }
 
 impl SafetyFilterConfig {
+    /// The filter on a drive that brakes at `brake_mps2`: `decel_mps2 = 0` takes the drive's rate.
+    pub fn on_drive(mut self, brake_mps2: f64) -> Self {
+        if self.decel_mps2 == 0.0 {
+            self.decel_mps2 = brake_mps2 as f32;
+        }
+        self
+    }
+
     /// Check the settings.
     pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
         if !self.enabled {
