@@ -313,6 +313,23 @@ mod cli {
     }
 
     #[test]
+    fn a_closed_stdout_ends_the_listing_quietly_without_a_panic() {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let o = Command::new(env!("CARGO_BIN_EXE_agvrl"))
+            .arg("envs")
+            .stdout(writer)
+            .output()
+            .unwrap();
+        assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+        #[cfg(unix)]
+        {
+            use std::os::unix::process::ExitStatusExt;
+            assert_eq!(o.status.signal(), Some(libc::SIGPIPE), "{:?}", o.status);
+        }
+    }
+
+    #[test]
     fn probe_prints_json_whose_ranges_match_the_scene() {
         let o = agvrl(&["probe", "--env", "racing-oval", "--pose", "4,0,-1.5707964"]);
         assert!(o.status.success(), "{}", stderr(&o));
