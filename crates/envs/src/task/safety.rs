@@ -57,6 +57,11 @@ pub struct SafetyFilterConfig {
     pub backout_m: f32,
     /// Throttle while reversing, in (0, 1].
     pub backout_throttle: f32,
+    /// Also back out a car that stopped itself in a dead end: standing still, not driving, with
+    /// no forward arc free for `backout_m` (else the filter backs out only a car it braked, and
+    /// a policy that parks in front of a wall stays there).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub backout_parked: bool,
     /// How long obstacle points are kept for checking a reverse path (the policy's or a
     /// back-out's), s (at least `memory_s`).
     pub reverse_memory_s: f32,
@@ -84,6 +89,7 @@ impl Default for SafetyFilterConfig {
             half_width_m: 0.192,
             backout_m: 0.0,
             backout_throttle: 0.25,
+            backout_parked: false,
             reverse_memory_s: 10.0,
             reverse_clearance_m: 0.65,
         }
@@ -145,6 +151,12 @@ impl SafetyFilterConfig {
                 ),
             ));
         }
+        if self.backout_parked && self.backout_m == 0.0 {
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safety_filter",
+                "safety_filter.backout_parked needs backout_m > 0 (how far to back out)",
+            ));
+        }
         if self.n_steering < 2 {
             return Err(agvrl_sim::InvalidSetting::new(
                 "safety_filter",
@@ -201,6 +213,8 @@ pub struct SafetyFilter {
     last_ds: f32,
     /// Consecutive controls braked by the filter at a standstill.
     stuck: u32,
+    /// Consecutive controls at a standstill with no forward arc free for `backout_m`.
+    parked: u32,
     /// Whether controls may reverse (else only `memory_s` of points is kept).
     reverses: bool,
     /// A back-out under way: distance still to reverse (m) and its steering (rad).
@@ -249,6 +263,7 @@ impl SafetyFilter {
             last: Intervention::None,
             last_ds: 0.0,
             stuck: 0,
+            parked: 0,
             backout: None,
             backable_m: 0.0,
         }
@@ -272,6 +287,7 @@ impl SafetyFilter {
         self.last = Intervention::None;
         self.last_ds = 0.0;
         self.stuck = 0;
+        self.parked = 0;
         self.backout = None;
         self.backable_m = 0.0;
     }
@@ -335,6 +351,14 @@ impl SafetyFilter {
     fn filter_forward(&mut self, speed: f32, proposed: Control, steering_limit_rad: f64, fan_half_rad: f32) -> Control {
         let delta = proposed.steering_rad.clamp(-steering_limit_rad, steering_limit_rad);
         let drives = proposed.throttle > 0.0;
+        if self.cfg.backout_parked {
+            if speed.abs() >= STILL_MPS {
+                self.parked = 0;
+            } else if let Some(c) = self.back_out_if_parked(delta, steering_limit_rad, fan_half_rad) {
+                self.last = Intervention::Reversed;
+                return c;
+            }
+        }
         let need = self.path_needed(speed, drives);
         if self.free_length(delta as f32, need, fan_half_rad) >= need {
             self.stuck = 0;
@@ -374,6 +398,23 @@ impl SafetyFilter {
             throttle: 0.0,
             steering_rad: best.0,
         }
+    }
+
+    /// A car standing still under a forward or zero throttle (`backout_parked`): after
+    /// `STUCK_CONTROLS` such controls in a row with no forward arc free for `backout_m`, the
+    /// back-out's first control.
+    fn back_out_if_parked(&mut self, delta: f64, steering_limit_rad: f64, fan_half_rad: f32) -> Option<Control> {
+        let want = self.cfg.backout_m;
+        let trapped = std::iter::once(delta)
+            .chain(self.steerings_nearest(delta, steering_limit_rad))
+            .all(|d| self.free_length(d as f32, want, fan_half_rad) < want);
+        self.parked = if trapped { self.parked + 1 } else { 0 };
+        if self.parked < STUCK_CONTROLS {
+            return None;
+        }
+        let c = self.start_backing_out(steering_limit_rad, fan_half_rad)?;
+        self.parked = 0;
+        Some(c)
     }
 
     /// A reverse control: while the car still rolls forward the drive only brakes, so it is
@@ -1195,6 +1236,61 @@ mod tests {
             f.filter(&slanted_wall_frame(0.8, 0.3, k as f64 * dt, 0.0), go, 0.36, FAN);
             assert_eq!(f.last_intervention(), Intervention::Braked);
         }
+    }
+
+    #[test]
+    fn a_car_that_parked_itself_in_a_dead_end_backs_out_only_with_backout_parked() {
+        let parked = |backout_parked: bool| {
+            let mut f = SafetyFilter::new(
+                SafetyFilterConfig {
+                    backout_m: 0.6,
+                    backout_parked,
+                    ..on().cfg
+                },
+                true,
+            );
+            f.backable_m = MAX_BACKABLE_M;
+            f
+        };
+        let wait = Control {
+            throttle: 0.0,
+            steering_rad: 0.1,
+        };
+        let dt = 0.1;
+        // At rest 1.0 m from a wall: braking needs no path, so the zero throttle is no
+        // correction, but no forward arc is free for 0.6 m.
+        let mut f = parked(true);
+        for k in 0..STUCK_CONTROLS - 1 {
+            let c = f.filter(&slanted_wall_frame(1.0, 0.3, k as f64 * dt, 0.0), wait, 0.36, FAN);
+            assert_eq!((f.last_intervention(), c), (Intervention::None, wait));
+        }
+        let t = (STUCK_CONTROLS - 1) as f64 * dt;
+        let c = f.filter(&slanted_wall_frame(1.0, 0.3, t, 0.0), wait, 0.36, FAN);
+        assert_eq!(f.last_intervention(), Intervention::Reversed);
+        assert_eq!(c.throttle, -0.25);
+        // Without the setting the car waits there for good.
+        let mut f = parked(false);
+        for k in 0..10 {
+            assert_eq!(
+                f.filter(&slanted_wall_frame(1.0, 0.3, k as f64 * dt, 0.0), wait, 0.36, FAN),
+                wait
+            );
+            assert_eq!(f.last_intervention(), Intervention::None);
+        }
+        // With room to drive on (the wall 3 m off), a car that waits is left waiting.
+        let mut f = parked(true);
+        for k in 0..10 {
+            assert_eq!(f.filter(&wall_frame(3.0, k as f64 * dt, 0.0), wait, 0.36, FAN), wait);
+            assert_eq!(f.last_intervention(), Intervention::None);
+        }
+        // The setting needs a back-out length.
+        let bad = SafetyFilterConfig {
+            backout_parked: true,
+            backout_m: 0.0,
+            decel_mps2: 3.0,
+            ..on().cfg
+        };
+        assert!(bad.validate().unwrap_err().to_string().contains("backout_parked"));
     }
 
     /// Generated scans for the properties: two frames 0.1 s apart (the car drives between
