@@ -1182,16 +1182,24 @@ mod tests {
         assert_eq!(f.last_intervention(), Intervention::None);
     }
 
-    #[test]
-    fn a_car_stuck_at_a_wall_backs_out_turning_its_nose_to_the_open_side() {
+    /// A filter that backs out 0.6 m (`backout_parked` as given) and may reverse as far as it
+    /// ever does.
+    fn backing_out(backout_parked: bool) -> SafetyFilter {
         let mut f = SafetyFilter::new(
             SafetyFilterConfig {
                 backout_m: 0.6,
+                backout_parked,
                 ..on().cfg
             },
             true,
         );
         f.backable_m = MAX_BACKABLE_M;
+        f
+    }
+
+    #[test]
+    fn a_car_stuck_at_a_wall_backs_out_turning_its_nose_to_the_open_side() {
+        let mut f = backing_out(false);
         let go = Control {
             throttle: 1.0,
             steering_rad: 0.0,
@@ -1240,18 +1248,6 @@ mod tests {
 
     #[test]
     fn a_car_that_parked_itself_in_a_dead_end_backs_out_only_with_backout_parked() {
-        let parked = |backout_parked: bool| {
-            let mut f = SafetyFilter::new(
-                SafetyFilterConfig {
-                    backout_m: 0.6,
-                    backout_parked,
-                    ..on().cfg
-                },
-                true,
-            );
-            f.backable_m = MAX_BACKABLE_M;
-            f
-        };
         let wait = Control {
             throttle: 0.0,
             steering_rad: 0.1,
@@ -1259,7 +1255,7 @@ mod tests {
         let dt = 0.1;
         // At rest 1.0 m from a wall: braking needs no path, so the zero throttle is no
         // correction, but no forward arc is free for 0.6 m.
-        let mut f = parked(true);
+        let mut f = backing_out(true);
         for k in 0..STUCK_CONTROLS - 1 {
             let c = f.filter(&slanted_wall_frame(1.0, 0.3, k as f64 * dt, 0.0), wait, 0.36, FAN);
             assert_eq!((f.last_intervention(), c), (Intervention::None, wait));
@@ -1269,7 +1265,7 @@ mod tests {
         assert_eq!(f.last_intervention(), Intervention::Reversed);
         assert_eq!(c.throttle, -0.25);
         // Without the setting the car waits there for good.
-        let mut f = parked(false);
+        let mut f = backing_out(false);
         for k in 0..10 {
             assert_eq!(
                 f.filter(&slanted_wall_frame(1.0, 0.3, k as f64 * dt, 0.0), wait, 0.36, FAN),
@@ -1278,7 +1274,7 @@ mod tests {
             assert_eq!(f.last_intervention(), Intervention::None);
         }
         // With room to drive on (the wall 3 m off), a car that waits is left waiting.
-        let mut f = parked(true);
+        let mut f = backing_out(true);
         for k in 0..10 {
             assert_eq!(f.filter(&wall_frame(3.0, k as f64 * dt, 0.0), wait, 0.36, FAN), wait);
             assert_eq!(f.last_intervention(), Intervention::None);
