@@ -57,9 +57,9 @@ pub struct SafetyFilterConfig {
     pub backout_m: f32,
     /// Throttle while reversing, in (0, 1].
     pub backout_throttle: f32,
-    /// Also back out a car that stopped itself in a dead end: standing still, not driving, with
-    /// no forward arc free for `backout_m` (else the filter backs out only a car it braked, and
-    /// a policy that parks in front of a wall stays there).
+    /// Also back out a car that stopped itself in a dead end: standing still under a zero or
+    /// forward throttle, with no forward arc free for `backout_m` (else the filter backs out
+    /// only a car it braked, and a policy that parks in front of a wall stays there).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub backout_parked: bool,
     /// How long obstacle points are kept for checking a reverse path (the policy's or a
