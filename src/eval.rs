@@ -90,6 +90,10 @@ pub struct EvalArgs {
     /// Number of deterministic episodes.
     #[arg(long, default_value_t = 5)]
     pub episodes: usize,
+    /// Sample the policy's actions as in training instead of taking their mean (episode k
+    /// seeds the noise with S + k): does the deterministic policy behave as the one trained?
+    #[arg(long, conflicts_with_all = ["random", "planner"])]
+    pub sampled: bool,
     /// Record the episodes into this rerun file (.rrd; open it with `rerun FILE`).
     #[arg(long, value_name = "FILE.rrd", conflicts_with = "spawn_viewer")]
     pub rerun: Option<PathBuf>,
@@ -127,6 +131,8 @@ pub struct EvalArgs {
 pub enum Driver<'a> {
     /// The policy, deterministic actions.
     Policy(&'a mut Policy),
+    /// The policy, actions sampled as in training; episode k seeds the noise with S + k.
+    Sampled(&'a mut Policy),
     /// Uniform random actions, the baseline a policy should beat.
     Random,
     /// A coverage planner (`crate::planner`), search envs only.
@@ -347,13 +353,14 @@ pub fn evaluate(
     }
     let mut cov_sum = 0.0;
     let check = |o: &agvrl_envs::BoxSpace, a: &agvrl_envs::BoxSpace, d: &Driver<'_>| match d {
-        Driver::Policy(p) => p.check_spaces(o, a).context("the policy does not fit this env"),
+        Driver::Policy(p) | Driver::Sampled(p) => p.check_spaces(o, a).context("the policy does not fit this env"),
         _ => Ok(()),
     };
     let mut random = RandomActions::new(seed);
     let mut act_of = |driver: &mut Driver<'_>, space: &agvrl_envs::BoxSpace, o: &[f32]| -> Result<Vec<f32>> {
         Ok(match driver {
             Driver::Policy(p) => p.act(o, true)?,
+            Driver::Sampled(p) => p.act(o, false)?,
             _ => random.sample(&space.low, &space.high),
         })
     };
@@ -375,6 +382,9 @@ pub fn evaluate(
                 let (ret, last) = match driver {
                     Driver::Planner(kind) => planner::drive(&mut env, kind, seed + k as u64, k, &mut see)?,
                     _ => {
+                        if let Driver::Sampled(p) = &mut driver {
+                            p.seed(seed + k as u64);
+                        }
                         let mut act = |o: &[f32]| act_of(&mut driver, &space, o);
                         drive(&mut env, seed + k as u64, k, &mut act, &mut see)?
                     }
@@ -393,6 +403,9 @@ pub fn evaluate(
             check(&env.observation_space(), &env.action_space(), &driver)?;
             let space = env.action_space();
             for k in 0..episodes {
+                if let Driver::Sampled(p) = &mut driver {
+                    p.seed(seed + k as u64);
+                }
                 let act = |o: &[f32]| act_of(&mut driver, &space, o);
                 let (ret, last) = agvrl_rl::eval::run_episode(&mut *env, seed + k as u64, act, |_, _, _| Ok(()))?;
                 s.mean_return += ret;
@@ -532,6 +545,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         watch.bags = Some(EpisodeBags::new(dir, file, &env_id, &env_cfg)?);
     }
     let driver = match (&mut policy, a.planner) {
+        (Some(p), _) if a.sampled => Driver::Sampled(p),
         (Some(p), _) => Driver::Policy(p),
         (None, Some(kind)) => Driver::Planner(kind),
         (None, None) => Driver::Random,
@@ -553,6 +567,9 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             src.policy.display().to_string()
         }
     );
+    if a.sampled {
+        println!("actions=sampled");
+    }
     println!("settings={}", src.source);
     println!("seed={seed}");
     println!("layouts={}", arg_name(a.layouts));
@@ -612,7 +629,12 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             _ => algo.as_str(),
         };
         let on = env_cfg.track_suffix();
-        if !watch.plot(p, &format!("{env_id}{on} {driver}: deterministic evaluation"))? {
+        let how = if a.sampled {
+            "sampled actions"
+        } else {
+            "deterministic evaluation"
+        };
+        if !watch.plot(p, &format!("{env_id}{on} {driver}: {how}"))? {
             bail!("{env_id} has no map to draw");
         }
         println!("plot={}", p.display());

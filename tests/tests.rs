@@ -936,6 +936,13 @@ mod cli {
         assert_ne!(key(&a, "mean_return"), key(&n, "mean_return"));
         let r = ev(&["--seed", "11", "--random"]);
         assert_eq!(key(&r, "policy"), "random");
+        // Sampled actions: seeded per episode, so repeatable, and not the mean's episodes.
+        let s = ev(&["--seed", "11", "--sampled"]);
+        assert_eq!(key(&s, "actions"), "sampled");
+        assert_eq!(s, ev(&["--seed", "11", "--sampled"]), "same seed, same samples");
+        assert_ne!(key(&a, "mean_return"), key(&s, "mean_return"));
+        let o = agvrl(&["eval", "--policy", policy.to_str().unwrap(), "--sampled", "--random"]);
+        assert!(!o.status.success(), "--sampled drives the policy, --random does not");
         // A file of format 1 without the TOML beside it carries no settings: the env must be
         // named.
         let old = d.path().join("old.agvrl");
