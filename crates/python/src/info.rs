@@ -25,7 +25,7 @@ fn code(c: Option<TerminationCause>) -> i8 {
     })
 }
 
-fn terms(t: &RewardTerms) -> [(&'static str, f64); 11] {
+fn terms(t: &RewardTerms) -> [(&'static str, f64); 12] {
     [
         ("throttle", t.throttle),
         ("steering", t.steering),
@@ -36,6 +36,7 @@ fn terms(t: &RewardTerms) -> [(&'static str, f64); 11] {
         ("proximity", t.proximity),
         ("coverage", t.coverage),
         ("filter", t.filter),
+        ("stale", t.stale),
         ("progress", t.progress),
         ("car_contact", t.car_contact),
     ]

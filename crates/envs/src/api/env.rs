@@ -88,6 +88,8 @@ pub struct RewardTerms {
     pub coverage: f64,
     /// Penalty for a step whose control the safety filter changed (the `safe` search reward).
     pub filter: f64,
+    /// Penalty for a step long after the last newly covered cell (the `safe` search reward).
+    pub stale: f64,
     /// Progress along the centre line (racing against others).
     pub progress: f64,
     /// Penalty for touching another car with one's front (racing against others).

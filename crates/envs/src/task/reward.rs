@@ -55,6 +55,12 @@ pub struct SafeShaping {
     pub filter: f64,
     /// Paid per newly covered 0.5 m cell (>= 0).
     pub new_cell: f64,
+    /// Charged every step once no new cell has been covered for `stale_after_s` (<= 0): a car
+    /// parked in a pocket it has swept keeps paying until it reaches new ground, where
+    /// standing still is otherwise free. 0 (the default): free.
+    pub stale: f64,
+    /// How long a car may go without a new cell before `stale` is charged, seconds (> 0).
+    pub stale_after_s: f64,
 }
 
 impl Default for SafeShaping {
@@ -66,6 +72,8 @@ impl Default for SafeShaping {
             near_speed_mps: 0.0,
             filter: 0.0,
             new_cell: 0.5,
+            stale: 0.0,
+            stale_after_s: 3.0,
         }
     }
 }
@@ -101,6 +109,18 @@ impl SafeShaping {
             return Err(agvrl_sim::InvalidSetting::new(
                 "safe_reward",
                 format!("safe_reward.filter must be <= 0, got {}", self.filter),
+            ));
+        }
+        if !(self.stale.is_finite() && self.stale <= 0.0) {
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safe_reward",
+                format!("safe_reward.stale must be <= 0, got {}", self.stale),
+            ));
+        }
+        if !(self.stale_after_s.is_finite() && self.stale_after_s > 0.0) {
+            return Err(agvrl_sim::InvalidSetting::new(
+                "safe_reward",
+                format!("safe_reward.stale_after_s must be > 0, got {}", self.stale_after_s),
             ));
         }
         if !(self.new_cell.is_finite() && self.new_cell >= 0.0) {
@@ -206,6 +226,7 @@ impl RewardTerms {
             + self.proximity
             + self.coverage
             + self.filter
+            + self.stale
             + self.progress
             + self.car_contact
     }
@@ -325,6 +346,8 @@ mod tests {
             near_speed_mps: 0.0,
             filter: 0.0,
             new_cell: 2.0,
+            stale: 0.0,
+            stale_after_s: 3.0,
         };
         assert_eq!(search(SearchReward::Safe, &wide, 3.0, 0.0, 0.0, false, 3).coverage, 6.0);
         // Halfway between 1.6 m and 0.6 m: half of the weight.
@@ -370,6 +393,19 @@ mod tests {
                 .message
                 .contains("new_cell")
         );
+        for bad in [
+            SafeShaping { stale: 0.1, ..wide },
+            SafeShaping {
+                stale_after_s: 0.0,
+                ..wide
+            },
+            SafeShaping {
+                stale_after_s: f64::NAN,
+                ..wide
+            },
+        ] {
+            assert!(bad.validate().unwrap_err().message.contains("stale"), "{bad:?}");
+        }
     }
 
     #[test]

@@ -60,6 +60,8 @@ pub struct Search {
     distance_m: f64,
     last_xy: Option<[f64; 2]>,
     start_s: f64,
+    /// When the last newly covered cell was reached, seconds (the `stale` charge).
+    last_new_cell_s: f64,
     found: Vec<(u32, f64)>,
     n_subjects: usize,
     filter: SafetyFilter,
@@ -157,6 +159,7 @@ impl Search {
             distance_m: 0.0,
             last_xy: None,
             start_s: 0.0,
+            last_new_cell_s: 0.0,
             found: vec![],
             n_subjects: 0,
             filter: SafetyFilter::new(
@@ -276,6 +279,7 @@ impl Task for Search {
         }
         self.grid = map.map(CoverageGrid::new).unwrap_or_default();
         self.start_s = frame.stamp_s;
+        self.last_new_cell_s = frame.stamp_s;
         self.found.clear();
         self.n_subjects = map.map(|m| m.subjects.len()).unwrap_or(0);
         self.look(frame, map);
@@ -326,6 +330,13 @@ impl Task for Search {
         reward::weight_proximity_by_speed(&mut terms, &self.cfg.safe, forward);
         if self.cfg.reward == SearchReward::Safe && self.filter.last_intervention() != Intervention::None {
             terms.filter = self.cfg.safe.filter;
+        }
+        if new_cells > 0 {
+            self.last_new_cell_s = frame.stamp_s;
+        } else if self.cfg.reward == SearchReward::Safe
+            && frame.stamp_s - self.last_new_cell_s > self.cfg.safe.stale_after_s
+        {
+            terms.stale = self.cfg.safe.stale;
         }
         let termination = terminate(
             &mut terms,
@@ -404,5 +415,58 @@ mod tests {
             Some(TerminationCause::TooClose)
         );
         assert_eq!(ended(narrow, &frame(47, 0.5)).termination, None);
+    }
+
+    #[test]
+    fn stale_is_charged_only_after_stale_after_s_without_a_new_cell() {
+        let cfg = SearchConfig {
+            reward: SearchReward::Safe,
+            safe: SafeShaping {
+                stale: -0.3,
+                stale_after_s: 1.0,
+                ..SafeShaping::default()
+            },
+            ..SearchConfig::default()
+        };
+        // Free cells every 0.5 m along y = 0, x from 0 to 20 m; coverage reaches 2 m.
+        let map = MapInfo {
+            half_extent_m: [30.0, 30.0],
+            free_cells: (0..=40).map(|k| [k as f32 * 0.5, 0.0]).collect(),
+            cell_m: 0.5,
+            ..MapInfo::default()
+        };
+        let at = |x: f64, t: f64| SensorFrame {
+            stamp_s: t,
+            gps: Some(agvrl_sim::msg::GpsReading {
+                position_m: [x, 0.0, 0.0],
+                orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
+                ..Default::default()
+            }),
+            ..frame(0, 5.0)
+        };
+        let mut s = Search::new(cfg, 0.36);
+        s.reset(&at(0.0, 0.0), Some(&map));
+        // Standing still: free for 1 s, then charged every step.
+        let charged: Vec<f64> = (1..=20)
+            .map(|k| s.evaluate(&at(0.0, k as f64 * 0.1), Some(&map)).terms.stale)
+            .collect();
+        assert!(charged[..10].iter().all(|&c| c == 0.0), "{charged:?}");
+        assert!(charged[10..].iter().all(|&c| c == -0.3), "{charged:?}");
+        // New ground clears it at once; the clock starts again.
+        let o = s.evaluate(&at(3.0, 2.1), Some(&map));
+        assert!(o.terms.coverage > 0.0);
+        assert_eq!(o.terms.stale, 0.0);
+        assert_eq!(s.evaluate(&at(3.0, 3.0), Some(&map)).terms.stale, 0.0);
+        assert_eq!(s.evaluate(&at(3.0, 3.2), Some(&map)).terms.stale, -0.3);
+        // Off by default.
+        let mut free = Search::new(
+            SearchConfig {
+                reward: SearchReward::Safe,
+                ..SearchConfig::default()
+            },
+            0.36,
+        );
+        free.reset(&at(0.0, 0.0), Some(&map));
+        assert_eq!(free.evaluate(&at(0.0, 50.0), Some(&map)).terms.stale, 0.0);
     }
 }
