@@ -115,6 +115,10 @@ struct Row {
     value_loss: f64,
     entropy: f64,
     steps_per_s: f64,
+    /// PPO's correction constraint: the fraction of the rollout's steps the filter corrected,
+    /// and the mean multiplier (NaN without the constraint).
+    corrected_fraction: f64,
+    correction_lambda: f64,
 }
 
 fn resolve(a: &TrainArgs) -> Result<RunConfig> {
@@ -472,6 +476,8 @@ fn learn_in_chunks(
             value_loss: p.losses.value,
             entropy: p.losses.entropy,
             steps_per_s: (p.steps - start) as f64 / t0.elapsed().as_secs_f64().max(1e-9),
+            corrected_fraction: p.losses.corrected_fraction,
+            correction_lambda: p.losses.correction_lambda,
         });
         if stop.load(Ordering::SeqCst) {
             Control::Stop
@@ -496,8 +502,6 @@ fn learn_in_chunks(
     Ok(rows.into_inner())
 }
 
-/// metrics.csv: the rows of earlier sessions of the run (`previous`, header included), then
-/// these.
 /// The metrics CSV `text` without the rows past step `steps`.
 fn metrics_up_to(text: &str, steps: u64) -> String {
     let mut out = String::new();
@@ -511,18 +515,45 @@ fn metrics_up_to(text: &str, steps: u64) -> String {
     out
 }
 
+/// metrics.csv's header; a run's earlier rows under an older header, a prefix of this one, get
+/// empty fields for the columns added since.
+const METRICS_HEADER: &str =
+    "step,episodes,mean_return,policy_loss,value_loss,entropy,steps_per_s,corrected_fraction,correction_lambda";
+
+/// metrics.csv: the rows of earlier sessions of the run (`previous`, header included), then
+/// these.
 fn metrics_csv(previous: &str, rows: &[Row]) -> String {
-    let mut csv = if previous.is_empty() {
-        String::from("step,episodes,mean_return,policy_loss,value_loss,entropy,steps_per_s\n")
-    } else {
-        previous.to_string()
+    let mut csv = format!("{METRICS_HEADER}\n");
+    let mut lines = previous.lines();
+    if let Some(header) = lines.next() {
+        let missing = METRICS_HEADER
+            .split(',')
+            .count()
+            .saturating_sub(header.split(',').count());
+        for line in lines {
+            let _ = writeln!(csv, "{line}{}", ",".repeat(missing));
+        }
+    }
+    let finite = |v: f64| {
+        if v.is_finite() {
+            format!("{v:.6}")
+        } else {
+            String::new()
+        }
     };
     for r in rows {
         let mean = r.mean_return.map(|m| format!("{m:.4}")).unwrap_or_default();
         let _ = writeln!(
             csv,
-            "{},{},{mean},{:.6},{:.6},{:.6},{:.1}",
-            r.step, r.episodes, r.policy_loss, r.value_loss, r.entropy, r.steps_per_s
+            "{},{},{mean},{:.6},{:.6},{:.6},{:.1},{},{}",
+            r.step,
+            r.episodes,
+            r.policy_loss,
+            r.value_loss,
+            r.entropy,
+            r.steps_per_s,
+            finite(r.corrected_fraction),
+            finite(r.correction_lambda)
         );
     }
     csv
@@ -575,6 +606,36 @@ fn run_title(cfg: &RunConfig) -> String {
 mod tests {
     use super::*;
     use agvrl_envs::task::ImageChannels;
+
+    #[test]
+    fn metrics_csv_keeps_an_older_runs_rows_under_the_new_header() {
+        let row = |step, lambda| Row {
+            step,
+            episodes: 2,
+            mean_return: Some(1.5),
+            policy_loss: 0.1,
+            value_loss: 0.2,
+            entropy: -0.3,
+            steps_per_s: 100.0,
+            corrected_fraction: 0.05,
+            correction_lambda: lambda,
+        };
+        let old = "step,episodes,mean_return,policy_loss,value_loss,entropy,steps_per_s\n100,1,,0.1,0.2,0.3,50.0\n";
+        let csv = metrics_csv(old, &[row(200, 0.7), row(300, f64::NAN)]);
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines[0], METRICS_HEADER);
+        assert_eq!(lines[1], "100,1,,0.1,0.2,0.3,50.0,,");
+        assert_eq!(
+            lines[2],
+            "200,2,1.5000,0.100000,0.200000,-0.300000,100.0,0.050000,0.700000"
+        );
+        assert!(lines[3].ends_with(",0.050000,"), "{}", lines[3]);
+        let n = METRICS_HEADER.split(',').count();
+        assert!(lines.iter().all(|l| l.split(',').count() == n), "{csv}");
+        // A resume of a run with this header keeps its rows as they are.
+        assert_eq!(metrics_csv(&csv, &[]), csv);
+        assert_eq!(plots::curve_of_csv(&csv), [(200.0, 1.5), (300.0, 1.5)]);
+    }
 
     #[test]
     fn camera_channels_in_the_env_give_both_learners_a_cnn_of_that_shape() {
