@@ -29,6 +29,10 @@ pub struct ExploredObs {
     /// Also append the frontier fractions (seen free, not yet visited) after the unexplored
     /// ones; needs the LiDAR scan.
     pub frontier: bool,
+    /// When > 0, also append how long the car has gone without coming near a cell it had not
+    /// visited, over this many seconds (capped at 1), last: a car parked on swept ground sees
+    /// the time pass, where the rest of its observation stands still. 0: off.
+    pub stale_s: f32,
 }
 
 impl Default for ExploredObs {
@@ -39,14 +43,19 @@ impl Default for ExploredObs {
             visited_m: 2.0,
             cell_m: 0.5,
             frontier: false,
+            stale_s: 0.0,
         }
     }
 }
 
 impl ExploredObs {
-    /// Values appended: one per sector and ring (twice with the frontier), each in [0, 1].
+    /// Values appended: one per sector and ring (twice with the frontier), and the stale time,
+    /// each in [0, 1].
     pub fn len(&self) -> usize {
-        self.sectors * (self.radii_m.len() - 1) * (1 + self.frontier as usize)
+        if self.sectors == 0 {
+            return 0;
+        }
+        self.sectors * (self.radii_m.len() - 1) * (1 + self.frontier as usize) + (self.stale_s > 0.0) as usize
     }
 
     /// Whether it is off.
@@ -69,7 +78,9 @@ impl ExploredObs {
             && r[0] >= 0.0
             && r[0] < r[1]
             && r[1] < r[2]
-            && r[2].max(self.visited_m) < 0.25 * GRID as f32 * self.cell_m;
+            && r[2].max(self.visited_m) < 0.25 * GRID as f32 * self.cell_m
+            && self.stale_s.is_finite()
+            && self.stale_s >= 0.0;
         if ok {
             Ok(())
         } else {
@@ -77,7 +88,7 @@ impl ExploredObs {
                 "observation.explored",
                 format!(
                     "observation.explored needs sectors <= 64, cell_m >= 0.05, 0 <= radii_m[0] < radii_m[1] < \
-                     radii_m[2] and radii_m[2], visited_m < {} cells; got {self:?}",
+                     radii_m[2], radii_m[2], visited_m < {} cells and stale_s >= 0; got {self:?}",
                     GRID / 4
                 ),
             ))
@@ -100,6 +111,8 @@ pub struct ExploredMemory {
     visited: Vec<u8>,
     /// Cells within the rings, relative to the car's cell: offset, bearing (rad), ring.
     stencil: Vec<(i32, i32, f32, usize)>,
+    /// When `visit` last marked a cell visited for the first time, seconds.
+    last_new_s: Option<f64>,
 }
 
 impl ExploredMemory {
@@ -121,6 +134,7 @@ impl ExploredMemory {
             cfg,
             visited: vec![0; (GRID * GRID) as usize],
             stencil,
+            last_new_s: None,
         }
     }
 
@@ -135,22 +149,33 @@ impl ExploredMemory {
     /// Forget everything (a new episode).
     pub fn clear(&mut self) {
         self.visited.fill(0);
+        self.last_new_s = None;
+    }
+
+    /// The memory's indices of the cells within `visited_m` of (x, y).
+    fn near(cfg: &ExploredObs, x: f64, y: f64) -> impl Iterator<Item = usize> + use<> {
+        let c = cfg.cell_m as f64;
+        let r = cfg.visited_m as f64;
+        let cell = move |v: f64| (v / c).round() as i32;
+        let (i0, i1) = (cell(x - r), cell(x + r));
+        let (j0, j1) = (cell(y - r), cell(y + r));
+        (i0..=i1)
+            .flat_map(move |i| (j0..=j1).map(move |j| (i, j)))
+            .filter(move |&(i, j)| (i as f64 * c - x).powi(2) + (j as f64 * c - y).powi(2) <= r * r)
+            .map(|(i, j)| Self::index(i, j))
     }
 
     /// Mark the cells within `visited_m` of the frame's position.
     pub fn visit(&mut self, frame: &SensorFrame) {
         let Some(g) = &frame.gps else { return };
-        let c = self.cfg.cell_m as f64;
         let (x, y) = (g.position_m[0], g.position_m[1]);
-        let r = self.cfg.visited_m as f64;
-        let (i0, i1) = (self.cell_of(x - r), self.cell_of(x + r));
-        let (j0, j1) = (self.cell_of(y - r), self.cell_of(y + r));
-        for i in i0..=i1 {
-            for j in j0..=j1 {
-                if (i as f64 * c - x).powi(2) + (j as f64 * c - y).powi(2) <= r * r {
-                    self.visited[Self::index(i, j)] |= VISITED;
-                }
-            }
+        let mut new = false;
+        for k in Self::near(&self.cfg, x, y) {
+            new |= self.visited[k] & VISITED == 0;
+            self.visited[k] |= VISITED;
+        }
+        if new || self.last_new_s.is_none() {
+            self.last_new_s = Some(frame.stamp_s);
         }
         if self.cfg.frontier {
             self.see(frame);
@@ -217,7 +242,17 @@ impl ExploredMemory {
             open[k] += u32::from(unvisited);
             open[n_open + k] += u32::from(unvisited && state & SEEN != 0);
         }
-        out.extend((0..self.cfg.len()).map(|k| open[k] as f32 / total[k % n_open].max(1) as f32));
+        let fractions = n_open * (1 + self.cfg.frontier as usize);
+        out.extend((0..fractions).map(|k| open[k] as f32 / total[k % n_open].max(1) as f32));
+        if self.cfg.stale_s > 0.0 {
+            // New ground under the car now is no wait, whether or not `visit` took it in yet.
+            let fresh = Self::near(&self.cfg, x, y).any(|k| self.visited[k] & VISITED == 0);
+            let waited = match self.last_new_s {
+                Some(t) if !fresh => (frame.stamp_s - t).max(0.0) as f32,
+                _ => 0.0,
+            };
+            out.push((waited / self.cfg.stale_s).min(1.0));
+        }
     }
 }
 
@@ -400,5 +435,49 @@ mod tests {
             .is_err()
         );
         assert!(cfg().validate().is_ok());
+    }
+
+    #[test]
+    fn the_stale_time_grows_on_swept_ground_and_drops_to_zero_on_new_ground() {
+        let stale = ExploredObs { stale_s: 2.0, ..cfg() };
+        assert_eq!(stale.len(), cfg().len() + 1);
+        let mut m = ExploredMemory::new(stale);
+        let at_t = |x: f64, t: f64| SensorFrame {
+            stamp_s: t,
+            ..at(x, 0.0, 0.0)
+        };
+        let last = |m: &ExploredMemory, f: &SensorFrame| *read(m, f).last().unwrap();
+        m.visit(&at_t(0.0, 10.0));
+        // Standing still: the wait grows with the clock, over stale_s, capped at 1.
+        for (t, want) in [(10.0, 0.0), (10.5, 0.25), (11.0, 0.5), (12.0, 1.0), (30.0, 1.0)] {
+            let f = at_t(0.0, t);
+            m.visit(&f);
+            assert_eq!(last(&m, &f), want, "t = {t}");
+        }
+        // 0.4 m on uncovers cells at the disk's edge; back where it stood, nothing.
+        m.visit(&at_t(0.4, 31.0));
+        assert_eq!(last(&m, &at_t(0.4, 31.0)), 0.0);
+        m.visit(&at_t(0.0, 31.5));
+        assert_eq!(last(&m, &at_t(0.0, 31.5)), 0.25);
+        // New ground reads 0 whether or not it was visited yet (the car's order, the env's).
+        let f = at_t(3.0, 32.0);
+        let before = read(&m, &f);
+        assert_eq!(*before.last().unwrap(), 0.0);
+        m.visit(&f);
+        assert_eq!(before, read(&m, &f));
+        assert_eq!(last(&m, &at_t(3.0, 33.0)), 0.5);
+        // A new episode starts its clock at its first frame.
+        m.clear();
+        m.visit(&at_t(0.0, 100.0));
+        assert_eq!(last(&m, &at_t(0.0, 100.5)), 0.25);
+        assert!(ExploredObs { stale_s: -1.0, ..cfg() }.validate().is_err());
+        assert!(
+            ExploredObs {
+                stale_s: f32::NAN,
+                ..cfg()
+            }
+            .validate()
+            .is_err()
+        );
     }
 }
