@@ -33,6 +33,12 @@ pub struct ExploredObs {
     /// visited, over this many seconds (capped at 1), last: a car parked on swept ground sees
     /// the time pass, where the rest of its observation stands still. 0: off.
     pub stale_s: f32,
+    /// When > 0, also append where the nearest frontier cell (seen free, not yet visited) within
+    /// this many metres lies: (1 + cos) / 2 and (1 + sin) / 2 of its bearing from straight ahead,
+    /// and its distance over `goal_m` (0.5, 0.5, 1 when there is none), before the stale time.
+    /// Needs the LiDAR scan. The rings see 8 m around the car; a car whose rings are all swept
+    /// learns from this where new ground lies. 0: off.
+    pub goal_m: f32,
 }
 
 impl Default for ExploredObs {
@@ -44,18 +50,21 @@ impl Default for ExploredObs {
             cell_m: 0.5,
             frontier: false,
             stale_s: 0.0,
+            goal_m: 0.0,
         }
     }
 }
 
 impl ExploredObs {
-    /// Values appended: one per sector and ring (twice with the frontier), and the stale time,
-    /// each in [0, 1].
+    /// Values appended: one per sector and ring (twice with the frontier), three for the nearest
+    /// frontier cell, and the stale time, each in [0, 1].
     pub fn len(&self) -> usize {
         if self.sectors == 0 {
             return 0;
         }
-        self.sectors * (self.radii_m.len() - 1) * (1 + self.frontier as usize) + (self.stale_s > 0.0) as usize
+        self.sectors * (self.radii_m.len() - 1) * (1 + self.frontier as usize)
+            + 3 * (self.goal_m > 0.0) as usize
+            + (self.stale_s > 0.0) as usize
     }
 
     /// Whether it is off.
@@ -80,7 +89,10 @@ impl ExploredObs {
             && r[1] < r[2]
             && r[2].max(self.visited_m) < 0.25 * GRID as f32 * self.cell_m
             && self.stale_s.is_finite()
-            && self.stale_s >= 0.0;
+            && self.stale_s >= 0.0
+            && self.goal_m.is_finite()
+            && self.goal_m >= 0.0
+            && self.goal_m < 0.25 * GRID as f32 * self.cell_m;
         if ok {
             Ok(())
         } else {
@@ -88,7 +100,7 @@ impl ExploredObs {
                 "observation.explored",
                 format!(
                     "observation.explored needs sectors <= 64, cell_m >= 0.05, 0 <= radii_m[0] < radii_m[1] < \
-                     radii_m[2], radii_m[2], visited_m < {} cells and stale_s >= 0; got {self:?}",
+                     radii_m[2], radii_m[2], visited_m, goal_m < {} cells and stale_s, goal_m >= 0; got {self:?}",
                     GRID / 4
                 ),
             ))
@@ -102,6 +114,10 @@ const VISITED: u8 = 1;
 const SEEN: u8 = 2;
 /// Rays mark free cells out to this range at most, metres.
 const SEE_WITHIN_M: f32 = 10.0;
+/// A scan is marked only once the car has turned this far since the last marked one, radians,
+/// or moved half a cell: marking costs about 40 us a scan, and a scan from nearly the same pose
+/// marks nearly the same cells.
+const SEE_TURN_RAD: f64 = 0.1;
 
 /// The memory behind `ExploredObs` for one episode.
 #[derive(Clone, Debug)]
@@ -111,8 +127,12 @@ pub struct ExploredMemory {
     visited: Vec<u8>,
     /// Cells within the rings, relative to the car's cell: offset, bearing (rad), ring.
     stencil: Vec<(i32, i32, f32, usize)>,
+    /// Cells within `goal_m` of the car's cell, nearest first.
+    goal_stencil: Vec<(i32, i32)>,
     /// When `visit` last marked a cell visited for the first time, seconds.
     last_new_s: Option<f64>,
+    /// The pose (x, y, yaw) of the last scan marked.
+    last_seen: Option<(f64, f64, f64)>,
 }
 
 impl ExploredMemory {
@@ -130,11 +150,19 @@ impl ExploredMemory {
                 }
             }
         }
+        let reach = (cfg.goal_m / c).ceil() as i32;
+        let mut goal_stencil: Vec<(i32, i32)> = (-reach..=reach)
+            .flat_map(|di| (-reach..=reach).map(move |dj| (di, dj)))
+            .filter(|&(di, dj)| ((di * di + dj * dj) as f32).sqrt() * c <= cfg.goal_m)
+            .collect();
+        goal_stencil.sort_by_key(|&(di, dj)| (di * di + dj * dj, di, dj));
         Self {
             cfg,
             visited: vec![0; (GRID * GRID) as usize],
             stencil,
+            goal_stencil,
             last_new_s: None,
+            last_seen: None,
         }
     }
 
@@ -150,6 +178,7 @@ impl ExploredMemory {
     pub fn clear(&mut self) {
         self.visited.fill(0);
         self.last_new_s = None;
+        self.last_seen = None;
     }
 
     /// The memory's indices of the cells within `visited_m` of (x, y).
@@ -177,7 +206,7 @@ impl ExploredMemory {
         if new || self.last_new_s.is_none() {
             self.last_new_s = Some(frame.stamp_s);
         }
-        if self.cfg.frontier {
+        if self.cfg.frontier || self.cfg.goal_m > 0.0 {
             self.see(frame);
         }
     }
@@ -190,6 +219,13 @@ impl ExploredMemory {
         };
         let c = self.cfg.cell_m as f64;
         let (x, y, yaw) = (g.position_m[0], g.position_m[1], g.rpy_rad[2]);
+        if let Some((lx, ly, lyaw)) = self.last_seen {
+            let turned = (yaw - lyaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+            if (x - lx).hypot(y - ly) < 0.5 * c && turned.abs() < SEE_TURN_RAD {
+                return;
+            }
+        }
+        self.last_seen = Some((x, y, yaw));
         let step = 0.5 * self.cfg.cell_m;
         for (k, &r) in scan.ranges.iter().enumerate() {
             if !r.is_finite() {
@@ -244,6 +280,23 @@ impl ExploredMemory {
         }
         let fractions = n_open * (1 + self.cfg.frontier as usize);
         out.extend((0..fractions).map(|k| open[k] as f32 / total[k % n_open].max(1) as f32));
+        if self.cfg.goal_m > 0.0 {
+            // The nearest cell seen free and not visited, nor within reach from where the car
+            // stands (the stencil is sorted from the car's cell centre: off by half a cell at most).
+            let goal = self.goal_stencil.iter().find_map(|&(di, dj)| {
+                let (dx, dy) = (di as f32 * self.cfg.cell_m - ox, dj as f32 * self.cfg.cell_m - oy);
+                let state = self.visited[Self::index(ci + di, cj + dj)];
+                (state & SEEN != 0 && state & VISITED == 0 && dx * dx + dy * dy > r2).then_some((dx, dy))
+            });
+            match goal {
+                Some((dx, dy)) => {
+                    let (s, c) = (dy.atan2(dx) - yaw).sin_cos();
+                    let d = dx.hypot(dy) / self.cfg.goal_m;
+                    out.extend([0.5 * (1.0 + c), 0.5 * (1.0 + s), d.min(1.0)]);
+                }
+                None => out.extend([0.5, 0.5, 1.0]),
+            }
+        }
         if self.cfg.stale_s > 0.0 {
             // New ground under the car now is no wait, whether or not `visit` took it in yet.
             let fresh = Self::near(&self.cfg, x, y).any(|k| self.visited[k] & VISITED == 0);
@@ -400,6 +453,93 @@ mod tests {
         }
         let after = read(&m, &at(4.0, 0.0, std::f64::consts::PI));
         assert!(after[8] < frontier[0], "{after:?}");
+    }
+
+    #[test]
+    fn the_goal_points_at_the_nearest_ground_seen_free_and_not_yet_visited() {
+        use agvrl_sim::msg::LaserScan;
+        let goal = ExploredObs { goal_m: 10.0, ..cfg() };
+        assert_eq!(goal.len(), cfg().len() + 3);
+        let tail = |m: &ExploredMemory, f: &SensorFrame| read(m, f)[8..].to_vec();
+        // Nothing seen yet: no goal.
+        let mut m = ExploredMemory::new(goal);
+        m.visit(&at(0.0, 0.0, 0.0));
+        assert_eq!(tail(&m, &at(0.0, 0.0, 0.0)), vec![0.5, 0.5, 1.0]);
+        // A 20 degree fan ahead (+x), free to 12 m.
+        let mut f = at(0.0, 0.0, 0.0);
+        f.scan = Some(LaserScan {
+            angle_min: -10f32.to_radians(),
+            angle_increment: 1f32.to_radians(),
+            range_max: 12.0,
+            hit: vec![false; 21],
+            ranges: vec![12.0; 21],
+            ..LaserScan::default()
+        });
+        m.visit(&f);
+        // Ahead, just beyond the 2 m the car has swept: a cell beside the axis, 2.06 m away at
+        // 14 degrees (the one on the axis lies on the 2 m circle, so counts as reached).
+        let v = tail(&m, &f);
+        assert!(v[0] > 0.98 && (v[1] - 0.5).abs() < 0.13, "{v:?}");
+        assert!(v[2] > 0.2 && v[2] < 0.25, "{v:?}");
+        // Facing +y, the same ground lies to the right.
+        let v = tail(&m, &at(0.0, 0.0, std::f64::consts::FRAC_PI_2));
+        assert!((v[0] - 0.5).abs() < 0.13 && v[1] < 0.02, "{v:?}");
+        // Having driven 4 m along the fan, the nearest unvisited ground is 2 m further on.
+        for k in 0..=40 {
+            m.visit(&at(k as f64 * 0.1, 0.0, 0.0));
+        }
+        let v = tail(&m, &at(4.0, 0.0, 0.0));
+        assert!(v[0] > 0.98 && v[2] > 0.2 && v[2] < 0.25, "{v:?}");
+        // Beyond goal_m there is none.
+        let mut near = ExploredMemory::new(ExploredObs { goal_m: 2.0, ..goal });
+        near.visit(&f);
+        assert_eq!(tail(&near, &f), vec![0.5, 0.5, 1.0]);
+        assert!(ExploredObs { goal_m: -1.0, ..cfg() }.validate().is_err());
+        assert!(ExploredObs { goal_m: 100.0, ..cfg() }.validate().is_err());
+    }
+
+    #[test]
+    fn a_scan_is_marked_again_only_once_the_car_has_moved_half_a_cell_or_turned() {
+        use agvrl_sim::msg::LaserScan;
+        let mut m = ExploredMemory::new(ExploredObs {
+            frontier: true,
+            ..cfg()
+        });
+        // One ray at `bearing` from the car's heading, free to 6 m.
+        let ray = |x: f64, yaw: f64, bearing: f32| SensorFrame {
+            scan: Some(LaserScan {
+                angle_min: bearing,
+                angle_increment: 0.1,
+                range_max: 6.0,
+                hit: vec![false],
+                ranges: vec![6.0],
+                ..LaserScan::default()
+            }),
+            ..at(x, 0.0, yaw)
+        };
+        let seen = |m: &ExploredMemory, x: f64, y: f64| {
+            m.visited[ExploredMemory::index(m.cell_of(x), m.cell_of(y))] & SEEN != 0
+        };
+        let left = std::f32::consts::FRAC_PI_2;
+        m.visit(&ray(0.0, 0.0, 0.0));
+        assert!(seen(&m, 5.0, 0.0) && !seen(&m, 0.0, 5.0));
+        // Turned 0.05 rad, or moved 0.2 m, from the marked pose: this scan (to the left) is not
+        // marked.
+        m.visit(&ray(0.0, 0.05, left));
+        m.visit(&ray(0.2, 0.0, left));
+        assert!(!seen(&m, 0.0, 5.0) && !seen(&m, 0.2, 5.0));
+        // Turned 0.1 rad: marked.
+        m.visit(&ray(0.0, 0.1, left));
+        assert!(seen(&m, -0.5, 5.0));
+        // Moved half a cell from there: marked.
+        m.visit(&ray(0.0, 0.1, 0.0));
+        assert!(!seen(&m, 5.0, 0.5));
+        m.visit(&ray(0.25, 0.1, 0.0));
+        assert!(seen(&m, 5.0, 0.5));
+        // A new episode marks its first scan.
+        m.clear();
+        m.visit(&ray(0.0, 0.0, left));
+        assert!(seen(&m, 0.0, 5.0) && !seen(&m, 5.0, 0.0));
     }
 
     #[test]
