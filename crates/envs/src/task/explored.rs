@@ -36,7 +36,7 @@ pub struct ExploredObs {
     /// When > 0, also append where the nearest frontier cell (seen free, not yet visited) within
     /// this many metres lies: (1 + cos) / 2 and (1 + sin) / 2 of its bearing from straight ahead,
     /// and its distance over `goal_m` (0.5, 0.5, 1 when there is none), before the stale time.
-    /// Needs the LiDAR scan. The rings see 8 m around the car; a car whose rings are all swept
+    /// Needs the LiDAR scan. The rings end at `radii_m[2]`; a car whose rings are all swept
     /// learns from this where new ground lies. 0: off.
     pub goal_m: f32,
 }
