@@ -332,9 +332,15 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
     }
     cfg.observation.explored.validate()?;
     cfg.observation.arcs.validate()?;
+    cfg.observation.rear.validate()?;
     if spec.task == TaskKind::Racing && !cfg.observation.explored.is_empty() {
         return Err(EnvError::Config(format!(
             "observation.explored is a search observation; {id} is a racing env"
+        )));
+    }
+    if spec.task == TaskKind::Racing && !cfg.observation.rear.is_empty() {
+        return Err(EnvError::Config(format!(
+            "observation.rear is a search observation; {id} is a racing env"
         )));
     }
     if let Some(cam) = cfg.sim.camera.as_ref().filter(|c| c.depth_only) {

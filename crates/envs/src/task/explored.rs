@@ -72,6 +72,22 @@ impl ExploredObs {
         self.len() == 0
     }
 
+    /// The parts appended, in order, with their widths (none when off).
+    pub fn layout(&self) -> Vec<(&'static str, usize)> {
+        if self.is_empty() {
+            return vec![];
+        }
+        vec![
+            ("explored", self.sectors * (self.radii_m.len() - 1)),
+            (
+                "explored.frontier",
+                self.sectors * (self.radii_m.len() - 1) * self.frontier as usize,
+            ),
+            ("explored.goal", 3 * (self.goal_m > 0.0) as usize),
+            ("explored.stale", (self.stale_s > 0.0) as usize),
+        ]
+    }
+
     /// An error for settings that cannot work.
     pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
         if self.is_empty() {

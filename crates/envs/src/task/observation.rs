@@ -23,7 +23,7 @@ pub enum RangeScale {
 
 /// Composition of the observation vector: the LiDAR ranges, then the enabled extras in this
 /// order (speed / 2 m/s, yaw rate / 2 rad/s, steering / limit, throttle, the explored-ground
-/// fractions, the arcs' free lengths, camera channels).
+/// fractions, the arcs' free lengths, the reverse arcs' free lengths, camera channels).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ObsConfig {
@@ -44,6 +44,10 @@ pub struct ObsConfig {
     /// a policy file written without them reads the same).
     #[serde(skip_serializing_if = "ArcObs::is_empty")]
     pub arcs: ArcObs,
+    /// Free lengths along reverse arcs, from the points the LiDAR saw in the last seconds
+    /// (search only; left out of the settings when off).
+    #[serde(skip_serializing_if = "RearObs::is_empty")]
+    pub rear: RearObs,
     /// Camera channels appended after everything else (needs the vehicle camera).
     pub image: ImageObs,
 }
@@ -347,6 +351,62 @@ impl ImageObs {
     }
 }
 
+/// Free reverse lengths (`[env_config.observation.rear]`): for `n` steering angles evenly from
+/// full left to full right (one: straight), how far the car could reverse along that arc, over
+/// `max_m`. The LiDAR does not see behind the car, so the lengths come from the safety filter's
+/// memory of scan points (by odometry, the last `reverse_memory_s`) and its reverse check: the
+/// body with its margin keeps off every remembered point, and the car never reverses farther
+/// than it drove forward (0 at a spawn). The same memory and check on the car as in training.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RearObs {
+    /// Reverse arcs (0: off).
+    pub n: usize,
+    /// Longest length looked at, metres (at most the 3 m the filter ever reverses).
+    pub max_m: f32,
+}
+
+impl Default for RearObs {
+    fn default() -> Self {
+        Self { n: 0, max_m: 1.5 }
+    }
+}
+
+impl RearObs {
+    /// Values appended.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether it is off.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// The steering angles of the arcs, full left (positive) to full right.
+    pub fn steerings(&self, steering_limit_rad: f64) -> Vec<f32> {
+        match self.n {
+            0 => vec![],
+            1 => vec![0.0],
+            n => (0..n)
+                .map(|k| (steering_limit_rad * (1.0 - 2.0 * k as f64 / (n - 1) as f64)) as f32)
+                .collect(),
+        }
+    }
+
+    /// An error for settings that cannot work.
+    pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
+        if self.n <= 9 && self.max_m.is_finite() && self.max_m > 0.0 && self.max_m <= 3.0 {
+            Ok(())
+        } else {
+            Err(agvrl_sim::InvalidSetting::new(
+                "observation.rear",
+                format!("observation.rear needs n <= 9 and max_m in (0, 3]; got {self:?}"),
+            ))
+        }
+    }
+}
+
 impl Default for ObsConfig {
     /// Normalised ranges plus speed, yaw rate, steering and throttle.
     fn default() -> Self {
@@ -358,6 +418,7 @@ impl Default for ObsConfig {
             throttle: true,
             explored: ExploredObs::default(),
             arcs: ArcObs::default(),
+            rear: RearObs::default(),
             image: ImageObs::default(),
         }
     }
@@ -374,6 +435,7 @@ impl ObsConfig {
             throttle: false,
             explored: ExploredObs::default(),
             arcs: ArcObs::default(),
+            rear: RearObs::default(),
             image: ImageObs::default(),
         }
     }
@@ -389,7 +451,7 @@ impl ObsConfig {
     pub fn needs(&self) -> SensorNeeds {
         SensorNeeds {
             scan: true,
-            imu: self.speed || self.yaw_rate,
+            imu: self.speed || self.yaw_rate || !self.rear.is_empty(),
             gps: !self.explored.is_empty(),
             image: !self.image.is_empty(),
         }
@@ -414,15 +476,68 @@ impl ObsConfig {
                 s.high.push(hi);
             }
         }
-        let n01 = self.explored.len() + self.arcs.len() + self.image.len();
+        let n01 = self.explored.len() + self.arcs.len() + self.rear.len() + self.image.len();
         s.low.extend(std::iter::repeat_n(0.0, n01));
         s.high.extend(std::iter::repeat_n(1.0, n01));
         s
     }
 
+    /// The observation's parts in order, each with its name and width, for `n_rays` rays.
+    pub fn layout(&self, n_rays: usize) -> Vec<(&'static str, usize)> {
+        let rays = if self.ranges == RangeScale::Off { 0 } else { n_rays };
+        let mut parts = vec![("ranges", rays)];
+        for (on, name) in [
+            (self.speed, "speed"),
+            (self.yaw_rate, "yaw_rate"),
+            (self.steering, "steering"),
+            (self.throttle, "throttle"),
+        ] {
+            parts.push((name, on as usize));
+        }
+        parts.extend(self.explored.layout());
+        parts.push(("arcs", self.arcs.len()));
+        parts.push(("rear", self.rear.len()));
+        parts.push(("image", self.image.len()));
+        parts.retain(|p| p.1 > 0);
+        parts
+    }
+
+    /// The indices of this observation's inputs that `before` (on the same LiDAR) lacks, or why
+    /// a network that read `before` cannot read this one: each part of `before` must be here,
+    /// as wide and in the same order.
+    pub fn inputs_added_since(&self, before: &ObsConfig, n_rays: usize) -> Result<Vec<usize>, String> {
+        let (old, new) = (before.layout(n_rays), self.layout(n_rays));
+        let mut added = vec![];
+        let (mut at, mut k) = (0, 0);
+        for &(name, width) in &new {
+            match old.get(k) {
+                Some(&(o, w)) if o == name && w == width => k += 1,
+                Some(&(o, w)) if o == name => {
+                    return Err(format!("observation part {name} is {width} wide, it was {w}"));
+                }
+                Some(&(o, _)) if old[k..].iter().any(|p| p.0 == name) => {
+                    return Err(format!("observation part {o} is gone or moved"));
+                }
+                _ => added.extend(at..at + width),
+            }
+            at += width;
+        }
+        match old.get(k) {
+            Some((name, _)) => Err(format!("observation part {name} is gone")),
+            None => Ok(added),
+        }
+    }
+
     /// Build the observation (the frame's needs were checked by the env); `explored` is the
-    /// task's memory when `self.explored` is on.
-    pub fn observe(&self, frame: &SensorFrame, steering_limit_rad: f64, explored: Option<&ExploredMemory>) -> Vec<f32> {
+    /// task's memory when `self.explored` is on, `rear` its reverse lengths (over `max_m`) when
+    /// `self.rear` is.
+    pub fn observe(
+        &self,
+        frame: &SensorFrame,
+        steering_limit_rad: f64,
+        explored: Option<&ExploredMemory>,
+        rear: Option<&[f32]>,
+    ) -> Vec<f32> {
         let mut out = Vec::new();
         if let Some(scan) = &frame.scan {
             out.reserve(scan.ranges.len() + self.n_extra());
@@ -453,6 +568,12 @@ impl ObsConfig {
         }
         if !self.arcs.is_empty() {
             self.arcs.append(frame.scan.as_ref(), steering_limit_rad, &mut out);
+        }
+        if !self.rear.is_empty() {
+            match rear.filter(|r| r.len() == self.rear.len()) {
+                Some(r) => out.extend(r),
+                None => out.extend(std::iter::repeat_n(0.0, self.rear.len())),
+            }
         }
         if !self.image.is_empty() {
             self.image.append(frame.image.as_ref(), &mut out);
@@ -567,7 +688,7 @@ mod tests {
             }),
             ..SensorFrame::default()
         };
-        let obs = cfg.observe(&frame, 0.36, None);
+        let obs = cfg.observe(&frame, 0.36, None, None);
         assert_eq!(obs.len(), cfg.space(n_rays, 12.0).dim());
         let tail = &obs[obs.len() - 5..];
         assert!(tail.iter().all(|v| (0.0..=1.0).contains(v)), "{tail:?}");
@@ -580,7 +701,7 @@ mod tests {
         if let Some(s) = open.scan.as_mut() {
             s.hit.iter_mut().for_each(|h| *h = false);
         }
-        let obs = cfg.observe(&open, 0.36, None);
+        let obs = cfg.observe(&open, 0.36, None, None);
         assert!(obs[obs.len() - 5..].iter().all(|v| *v == 1.0));
         assert!(
             ArcObs {
@@ -590,5 +711,41 @@ mod tests {
             .validate()
             .is_err()
         );
+    }
+    #[test]
+    fn inputs_added_since_finds_new_parts_and_refuses_lost_or_resized_ones() {
+        let before = ObsConfig {
+            explored: ExploredObs {
+                sectors: 8,
+                ..ExploredObs::default()
+            },
+            arcs: arcs(9),
+            ..ObsConfig::default()
+        };
+        let rings = before.explored.len();
+        let after = ObsConfig {
+            explored: ExploredObs {
+                stale_s: 10.0,
+                ..before.explored
+            },
+            rear: RearObs { n: 3, max_m: 1.5 },
+            ..before
+        };
+        let wait = 100 + 4 + rings;
+        assert_eq!(
+            after.inputs_added_since(&before, 100),
+            Ok(vec![wait, wait + 10, wait + 11, wait + 12])
+        );
+        assert_eq!(after.space(100, 12.0).dim(), wait + 13);
+        assert_eq!(before.inputs_added_since(&before, 100), Ok(vec![]));
+        let no_arcs = ObsConfig {
+            arcs: ArcObs::default(),
+            ..after
+        };
+        assert!(no_arcs.inputs_added_since(&before, 100).unwrap_err().contains("arcs"));
+        let wider = ObsConfig { arcs: arcs(5), ..after };
+        assert!(wider.inputs_added_since(&before, 100).unwrap_err().contains("wide"));
+        let no_speed = ObsConfig { speed: false, ..after };
+        assert!(no_speed.inputs_added_since(&before, 100).unwrap_err().contains("speed"));
     }
 }

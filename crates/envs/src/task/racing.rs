@@ -94,7 +94,10 @@ impl Task for Racing {
     }
 
     fn observe(&self, frame: &SensorFrame) -> Vec<f32> {
-        self.cfg.common.observation.observe(frame, self.steering_limit, None)
+        self.cfg
+            .common
+            .observation
+            .observe(frame, self.steering_limit, None, None)
     }
 
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {

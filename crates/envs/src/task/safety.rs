@@ -225,6 +225,14 @@ pub struct SafetyFilter {
     backable_m: f32,
 }
 
+/// Half the angle the frame's scan covers (pi without a scan).
+fn whole_scan_half_rad(frame: &SensorFrame) -> f32 {
+    frame.scan.as_ref().map_or(std::f32::consts::PI, |s| {
+        let end = s.angle_min + s.angle_increment * s.ranges.len().saturating_sub(1) as f32;
+        s.angle_min.abs().max(end.abs())
+    })
+}
+
 /// The most a car reverses along the way it came, metres (about what it drove in
 /// `reverse_memory_s` at low speed; farther back, odometry drifts).
 const MAX_BACKABLE_M: f32 = 3.0;
@@ -320,12 +328,7 @@ impl SafetyFilter {
         if !self.cfg.enabled {
             return proposed;
         }
-        let fan_half_rad = fan_half_rad.unwrap_or_else(|| {
-            frame.scan.as_ref().map_or(std::f32::consts::PI, |s| {
-                let end = s.angle_min + s.angle_increment * s.ranges.len().saturating_sub(1) as f32;
-                s.angle_min.abs().max(end.abs())
-            })
-        });
+        let fan_half_rad = fan_half_rad.unwrap_or_else(|| whole_scan_half_rad(frame));
         let speed = self.observe(frame);
         self.collect_near(speed);
         if let Some(c) = self.keep_backing_out(speed, fan_half_rad) {
@@ -455,6 +458,29 @@ impl SafetyFilter {
             throttle: 0.0,
             steering_rad: delta,
         }
+    }
+
+    /// Take in a frame as [`SafetyFilter::filter`] does, filtering nothing, and push to `out`
+    /// how far the car could reverse from here along the arc of each steering in `deltas`,
+    /// over `max_m` (the reverse check of a policy's control, up to `max_m`). `fan_half_rad`
+    /// as in `filter`.
+    pub fn reverse_free_fractions(
+        &mut self,
+        frame: &SensorFrame,
+        deltas: &[f32],
+        max_m: f32,
+        fan_half_rad: Option<f32>,
+        out: &mut Vec<f32>,
+    ) {
+        let fan_half_rad = fan_half_rad.unwrap_or_else(|| whole_scan_half_rad(frame));
+        let speed = self.observe(frame);
+        self.collect_near(speed);
+        self.grid_old_points();
+        out.extend(
+            deltas
+                .iter()
+                .map(|&d| self.reverse_free_length(d, max_m, fan_half_rad) / max_m),
+        );
     }
 
     /// Begin reversing out of a dead end: the nose should swing towards the open side (the
@@ -1180,6 +1206,41 @@ mod tests {
         let mut f = on();
         assert_eq!(f.filter(&wall_frame(5.0, 0.0, 1.5), back, 0.36, FAN), back);
         assert_eq!(f.last_intervention(), Intervention::None);
+    }
+
+    #[test]
+    fn reverse_lengths_end_at_points_seen_behind_and_at_the_way_the_car_came() {
+        let at_rest = |t: f64| {
+            let mut fr = wall_frame(12.0, t, 0.0);
+            fr.scan.as_mut().unwrap().hit.fill(false);
+            fr
+        };
+        let lengths = |f: &mut SafetyFilter, fr: &SensorFrame| {
+            let mut out = vec![];
+            f.reverse_free_fractions(fr, &[0.36, 0.0, -0.36], 1.5, FAN, &mut out);
+            out
+        };
+        // At a spawn nothing behind is known: no reverse arc is free.
+        let mut f = on();
+        assert_eq!(lengths(&mut f, &at_rest(0.0)), [0.0; 3]);
+        // After 1 m forward with nothing seen, each arc is free for the 1 m driven.
+        for k in 1..=10 {
+            let mut fr = at_rest(0.1 * k as f64);
+            fr.imu.as_mut().unwrap().lin_vel_b[0] = 1.0;
+            lengths(&mut f, &fr);
+        }
+        for l in lengths(&mut f, &at_rest(1.1)) {
+            assert!((l - 1.0 / 1.5).abs() < 1e-4, "{l}");
+        }
+        // A point seen 5 s ago 0.6 m behind the rear axle (its cell's centre 0.575 m): straight
+        // back, the body's back (0.085 m) and margin (0.08 m) reach it after 0.41 m, so the
+        // last clear pose is 0.40 m back.
+        let mut f = remembering(-0.6, 0.0, 0.0, 5.0);
+        let l = lengths(&mut f, &at_rest(5.0));
+        assert!((l[1] - 0.40 / 1.5).abs() < 1e-4, "{l:?}");
+        // Beyond reverse_memory_s it is forgotten.
+        let mut f = remembering(-0.6, 0.0, 0.0, 10.5);
+        assert_eq!(lengths(&mut f, &at_rest(10.5))[1], 1.0);
     }
 
     /// A filter that backs out 0.6 m (`backout_parked` as given) and may reverse as far as it

@@ -71,6 +71,9 @@ pub struct Search {
     by_kind: [u64; 4],
     clearance_m: f64,
     explored: Option<ExploredMemory>,
+    /// With `observation.rear`: a filter kept for its memory and reverse check (it filters
+    /// nothing), and the reverse lengths of the last frame.
+    rear: Option<(SafetyFilter, Vec<f32>)>,
 }
 
 /// The free cells of a map that coverage counts, indexed by position.
@@ -172,6 +175,28 @@ impl Search {
             clearance_m: f64::INFINITY,
             explored: (!cfg.common.observation.explored.is_empty())
                 .then(|| ExploredMemory::new(cfg.common.observation.explored)),
+            rear: (!cfg.common.observation.rear.is_empty()).then(|| {
+                let memory = super::SafetyFilterConfig {
+                    enabled: true,
+                    advisory: false,
+                    // Reach for points as far as the longest reverse arc.
+                    backout_m: cfg.common.observation.rear.max_m,
+                    backout_parked: false,
+                    ..cfg.common.safety_filter
+                };
+                (SafetyFilter::new(memory, true), vec![])
+            }),
+        }
+    }
+
+    /// Take in a frame for the reverse lengths (`observation.rear`).
+    fn look_behind(&mut self, frame: &SensorFrame) {
+        let rear_cfg = self.cfg.common.observation.rear;
+        let fan = (self.cfg.clearance_fov_deg > 0.0).then(|| 0.5 * self.cfg.clearance_fov_deg.to_radians());
+        if let Some((memory, lengths)) = &mut self.rear {
+            lengths.clear();
+            let deltas = rear_cfg.steerings(self.steering_limit);
+            memory.reverse_free_fractions(frame, &deltas, rear_cfg.max_m, fan, lengths);
         }
     }
 
@@ -277,6 +302,10 @@ impl Task for Search {
             m.clear();
             m.visit(frame);
         }
+        if let Some((memory, _)) = &mut self.rear {
+            memory.reset();
+        }
+        self.look_behind(frame);
         self.grid = map.map(CoverageGrid::new).unwrap_or_default();
         self.start_s = frame.stamp_s;
         self.last_new_cell_s = frame.stamp_s;
@@ -293,10 +322,12 @@ impl Task for Search {
     }
 
     fn observe(&self, frame: &SensorFrame) -> Vec<f32> {
-        self.cfg
-            .common
-            .observation
-            .observe(frame, self.steering_limit, self.explored.as_ref())
+        self.cfg.common.observation.observe(
+            frame,
+            self.steering_limit,
+            self.explored.as_ref(),
+            self.rear.as_ref().map(|(_, l)| l.as_slice()),
+        )
     }
 
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
@@ -315,6 +346,7 @@ impl Task for Search {
         if let Some(m) = &mut self.explored {
             m.visit(frame);
         }
+        self.look_behind(frame);
         let new_cells = self.n_covered - covered_before;
         let mut terms = reward::search(
             self.cfg.reward,
