@@ -336,10 +336,18 @@ pub fn train_run(
     );
     let pool = Pool::default();
     let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
-        Box::new(ppo_with_threads(
-            Ppo::new(cfg.ppo.clone(), vec_env(&cfg, &pool)?, device, cfg.seed)?,
-            &cfg,
-        ))
+        let mut ppo = Ppo::new(cfg.ppo.clone(), vec_env(&cfg, &pool)?, device, cfg.seed)?;
+        if let Some(from) = &cfg.init_from {
+            let added = inputs_added_since(&cfg, from)?;
+            ppo.warm_start(&from.join(files::CHECKPOINT), &added)
+                .with_context(|| format!("init_from = {}", from.display()))?;
+            eprintln!(
+                "starting from the weights of {} ({} observation inputs added)",
+                from.display(),
+                added.len()
+            );
+        }
+        Box::new(ppo_with_threads(ppo, &cfg))
     } else {
         Box::new(sac_with_threads(
             Sac::new(cfg.sac.clone(), vec_env(&cfg, &pool)?, device, cfg.seed)?,
@@ -360,6 +368,24 @@ pub fn train_run(
     )?;
     let dir = run.finish()?;
     Ok((dir, report))
+}
+
+/// The observation inputs of `cfg` that the run in `from` (a run directory) did not have.
+fn inputs_added_since(cfg: &RunConfig, from: &std::path::Path) -> Result<Vec<usize>> {
+    let before = RunConfig::load(&from.join(files::CONFIG))
+        .with_context(|| format!("init_from = {}: not a run directory", from.display()))?;
+    let rays = cfg.env_config.sim.lidar.n_rays;
+    if before.env_config.sim.lidar.n_rays != rays {
+        anyhow::bail!(
+            "init_from = {}: its LiDAR has {} rays, this run's {rays}",
+            from.display(),
+            before.env_config.sim.lidar.n_rays
+        );
+    }
+    cfg.env_config
+        .observation
+        .inputs_added_since(&before.env_config.observation, rays)
+        .map_err(|e| anyhow::anyhow!("init_from = {}: {e}", from.display()))
 }
 
 /// `sac` splitting each gradient step over the run's `threads` (between the env rounds the

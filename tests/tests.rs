@@ -206,6 +206,57 @@ mod cli {
     }
 
     #[test]
+    fn init_from_fine_tunes_a_run_with_added_observation_parts_and_refuses_lost_ones() {
+        let d = tmp("init-from");
+        let (base, tuned) = (d.path().join("base"), d.path().join("tuned"));
+        let train = |out: &Path, sets: &[&str]| {
+            let mut args = vec![
+                "train",
+                "--env",
+                "search-outdoor-20",
+                "--algo",
+                "ppo",
+                "--steps",
+                "128",
+                "--n-envs",
+                "1",
+                "--out",
+                out.to_str().unwrap(),
+            ];
+            for s in [
+                "ppo.n_steps=64",
+                "ppo.batch_size=64",
+                "ppo.net_arch=[16]",
+                "eval_episodes=1",
+                "eval_max_steps=20",
+            ]
+            .iter()
+            .chain(sets)
+            {
+                args.extend(["--set", s]);
+            }
+            agvrl(&args)
+        };
+        let o = train(&base, &["env_config.observation.arcs.n=3"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let from = format!("init_from=\"{}\"", base.display());
+        let o = train(
+            &tuned,
+            &[
+                "env_config.observation.arcs.n=3",
+                "env_config.observation.rear.n=3",
+                &from,
+            ],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains("3 observation inputs added"), "{}", stderr(&o));
+        // A run whose network read inputs this one lacks cannot start from it.
+        let o = train(&d.path().join("lost"), &[&from]);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains("arcs is gone"), "{}", stderr(&o));
+    }
+
+    #[test]
     fn ctrl_c_leaves_a_complete_run_that_resume_continues() {
         let d = tmp("ctrlc");
         let run = d.path().join("run");

@@ -47,6 +47,13 @@ pub struct RunConfig {
     /// behind it (the backstop) then seldom has to enforce. Evaluation never uses it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub train_safety_filter: Option<SafetyFilterConfig>,
+    /// Start from the weights of another PPO run (its directory) instead of new ones: a
+    /// fine-tuning. Its network must be this run's; this run's observation may add parts to
+    /// its (`env_config.observation`), which start with zero weights, so the first policy acts
+    /// and values exactly as that run's last. The optimiser, the step count and the learning
+    /// rate's schedule start afresh; the correction multipliers carry over.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub init_from: Option<std::path::PathBuf>,
     /// Deterministic episodes evaluated after training.
     pub eval_episodes: usize,
     /// Time limit of evaluation episodes, control steps (default: the training limit).
@@ -73,6 +80,7 @@ impl Default for RunConfig {
             advisory_filter_envs: Vec::new(),
             recovery_spawn_envs: Vec::new(),
             train_safety_filter: None,
+            init_from: None,
             eval_episodes: 3,
             eval_max_steps: None,
             env_config: EnvConfig::default(),
@@ -197,6 +205,11 @@ impl RunConfig {
                     self.n_envs
                 )));
             }
+        }
+        if self.init_from.is_some() && self.algo != Algorithm::Ppo {
+            return Err(RunError::Config(
+                "init_from fine-tunes a PPO run; algo must be \"ppo\"".into(),
+            ));
         }
         if self.env_config.track.is_some() && self.procedural_layouts > 0 {
             return Err(RunError::Config(

@@ -27,7 +27,7 @@ use crate::normalize::ObsNormalizer;
 use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData};
 use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
-use agvrl_envs::{Env, VecEnv};
+use agvrl_envs::{BoxSpace, Env, VecEnv};
 use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -643,6 +643,51 @@ impl<E: Env> Ppo<E> {
             s.lambdas = h.correction_lambdas;
         }
         Ok(s)
+    }
+
+    /// Start from the weights (and correction multipliers) of another run's checkpoint, whose
+    /// observation lacked the inputs at `added` (indices into this env's observation). Those
+    /// inputs get zero weights, so the policy starts out acting and valuing exactly as the
+    /// checkpoint's; the optimiser, counters and schedule start afresh.
+    pub fn warm_start(&mut self, path: &Path, added: &[usize]) -> Result<()> {
+        let new_space = self.env.observation_space().clone();
+        let keep: Vec<usize> = (0..new_space.dim()).filter(|i| !added.contains(i)).collect();
+        let old_space = BoxSpace {
+            low: keep.iter().map(|&i| new_space.low[i]).collect(),
+            high: keep.iter().map(|&i| new_space.high[i]).collect(),
+        };
+        let spaces = (&old_space, self.env.action_space());
+        let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Ppo, spaces)?;
+        let plain = |c: &PpoConfig| c.image.is_none() && !c.normalize_obs;
+        let same = h.config.net_arch == self.cfg.net_arch
+            && h.config.activation_fn == self.cfg.activation_fn
+            && h.config.use_sde == self.cfg.use_sde;
+        if !same || !plain(&h.config) || !plain(&self.cfg) {
+            return Err(RlError::Mismatch {
+                what: "network (a warm start needs the same layers, activation and gSDE, and no image or observation normaliser)",
+                file: format!("{:?} {:?}", h.config.net_arch, h.config.activation_fn),
+                env: format!("{:?} {:?}", self.cfg.net_arch, self.cfg.activation_fn),
+            });
+        }
+        let mut shapes = self.params.shapes.clone();
+        shapes[0][1] = keep.len();
+        let mut old = r.params(&shapes)?;
+        let [members, _, cols] = self.params.shapes[0];
+        let rows = new_space.dim();
+        let mut first = vec![0.0f32; members * rows * cols];
+        for m in 0..members {
+            for (k, &i) in keep.iter().enumerate() {
+                let src = &old.data[0][(m * keep.len() + k) * cols..][..cols];
+                first[(m * rows + i) * cols..][..cols].copy_from_slice(src);
+            }
+        }
+        old.shapes[0] = self.params.shapes[0];
+        old.data[0] = first;
+        self.params = old;
+        if h.correction_lambdas.len() == self.lambdas.len() {
+            self.lambdas = h.correction_lambdas;
+        }
+        Ok(())
     }
 
     /// Mean return of `n_episodes` deterministic episodes on `env` (seeded `seed`, `seed + 1`, ...).

@@ -578,6 +578,55 @@ mod tests {
         }
     }
 
+    /// A warm start gives the added inputs zero weights in both trunks (actor and critic) and
+    /// keeps every other weight, so the actor acts as the checkpoint's on the inputs they share.
+    #[test]
+    fn a_warm_start_keeps_the_weights_and_zeroes_the_added_inputs() {
+        use super::super::{Ppo, PpoConfig};
+        let cfg = PpoConfig {
+            net_arch: vec![8, 8],
+            n_steps: 8,
+            batch_size: 8,
+            ..PpoConfig::default()
+        };
+        let dev = crate::default_device();
+        let learner = |n, cfg: &PpoConfig, seed| {
+            Ppo::new(cfg.clone(), VecEnv::new(vec![Shape(n)], 1).unwrap(), &dev, seed).unwrap()
+        };
+        let from = learner(3, &cfg, 1);
+        let path = std::env::temp_dir().join(format!("agvrl-warm-start-{}.ckpt", std::process::id()));
+        from.save_checkpoint(&path).unwrap();
+        let mut to = learner(5, &cfg, 2);
+        to.warm_start(&path, &[0, 3]).unwrap();
+        let [members, rows, cols] = to.params.shapes[0];
+        assert_eq!([members, rows], [2, 5]);
+        let row = |p: &[f32], n: usize, m: usize, i: usize| p[(m * n + i) * cols..][..cols].to_vec();
+        for m in 0..members {
+            for (i, was) in [None, Some(0), Some(1), None, Some(2)].into_iter().enumerate() {
+                let expected = was.map_or(vec![0.0; cols], |k| row(&from.params.data[0], 3, m, k));
+                assert_eq!(row(&to.params.data[0], 5, m, i), expected, "member {m}, input {i}");
+            }
+        }
+        assert_eq!(to.params.data[1..], from.params.data[1..]);
+        let (mut a, mut b) = (from.policy(&dev), to.policy(&dev));
+        let acts = (
+            a.act(&[0.3, 0.7, 0.9], true).unwrap(),
+            b.act(&[0.5, 0.3, 0.7, 1.0, 0.9], true).unwrap(),
+        );
+        assert!(
+            acts.0.iter().zip(&acts.1).all(|(p, q)| (p - q).abs() < 1e-6),
+            "{acts:?}"
+        );
+        // Another network, or inputs that do not account for the difference, are refused.
+        let narrow = PpoConfig {
+            net_arch: vec![4],
+            ..cfg.clone()
+        };
+        assert!(learner(5, &narrow, 3).warm_start(&path, &[0, 3]).is_err());
+        assert!(learner(5, &cfg, 3).warm_start(&path, &[0]).is_err());
+        std::fs::remove_file(&path).unwrap();
+    }
+
     /// The host networks' outputs and gradients against the same networks through Burn's
     /// autodiff (tanh there is `2 sigmoid(2x) - 1` on libm's `expf`), for both activations,
     /// with and without gSDE's latent, and with the NatureCNN (1 and 3 channels, a vector part
