@@ -325,11 +325,6 @@ pub fn train_run(
     let mut cfg = cfg;
     image_spec_from_env(&mut cfg);
     cfg.validate()?;
-    let run = match out {
-        Some(out) => RunDir::create(out)?,
-        None => RunDir::create_unique(PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)))?,
-    };
-    write_atomic(&run.file(files::CONFIG), cfg.to_toml()?.as_bytes())?;
     eprintln!(
         "training {} on {} for {} steps (seed {}, {} envs)",
         cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs
@@ -355,6 +350,12 @@ pub fn train_run(
         )?)
     };
     let pool = pool_of(&cfg, pool, learner.as_ref());
+    // Created once the learner stands, so a setting it refuses leaves no run directory behind.
+    let run = match out {
+        Some(out) => RunDir::create(out)?,
+        None => RunDir::create_unique(PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)))?,
+    };
+    write_atomic(&run.file(files::CONFIG), cfg.to_toml()?.as_bytes())?;
     let files = |name: &str| run.file(name);
     let report = run_learner(
         learner.as_mut(),

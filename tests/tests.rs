@@ -254,6 +254,7 @@ mod cli {
         let o = train(&d.path().join("lost"), &[&from]);
         assert!(!o.status.success());
         assert!(stderr(&o).contains("arcs is gone"), "{}", stderr(&o));
+        assert!(!d.path().join("lost").exists() && !d.path().join("lost.partial").exists());
     }
 
     #[test]
