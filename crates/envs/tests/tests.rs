@@ -147,6 +147,19 @@ mod env_config_file {
             assert!(e.contains(key) || e.contains("warp"), "{bad}: {e}");
         }
     }
+
+    /// The reverse lengths widen a search env's observation by `n`, and a racing env refuses them.
+    #[test]
+    fn rear_lengths_widen_a_search_observation_and_a_racing_env_refuses_them() {
+        let rear: EnvConfig = toml::from_str("[observation.rear]\nn = 3\n").unwrap();
+        let dim = |cfg: &EnvConfig| make("search-outdoor-20", cfg).unwrap().observation_space().dim();
+        assert_eq!(dim(&rear), dim(&EnvConfig::default()) + 3);
+        // At a spawn the car has driven nowhere, so it may reverse nowhere.
+        let (obs, _) = make("search-outdoor-20", &rear).unwrap().reset(Some(0)).unwrap();
+        assert_eq!(obs[obs.len() - 3..], [0.0; 3]);
+        let e = make("racing-oval", &rear).err().unwrap().to_string();
+        assert!(e.contains("observation.rear is a search observation"), "{e}");
+    }
 }
 
 mod episodes {
