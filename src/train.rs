@@ -320,9 +320,18 @@ pub fn train_run(
     stop: &AtomicBool,
     progress: ProgressMode,
 ) -> Result<(PathBuf, RunReport)> {
+    let mut cfg = cfg;
+    if let Some(first) = cfg.init_config().map(PathBuf::from) {
+        let out = out.clone().unwrap_or_else(|| default_run_path(&cfg));
+        let (dir, report) = first_stage(&first, cfg.seed, &out, device, stop, progress)?;
+        if report.interrupted {
+            eprintln!("interrupted in the first stage; the fine-tuning did not start");
+            return Ok((dir, report));
+        }
+        cfg.init_from = Some(dir);
+    }
     let device = device.device()?;
     let device = &device;
-    let mut cfg = cfg;
     image_spec_from_env(&mut cfg);
     cfg.validate()?;
     eprintln!(
@@ -353,7 +362,7 @@ pub fn train_run(
     // Created once the learner stands, so a setting it refuses leaves no run directory behind.
     let run = match out {
         Some(out) => RunDir::create(out)?,
-        None => RunDir::create_unique(PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo)))?,
+        None => RunDir::create_unique(default_run_path(&cfg))?,
     };
     write_atomic(&run.file(files::CONFIG), cfg.to_toml()?.as_bytes())?;
     let files = |name: &str| run.file(name);
@@ -369,6 +378,49 @@ pub fn train_run(
     )?;
     let dir = run.finish()?;
     Ok((dir, report))
+}
+
+fn default_run_path(cfg: &RunConfig) -> PathBuf {
+    PathBuf::from("runs").join(format!("{}-{}-{}", stamp(), cfg.env, cfg.algo))
+}
+
+/// Train the run config `first` at `seed` into `<out>-init`, the first stage of the training
+/// into `out`; a finished first stage of the same config there is used as it is, so a
+/// command run again after its fine-tuning failed does not train it again.
+fn first_stage(
+    first: &std::path::Path,
+    seed: u64,
+    out: &std::path::Path,
+    device: DeviceChoice,
+    stop: &AtomicBool,
+    progress: ProgressMode,
+) -> Result<(PathBuf, RunReport)> {
+    let mut cfg = RunConfig::load(first).with_context(|| format!("init_from = {}", first.display()))?;
+    cfg.seed = seed;
+    let dir = PathBuf::from(format!("{}-init", out.display()));
+    if dir.exists() {
+        let mut expected = cfg.clone();
+        image_spec_from_env(&mut expected);
+        let run = Run::open(&dir)?;
+        let report = run.report().ok();
+        if run.config() != &expected || report.as_ref().is_none_or(|r| r.interrupted) {
+            anyhow::bail!(
+                "{} exists and is not a finished training of {} at seed {seed}: resume it \
+                 (agvrl train --resume {}) or remove it",
+                dir.display(),
+                first.display(),
+                dir.display()
+            );
+        }
+        eprintln!(
+            "first stage: {} is {} at seed {seed}, trained",
+            dir.display(),
+            first.display()
+        );
+        return Ok((dir, report.unwrap_or_default()));
+    }
+    eprintln!("first stage: {} at seed {seed} into {}", first.display(), dir.display());
+    train_run(cfg, Some(dir), device, stop, progress)
 }
 
 /// The observation inputs of `cfg` that the run in `from` (a run directory) did not have.

@@ -257,6 +257,77 @@ mod cli {
         assert!(!d.path().join("lost").exists() && !d.path().join("lost.partial").exists());
     }
 
+    /// A config whose `init_from` names another config trains that one first and fine-tunes
+    /// from it in one command, to the bits of the two commands by hand (same CPU); run again,
+    /// it keeps the finished first stage, and refuses one of another config.
+    #[test]
+    fn init_from_a_config_trains_it_first_then_fine_tunes_as_two_commands_do() {
+        let d = tmp("init-config");
+        let first = "env = \"search-outdoor-20\"\nalgo = \"ppo\"\nsteps = 128\nn_envs = 1\n\
+                     eval_episodes = 1\neval_max_steps = 20\n\
+                     [ppo]\nn_steps = 64\nbatch_size = 64\nnet_arch = [16]\n";
+        let tune = "init_from = \"first.toml\"\nsteps = 64\n\
+                    [ppo]\nlearning_rate = 1e-4\n[env_config.observation.rear]\nn = 3\n";
+        let run = |cwd: &Path, args: &[&str]| {
+            Command::new(env!("CARGO_BIN_EXE_agvrl"))
+                .current_dir(cwd)
+                .args(["train", "--seed", "5", "--progress", "none"])
+                .args(args)
+                .output()
+                .expect("run agvrl")
+        };
+        let (one, two) = (d.path().join("one"), d.path().join("two"));
+        for dir in [&one, &two] {
+            std::fs::create_dir(dir).unwrap();
+            std::fs::write(dir.join("first.toml"), first).unwrap();
+            std::fs::write(dir.join("tune.toml"), tune).unwrap();
+        }
+        let o = run(&one, &["--config", "tune.toml", "--out", "tuned"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains("3 observation inputs added"), "{}", stderr(&o));
+        let o = run(&two, &["--config", "first.toml", "--out", "tuned-init"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let o = run(
+            &two,
+            &[
+                "--config",
+                "tune.toml",
+                "--out",
+                "tuned",
+                "--set",
+                "init_from=\"tuned-init\"",
+            ],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let read = |p: PathBuf| std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        let policy = |dir: &Path| read(dir.join("tuned/policy.agvrl"));
+        assert!(policy(&one) == policy(&two), "one command and two give other policies");
+        let cfg = String::from_utf8(read(one.join("tuned/config.toml"))).unwrap();
+        assert!(cfg.contains("init_from = \"tuned-init\""), "{cfg}");
+        assert!(cfg.contains("env = \"search-outdoor-20\""), "{cfg}");
+        let first_cfg = String::from_utf8(read(one.join("tuned-init/config.toml"))).unwrap();
+        assert!(
+            first_cfg.contains("seed = 5") && first_cfg.contains("steps = 128"),
+            "{first_cfg}"
+        );
+        // Run again: the first stage is kept, and the fine-tuning is the same.
+        std::fs::remove_dir_all(one.join("tuned")).unwrap();
+        let o = run(&one, &["--config", "tune.toml", "--out", "tuned"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains("trained"), "{}", stderr(&o));
+        assert!(policy(&one) == policy(&two));
+        // A first stage of another config is not taken for this one's.
+        std::fs::remove_dir_all(one.join("tuned")).unwrap();
+        std::fs::write(one.join("first.toml"), first.replace("steps = 128", "steps = 256")).unwrap();
+        let o = run(&one, &["--config", "tune.toml", "--out", "tuned"]);
+        assert!(!o.status.success());
+        assert!(
+            stderr(&o).contains("is not a finished training of first.toml"),
+            "{}",
+            stderr(&o)
+        );
+    }
+
     #[test]
     fn ctrl_c_leaves_a_complete_run_that_resume_continues() {
         let d = tmp("ctrlc");

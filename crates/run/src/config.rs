@@ -52,6 +52,10 @@ pub struct RunConfig {
     /// its (`env_config.observation`), which start with zero weights, so the first policy acts
     /// and values exactly as that run's last. The optimiser, the step count and the learning
     /// rate's schedule start afresh; the correction multipliers carry over.
+    ///
+    /// A run config instead (a `.toml` file, see [`RunConfig::init_config`]) is the first
+    /// stage: this config's keys go over that file's, and training trains that file first, at
+    /// this run's seed, then fine-tunes from it, in one command.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub init_from: Option<std::path::PathBuf>,
     /// Deterministic episodes evaluated after training.
@@ -64,6 +68,46 @@ pub struct RunConfig {
     pub ppo: PpoConfig,
     /// SAC settings (used when algo = "sac").
     pub sac: SacConfig,
+}
+
+fn is_config_file(p: &Path) -> bool {
+    p.extension().is_some_and(|e| e == "toml")
+}
+
+/// The keys of the run config that `table`'s `init_from` names, when it names one (a `.toml`
+/// file, read from the working directory as run directories are).
+fn first_stage_table(table: &toml::Table, origin: &str) -> Result<Option<toml::Table>> {
+    let Some(path) = table.get("init_from").and_then(|v| v.as_str()).map(Path::new) else {
+        return Ok(None);
+    };
+    if !is_config_file(path) {
+        return Ok(None);
+    }
+    let err = |m: String| RunError::Config(format!("{origin}: init_from = {}: {m}", path.display()));
+    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    let first: toml::Table = toml::from_str(&text).map_err(|e| err(e.message().trim().to_string()))?;
+    if let Some(inner) = first
+        .get("init_from")
+        .and_then(|v| v.as_str())
+        .filter(|p| is_config_file(Path::new(p)))
+    {
+        return Err(err(format!(
+            "that config starts from another config ({inner}); a training has at most two stages"
+        )));
+    }
+    Ok(Some(first))
+}
+
+/// `over`'s keys replace `base`'s; tables merge key by key, anything else is replaced whole.
+fn merge_tables(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_tables(b, o),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
 }
 
 impl Default for RunConfig {
@@ -94,7 +138,18 @@ impl RunConfig {
     /// Parse a run TOML; `origin` names it in errors.
     /// A track given by path (`env_config.track`) is loaded here, so that every config read
     /// carries the track itself: the run directory's and the policy file's copies need no files.
+    /// A config whose `init_from` names a run config starts from that file's keys.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
+        Self::from_toml_with(text, origin, &[])
+    }
+
+    /// The first stage of a two-stage training: `init_from` when it names a run config (a
+    /// `.toml` file) rather than a run directory.
+    pub fn init_config(&self) -> Option<&Path> {
+        self.init_from.as_deref().filter(|p| is_config_file(p))
+    }
+
+    fn parse(text: &str, origin: &str) -> Result<Self> {
         let mut cfg: RunConfig =
             toml::from_str(text).map_err(|e| RunError::Config(format!("{origin}: {}", e.message().trim())))?;
         cfg.validate().map_err(|e| match e {
@@ -113,11 +168,17 @@ impl RunConfig {
     /// Parse a run TOML with `sets` (`KEY=VALUE`, dotted keys, TOML values; a value that is
     /// not TOML is taken as a string) applied on top.
     pub fn from_toml_with(text: &str, origin: &str, sets: &[String]) -> Result<Self> {
-        if sets.is_empty() {
-            return Self::from_toml(text, origin);
-        }
         let mut table: toml::Table =
             toml::from_str(text).map_err(|e| RunError::Config(format!("{origin}: {}", e.message().trim())))?;
+        let first = first_stage_table(&table, origin)?;
+        if first.is_none() && sets.is_empty() {
+            // Parsed from the text itself, so errors keep their line and column.
+            return Self::parse(text, origin);
+        }
+        if let Some(mut first) = first {
+            merge_tables(&mut first, table);
+            table = first;
+        }
         for s in sets {
             let (key, value) = s
                 .split_once('=')
@@ -138,8 +199,12 @@ impl RunConfig {
             }
             t.insert(path[path.len() - 1].to_string(), value);
         }
-        let text = toml::to_string(&table).map_err(|e| RunError::Config(format!("{origin} with --set: {e}")))?;
-        Self::from_toml(&text, &format!("{origin} with --set"))
+        let shown = match sets.is_empty() {
+            true => origin.to_string(),
+            false => format!("{origin} with --set"),
+        };
+        let text = toml::to_string(&table).map_err(|e| RunError::Config(format!("{shown}: {e}")))?;
+        Self::parse(&text, &shown)
     }
 
     /// Load a run TOML file.

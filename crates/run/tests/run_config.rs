@@ -141,3 +141,43 @@ fn train_safety_filter_shields_training_envs_and_never_evaluation() {
     let e = RunConfig::from_toml(&off, "z.toml").unwrap_err().to_string();
     assert!(e.contains("advisory_filter_envs"), "{e}");
 }
+
+/// `init_from` naming a run config: this config's keys go over that file's (tables key by
+/// key), `--set` over both; the file is the first stage, and one that has a first stage of
+/// its own, or is missing, is refused by name.
+#[test]
+fn a_config_starting_from_another_takes_its_keys_under_its_own() {
+    let dir = tempfile::Builder::new().prefix("agvrl-run-stages-").tempdir().unwrap();
+    let first = dir.path().join("first.toml");
+    std::fs::write(
+        &first,
+        "env = \"search-urban-20\"\nsteps = 500\nn_envs = 4\n[ppo]\nn_steps = 64\nlearning_rate = 3e-4\n",
+    )
+    .unwrap();
+    let tune = format!(
+        "init_from = \"{}\"\nsteps = 100\n[ppo]\nlearning_rate = 1e-4\n",
+        first.display()
+    );
+    let c = RunConfig::from_toml(&tune, "tune.toml").unwrap();
+    assert_eq!((c.env.as_str(), c.steps, c.n_envs), ("search-urban-20", 100, 4));
+    assert_eq!((c.ppo.n_steps, c.ppo.learning_rate), (64, 1e-4));
+    assert_eq!(c.init_config(), Some(first.as_path()));
+    let c = RunConfig::from_toml_with(&tune, "tune.toml", &["n_envs=2".into()]).unwrap();
+    assert_eq!((c.n_envs, c.ppo.n_steps), (2, 64));
+    // A run directory is not a first stage, and brings no keys.
+    let c = RunConfig::from_toml("init_from = \"runs/x\"\n", "d.toml").unwrap();
+    assert_eq!((c.init_config(), c.env.as_str()), (None, "racing-oval"));
+    let second = dir.path().join("second.toml");
+    std::fs::write(&second, &tune).unwrap();
+    let e = RunConfig::from_toml(&format!("init_from = \"{}\"\n", second.display()), "third.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("third.toml: init_from = ") && e.contains("at most two stages"),
+        "{e}"
+    );
+    let e = RunConfig::from_toml("init_from = \"nowhere.toml\"\n", "x.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.starts_with("x.toml: init_from = nowhere.toml: "), "{e}");
+}
