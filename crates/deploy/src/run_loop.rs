@@ -259,6 +259,11 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
         });
         let checked = self.check(&frame, now_s);
         let fresh = checked.is_ok();
+        // The task takes the frame in before the policy sees it, as the env does: the memories
+        // an observation reads (explored ground, the ground behind the car) include this frame.
+        let t_eval = Instant::now();
+        let outcome = fresh.then(|| self.task.evaluate(&frame, self.vehicle.map()));
+        let eval_time = t_eval.elapsed();
         let mut intervention = Intervention::None;
         let (control, event, inference) = match checked {
             Err(ev) => (Control::default(), Some(ev), None),
@@ -279,8 +284,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
                 }
             }
         };
-        let infer_us = t0.elapsed().as_secs_f64() * 1e6;
-        let outcome = fresh.then(|| self.task.evaluate(&frame, self.vehicle.map()));
+        let infer_us = t0.elapsed().saturating_sub(eval_time).as_secs_f64() * 1e6;
         self.vehicle.actuate(control).map_err(vehicle_err)?;
         let tick_us = started.elapsed().as_secs_f64() * 1e6;
         self.clock_s += period;

@@ -57,7 +57,8 @@ pub trait Task: Send {
     }
     /// Start an episode from its first frame.
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>);
-    /// The observation of a frame.
+    /// The observation of a frame, once `reset` or `evaluate` has taken it in (the memories
+    /// it reads include that frame): the env and the drive loop both call them in that order.
     fn observe(&self, frame: &SensorFrame) -> Vec<f32>;
     /// Reward and termination after a step.
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome;
