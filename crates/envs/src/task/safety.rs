@@ -197,9 +197,9 @@ pub struct SafetyFilter {
     last_stamp_s: Option<f64>,
     /// Obstacle points in the odometry frame, one per `CELL_M` cell, with the time the cell
     /// was last seen occupied (a wall seen in 45 scans is remembered once).
-    memory: HashMap<(i32, i32), f64>,
+    memory: CellMemory,
     /// Points near the car in its current frame, seen within `memory_s` (rebuilt every
-    /// control).
+    /// control; for the reverse lengths alone, all of them).
     near: Vec<[f32; 2]>,
     /// Older remembered points near the car (only reverse paths are checked against them).
     near_old: Vec<[f32; 2]>,
@@ -207,7 +207,8 @@ pub struct SafetyFilter {
     /// reverse path is checked this control: most controls check none).
     near_grid: PointGrid,
     near_old_grid: PointGrid,
-    near_old_gridded: bool,
+    /// The reach of `near_old` while it is still to be gathered.
+    old_pending: Option<f32>,
     last: Intervention,
     /// Distance driven over the last control period by odometry, metres.
     last_ds: f32,
@@ -262,12 +263,12 @@ impl SafetyFilter {
             cfg,
             pose: [0.0; 3],
             last_stamp_s: None,
-            memory: HashMap::new(),
+            memory: CellMemory::default(),
             near: Vec::new(),
             near_old: Vec::new(),
             near_grid: PointGrid::default(),
             near_old_grid: PointGrid::default(),
-            near_old_gridded: false,
+            old_pending: None,
             last: Intervention::None,
             last_ds: 0.0,
             stuck: 0,
@@ -330,7 +331,7 @@ impl SafetyFilter {
         }
         let fan_half_rad = fan_half_rad.unwrap_or_else(|| whole_scan_half_rad(frame));
         let speed = self.observe(frame);
-        self.collect_near(speed);
+        self.collect_near(self.reach(speed), true);
         if let Some(c) = self.keep_backing_out(speed, fan_half_rad) {
             self.last = Intervention::Reversed;
             return c;
@@ -473,8 +474,9 @@ impl SafetyFilter {
         out: &mut Vec<f32>,
     ) {
         let fan_half_rad = fan_half_rad.unwrap_or_else(|| whole_scan_half_rad(frame));
-        let speed = self.observe(frame);
-        self.collect_near(speed);
+        self.observe(frame);
+        // Only reverse paths are checked here, against old and recent points alike.
+        self.collect_near(self.reverse_reach(max_m), false);
         self.grid_old_points();
         out.extend(
             deltas
@@ -586,8 +588,7 @@ impl SafetyFilter {
         } else {
             self.cfg.memory_s
         };
-        let keep_after = frame.stamp_s - keep_s as f64;
-        self.memory.retain(|_, t| *t >= keep_after);
+        self.memory.forget_before(frame.stamp_s - keep_s as f64);
         if let Some(scan) = &frame.scan {
             let (s, c) = self.pose[2].sin_cos();
             for (i, &r) in scan.ranges.iter().enumerate() {
@@ -606,51 +607,93 @@ impl SafetyFilter {
         v as f32
     }
 
-    /// Remembered points that a path from here could reach, in the car's frame.
-    fn collect_near(&mut self, speed: f32) {
-        let reach = (self.path_needed(speed, true) + 1.0).max(self.cfg.backout_m + self.cfg.rear_m)
+    /// How far from the rear axle a point may be that any path the filter checks at `speed`
+    /// can reach, metres.
+    fn reach(&self, speed: f32) -> f32 {
+        (self.path_needed(speed, true) + 1.0).max(self.cfg.backout_m + self.cfg.rear_m)
             + self.cfg.front_m
             + self.cfg.clearance_m
-            + self.cfg.half_width_m;
+            + self.cfg.half_width_m
+    }
+
+    /// As [`Self::reach`] for reverse paths of up to `limit_m` alone: a pose on one is within
+    /// `limit_m` of the rear axle, and the box of points that can fail its check
+    /// ([`Self::pose_box`]) within a square around it of half-side the farthest its body or
+    /// LiDAR clearance reaches.
+    fn reverse_reach(&self, limit_m: f32) -> f32 {
+        let cfg = &self.cfg;
+        let m = cfg.body_margin_m;
+        let body = (cfg.front_m.max(cfg.rear_m) + m).hypot(cfg.half_width_m + m);
+        let lidar = cfg.lidar_x_m.abs() + cfg.reverse_clearance_m;
+        // The box's 1 mm pad, and as much again for rounding.
+        limit_m + std::f32::consts::SQRT_2 * (body.max(lidar) + 2e-3)
+    }
+
+    /// Remembered points within `reach` metres of the rear axle, in the car's frame: those seen
+    /// within `memory_s` in `near` and older ones in `near_old` (gathered once a reverse path is
+    /// checked: most controls check none), or all in `near` if not `split_old`.
+    fn collect_near(&mut self, reach: f32, split_old: bool) {
+        let recent_after = self.recent_after();
+        let mut near = std::mem::take(&mut self.near);
+        near.clear();
+        self.push_points(reach, |seen| !split_old || seen >= recent_after, &mut near);
+        self.near = near;
+        self.near_grid.rebuild(&self.near);
+        self.near_old.clear();
+        if split_old {
+            self.old_pending = Some(reach);
+        } else {
+            self.near_old_grid.rebuild(&[]);
+            self.old_pending = None;
+        }
+    }
+
+    /// Points seen before this are old (only reverse paths are checked against them).
+    fn recent_after(&self) -> f64 {
+        self.last_stamp_s.unwrap_or(0.0) - self.cfg.memory_s as f64
+    }
+
+    /// Push to `out` the remembered points within `reach` metres of the rear axle, in the car's
+    /// frame, whose time last seen passes `keep`.
+    fn push_points(&self, reach: f32, keep: impl Fn(f64) -> bool, out: &mut Vec<[f32; 2]>) {
         let (s, c) = self.pose[2].sin_cos();
         let (s, c) = (s as f32, c as f32);
-        let recent_after = self.last_stamp_s.unwrap_or(0.0) - self.cfg.memory_s as f64;
-        self.near.clear();
-        self.near_old.clear();
-        for (&(i, j), &seen) in &self.memory {
-            // Relative to the car in f64, then f32: odometry may run far from its origin.
-            let dx = ((i as f64 + 0.5) * CELL_M - self.pose[0]) as f32;
-            let dy = ((j as f64 + 0.5) * CELL_M - self.pose[1]) as f32;
-            let p = [c * dx + s * dy, -s * dx + c * dy];
-            if p[0] * p[0] + p[1] * p[1] <= reach * reach {
-                if seen >= recent_after {
-                    self.near.push(p);
-                } else {
-                    self.near_old.push(p);
+        for cells in self.memory.around(self.pose[0], self.pose[1], reach as f64) {
+            for &((i, j), seen) in cells {
+                if !(self.memory.remembers(seen) && keep(seen)) {
+                    continue;
+                }
+                // Relative to the car in f64, then f32: odometry may run far from its origin.
+                let dx = ((i as f64 + 0.5) * CELL_M - self.pose[0]) as f32;
+                let dy = ((j as f64 + 0.5) * CELL_M - self.pose[1]) as f32;
+                let p = [c * dx + s * dy, -s * dx + c * dy];
+                if p[0] * p[0] + p[1] * p[1] <= reach * reach {
+                    out.push(p);
                 }
             }
         }
-        self.near_grid.rebuild(&self.near);
-        self.near_old_gridded = false;
     }
 
-    /// Bucket `near_old` for the reverse path checks of this control.
+    /// Gather and bucket `near_old` for the reverse path checks of this control.
     fn grid_old_points(&mut self) {
-        if !self.near_old_gridded {
+        if let Some(reach) = self.old_pending.take() {
+            let recent_after = self.recent_after();
+            let mut old = std::mem::take(&mut self.near_old);
+            self.push_points(reach, |seen| seen < recent_after, &mut old);
+            self.near_old = old;
             self.near_old_grid.rebuild(&self.near_old);
-            self.near_old_gridded = true;
         }
     }
 
     /// A box (min, max corners, in the car's frame) holding every point that can fail the check
-    /// of pose `(x, y, th)` ([`Self::points_clear`]): the body's rectangle with margin, and the
-    /// LiDAR's sector of radius `clearance_m` over its fan (a disk for a fan of 90 degrees or
-    /// more), widened by 1 mm for rounding.
-    fn pose_box(&self, x: f32, y: f32, th: f32, fan_half_rad: f32, clearance_m: f32) -> ([f32; 2], [f32; 2]) {
+    /// of `pose` ([`Self::points_clear`]): the body's rectangle with margin, and the LiDAR's
+    /// sector of radius `clearance_m` over its fan (a disk for a fan of 90 degrees or more),
+    /// widened by 1 mm for rounding.
+    fn pose_box(&self, pose: Pose, fan: Fan) -> ([f32; 2], [f32; 2]) {
         use std::f32::consts::FRAC_PI_2;
         let cfg = &self.cfg;
         let m = cfg.body_margin_m;
-        let (s, c) = th.sin_cos();
+        let Pose { x, y, sin: s, cos: c } = pose;
         let (mut lo, mut hi) = ([f32::MAX; 2], [f32::MIN; 2]);
         let mut add = |px: f32, py: f32| {
             lo = [lo[0].min(px), lo[1].min(py)];
@@ -662,14 +705,14 @@ impl SafetyFilter {
             }
         }
         let (ax, ay) = (x + c * cfg.lidar_x_m, y + s * cfg.lidar_x_m);
-        let r = clearance_m;
-        if fan_half_rad >= FRAC_PI_2 {
+        let r = fan.clearance_m;
+        if fan.half_rad >= FRAC_PI_2 {
             add(ax - r, ay - r);
             add(ax + r, ay + r);
         } else {
             add(ax, ay);
             // The arc's ends, at headings th -+ fan.
-            let (sf, cf) = fan_half_rad.sin_cos();
+            let (sf, cf) = (fan.sin, fan.cos);
             add(ax + r * (c * cf + s * sf), ay + r * (s * cf - c * sf));
             add(ax + r * (c * cf - s * sf), ay + r * (s * cf + c * sf));
             // The circle's extremes along the axes that lie within the fan (an axis within
@@ -689,13 +732,16 @@ impl SafetyFilter {
     /// margin) touches any remembered point or the LiDAR comes within `reverse_clearance_m`
     /// of one in its fan, metres (up to `limit`, and never beyond the way the car came).
     fn reverse_free_length(&self, delta: f32, limit: f32, fan_half_rad: f32) -> f32 {
-        debug_assert!(self.near_old_gridded, "near_old is bucketed before a reverse check");
-        let clearance = self.cfg.reverse_clearance_m;
-        self.walk_arc(delta, limit.min(self.backable_m), -1.0, |x, y, th| {
-            let (lo, hi) = self.pose_box(x, y, th, fan_half_rad, clearance);
+        debug_assert!(
+            self.old_pending.is_none(),
+            "near_old is bucketed before a reverse check"
+        );
+        let fan = Fan::new(fan_half_rad, self.cfg.reverse_clearance_m);
+        self.walk_arc(delta, limit.min(self.backable_m), -1.0, |pose| {
+            let (lo, hi) = self.pose_box(pose, fan);
             [&self.near_grid, &self.near_old_grid]
                 .iter()
-                .all(|g| self.points_clear(g.within(lo, hi), x, y, th, fan_half_rad, clearance))
+                .all(|g| self.points_clear(g.within(lo, hi), pose, fan))
         })
     }
 
@@ -703,49 +749,36 @@ impl SafetyFilter {
     /// touches a point or the LiDAR comes within `clearance_m` of a point in its fan, metres
     /// (checked up to `limit`; `limit` itself when the path is clear).
     fn free_length(&self, delta: f32, limit: f32, fan_half_rad: f32) -> f32 {
-        let clearance = self.cfg.clearance_m;
-        self.walk_arc(delta, limit, 1.0, |x, y, th| {
-            let (lo, hi) = self.pose_box(x, y, th, fan_half_rad, clearance);
-            self.points_clear(self.near_grid.within(lo, hi), x, y, th, fan_half_rad, clearance)
+        let fan = Fan::new(fan_half_rad, self.cfg.clearance_m);
+        self.walk_arc(delta, limit, 1.0, |pose| {
+            let (lo, hi) = self.pose_box(pose, fan);
+            self.points_clear(self.near_grid.within(lo, hi), pose, fan)
         })
     }
 
     /// Poses every `PATH_STEP_M` along the arc of steering `delta`, forward (`sign` 1) or in
     /// reverse (-1), up to `limit`: the distance before the first pose `clear` rejects, or
     /// `limit`.
-    fn walk_arc(&self, delta: f32, limit: f32, sign: f32, clear: impl Fn(f32, f32, f32) -> bool) -> f32 {
+    fn walk_arc(&self, delta: f32, limit: f32, sign: f32, clear: impl Fn(Pose) -> bool) -> f32 {
         let k = delta.tan() / self.cfg.wheelbase_m;
         let n = (limit / PATH_STEP_M).ceil().max(1.0) as usize;
         for i in 1..=n {
             let s = (i as f32 * PATH_STEP_M).min(limit);
-            let (x, y, th) = arc_pose(k, sign * s);
-            if !clear(x, y, th) {
+            if !clear(arc_pose(k, sign * s)) {
                 return (s - PATH_STEP_M).max(0.0);
             }
         }
         limit
     }
 
-    /// Whether the body (with margin) at pose `(x, y, th)` touches none of `points` and the LiDAR
-    /// keeps `clearance_m` from those in its fan.
-    fn points_clear<'a>(
-        &self,
-        points: impl IntoIterator<Item = &'a [f32; 2]>,
-        x: f32,
-        y: f32,
-        th: f32,
-        fan_half_rad: f32,
-        clearance_m: f32,
-    ) -> bool {
+    /// Whether the body (with margin) at `pose` touches none of `points` and the LiDAR keeps
+    /// `fan.clearance_m` from those in its fan.
+    fn points_clear<'a>(&self, points: impl IntoIterator<Item = &'a [f32; 2]>, pose: Pose, fan: Fan) -> bool {
         let cfg = &self.cfg;
-        let (s, c) = th.sin_cos();
+        let Pose { x, y, sin: s, cos: c } = pose;
         let m = cfg.body_margin_m;
-        let tan_fan = if fan_half_rad < std::f32::consts::FRAC_PI_2 {
-            fan_half_rad.tan()
-        } else {
-            f32::INFINITY
-        };
-        let c2 = clearance_m * clearance_m;
+        let tan_fan = fan.tan;
+        let c2 = fan.clearance_m * fan.clearance_m;
         for &[px, py] in points {
             let (dx, dy) = (px - x, py - y);
             let bx = c * dx + s * dy;
@@ -759,6 +792,123 @@ impl SafetyFilter {
             }
         }
         true
+    }
+}
+
+/// The filter's remembered cells, bucketed by place: the points a path could reach are found
+/// without visiting all of `reverse_memory_s` of scans along the way the car came, and old cells
+/// are dropped in a sweep now and then rather than every control.
+#[derive(Clone, Debug)]
+struct CellMemory {
+    /// Each remembered cell's slot in its chunk.
+    slot: HashMap<(i32, i32), u32>,
+    /// The cells of each chunk (`CHUNK` cells a side), with the time each was last seen.
+    chunks: HashMap<(i32, i32), Vec<((i32, i32), f64)>>,
+    /// Cells last seen before this are forgotten: skipped, and dropped by the next sweep.
+    forget_before: f64,
+    /// `forget_before` at the last sweep.
+    swept_at: f64,
+}
+
+impl Default for CellMemory {
+    fn default() -> Self {
+        Self {
+            slot: HashMap::new(),
+            chunks: HashMap::new(),
+            forget_before: f64::NEG_INFINITY,
+            swept_at: f64::NEG_INFINITY,
+        }
+    }
+}
+
+impl CellMemory {
+    /// Chunk side, cells.
+    const CHUNK: i32 = 32;
+    /// Seconds of forgetting between sweeps.
+    const SWEEP_S: f64 = 1.0;
+
+    fn chunk_of(cell: (i32, i32)) -> (i32, i32) {
+        (cell.0.div_euclid(Self::CHUNK), cell.1.div_euclid(Self::CHUNK))
+    }
+
+    fn clear(&mut self) {
+        self.slot.clear();
+        self.chunks.clear();
+        self.forget_before = f64::NEG_INFINITY;
+        self.swept_at = f64::NEG_INFINITY;
+    }
+
+    /// Remember `cell` as seen at `t_s` (not before the last [`Self::forget_before`]).
+    fn insert(&mut self, cell: (i32, i32), t_s: f64) {
+        let chunk = self.chunks.entry(Self::chunk_of(cell)).or_default();
+        match self.slot.get(&cell) {
+            Some(&k) => chunk[k as usize].1 = t_s,
+            None => {
+                self.slot.insert(cell, chunk.len() as u32);
+                chunk.push((cell, t_s));
+            }
+        }
+    }
+
+    /// Forget the cells last seen before `t_s`. A time earlier than the last one first drops
+    /// what the last one forgot, so a forgotten cell stays forgotten.
+    fn forget_before(&mut self, t_s: f64) {
+        if t_s < self.forget_before || t_s - self.swept_at >= Self::SWEEP_S {
+            self.sweep();
+        }
+        self.forget_before = t_s;
+    }
+
+    /// Drop the forgotten cells.
+    fn sweep(&mut self) {
+        let after = self.forget_before;
+        let slot = &mut self.slot;
+        self.chunks.retain(|_, cells| {
+            let before = cells.len();
+            cells.retain(|&(cell, t)| {
+                let keep = t >= after;
+                if !keep {
+                    slot.remove(&cell);
+                }
+                keep
+            });
+            if cells.len() < before {
+                for (k, &(cell, _)) in cells.iter().enumerate() {
+                    slot.insert(cell, k as u32);
+                }
+            }
+            !cells.is_empty()
+        });
+        self.swept_at = after;
+    }
+
+    /// The chunks holding every remembered cell whose centre lies within `reach` metres of
+    /// (`x`, `y`) in the odometry frame (and cells farther off; forgotten ones too: see
+    /// [`Self::remembers`]).
+    fn around(&self, x: f64, y: f64, reach: f64) -> impl Iterator<Item = &[((i32, i32), f64)]> + '_ {
+        // A cell's chunk is that of its centre; a cell's width of slack for rounding.
+        let side = Self::CHUNK as f64 * CELL_M;
+        let r = reach + CELL_M;
+        let range = move |v: f64| (((v - r) / side).floor() as i32)..=(((v + r) / side).floor() as i32);
+        range(x)
+            .flat_map(move |ci| range(y).map(move |cj| (ci, cj)))
+            .filter_map(|chunk| self.chunks.get(&chunk).map(Vec::as_slice))
+    }
+
+    /// Whether a cell last seen at `seen_s` is still remembered.
+    fn remembers(&self, seen_s: f64) -> bool {
+        seen_s >= self.forget_before
+    }
+
+    /// Every remembered cell and when it was last seen.
+    #[cfg(test)]
+    fn cells(&self) -> impl Iterator<Item = ((i32, i32), f64)> + '_ {
+        let after = self.forget_before;
+        self.chunks
+            .values()
+            .flatten()
+            .copied()
+            .filter(move |&(_, t)| t >= after)
     }
 }
 
@@ -862,14 +1012,71 @@ impl PointGrid {
     }
 }
 
+/// A rear-axle pose in the car's frame: position, and its heading's sine and cosine.
+#[derive(Clone, Copy, Debug)]
+struct Pose {
+    x: f32,
+    y: f32,
+    sin: f32,
+    cos: f32,
+}
+
+impl Pose {
+    #[cfg(test)]
+    fn new(x: f32, y: f32, th: f32) -> Self {
+        let (sin, cos) = th.sin_cos();
+        Self { x, y, sin, cos }
+    }
+}
+
+/// The LiDAR's clearance in a check: `clearance_m` within `half_rad` of its heading (the
+/// sine, cosine and tangent of `half_rad` computed once per path, not per pose).
+#[derive(Clone, Copy, Debug)]
+struct Fan {
+    half_rad: f32,
+    clearance_m: f32,
+    sin: f32,
+    cos: f32,
+    /// Infinite for a fan of 90 degrees or more.
+    tan: f32,
+}
+
+impl Fan {
+    fn new(half_rad: f32, clearance_m: f32) -> Self {
+        let (sin, cos) = half_rad.sin_cos();
+        let tan = if half_rad < std::f32::consts::FRAC_PI_2 {
+            half_rad.tan()
+        } else {
+            f32::INFINITY
+        };
+        Self {
+            half_rad,
+            clearance_m,
+            sin,
+            cos,
+            tan,
+        }
+    }
+}
+
 /// The rear axle's pose after driving `s` metres (negative: reversing) on an arc of curvature
 /// `k`, from the origin heading along x.
-fn arc_pose(k: f32, s: f32) -> (f32, f32, f32) {
+fn arc_pose(k: f32, s: f32) -> Pose {
     if k.abs() < 1e-6 {
-        (s, 0.0, 0.0)
+        Pose {
+            x: s,
+            y: 0.0,
+            sin: 0.0,
+            cos: 1.0,
+        }
     } else {
-        let th = k * s;
-        (th.sin() / k, (1.0 - th.cos()) / k, th)
+        let (sin, cos) = (k * s).sin_cos();
+        Pose {
+            x: sin / k,
+            y: (1.0 - cos) / k,
+            sin,
+            cos,
+        }
     }
 }
 
@@ -966,14 +1173,11 @@ mod tests {
                 let (px, py, th) = (10.0 * next() - 5.0, 10.0 * next() - 5.0, 6.3 * next() - 3.15);
                 for clearance in [f.cfg.clearance_m, f.cfg.reverse_clearance_m] {
                     for fan in [std::f32::consts::FRAC_PI_4, 1.2, 1.8, std::f32::consts::PI] {
-                        let all = f.points_clear(&pts, px, py, th, fan, clearance);
-                        let (lo, hi) = f.pose_box(px, py, th, fan, clearance);
+                        let (pose, fan) = (Pose::new(px, py, th), Fan::new(fan, clearance));
+                        let all = f.points_clear(&pts, pose, fan);
+                        let (lo, hi) = f.pose_box(pose, fan);
                         let near = grid.within(lo, hi);
-                        assert_eq!(
-                            f.points_clear(near, px, py, th, fan, clearance),
-                            all,
-                            "pose {px} {py} {th}"
-                        );
+                        assert_eq!(f.points_clear(near, pose, fan), all, "pose {px} {py} {th}");
                         checks += 1;
                         blocked += usize::from(!all);
                     }
@@ -1389,7 +1593,7 @@ mod tests {
                 } else {
                     ((k * s).sin() / k, (1.0 - (k * s).cos()) / k, k * s)
                 };
-                for &(ci, cj) in f.memory.keys() {
+                for ((ci, cj), _) in f.memory.cells() {
                     // The cell's centre in the car's frame, then in the pose's frame.
                     let (wx, wy) = ((ci as f64 + 0.5) * CELL_M - ox, (cj as f64 + 0.5) * CELL_M - oy);
                     let (px, py) = (
@@ -1456,6 +1660,65 @@ mod tests {
                     let need = v * f.cfg.reaction_s + v * v / (2.0 * f.cfg.decel_mps2) + f.cfg.lookahead_m;
                     let hit = brute_force_hit(&f, c.steering_rad, need, fan);
                     prop_assert!(hit.is_none(), "sent {c:?} ({:?}); blocked at {hit:?}", f.last);
+                }
+            }
+
+            /// The reverse lengths look only at the points near enough to matter: they equal
+            /// the lengths over every remembered point.
+            #[test]
+            fn reverse_lengths_over_the_near_points_equal_those_over_every_point(
+                (first, second, speeds, fan, _) in scene(),
+            ) {
+                let deltas = [LIMIT_RAD as f32, 0.0, -LIMIT_RAD as f32];
+                let mut f = on();
+                let mut out = vec![];
+                f.reverse_free_fractions(&scan_frame(&first, fan, 0.0, speeds.0), &deltas, 1.5, Some(fan), &mut out);
+                f.backable_m = MAX_BACKABLE_M;
+                let second = scan_frame(&second, fan, 0.1, speeds.1);
+                let mut every = f.clone();
+                out.clear();
+                f.reverse_free_fractions(&second, &deltas, 1.5, Some(fan), &mut out);
+                every.observe(&second);
+                every.collect_near(100.0, false);
+                every.grid_old_points();
+                prop_assert_eq!(every.near.len(), every.memory.cells().count());
+                let all: Vec<f32> = deltas.iter().map(|&d| every.reverse_free_length(d, 1.5, fan) / 1.5).collect();
+                prop_assert_eq!(out, all);
+            }
+
+            /// Forgetting in sweeps keeps what forgetting at every call keeps, stamps running
+            /// backwards included.
+            #[test]
+            fn the_memory_keeps_what_forgetting_every_control_keeps(
+                ops in prop::collection::vec(
+                    prop_oneof![
+                        ((-40i32..40, -40i32..40), 0.0f64..30.0).prop_map(|(c, t)| (Some(c), t)),
+                        (0.0f64..30.0).prop_map(|t| (None, t)),
+                    ],
+                    1..300,
+                ),
+            ) {
+                let mut memory = CellMemory::default();
+                let mut model = HashMap::new();
+                // A cell is seen at or after the last time forgetting was called with.
+                let mut floor = 0.0;
+                for (cell, t) in ops {
+                    match cell {
+                        Some(c) => {
+                            memory.insert(c, floor + t);
+                            model.insert(c, floor + t);
+                        }
+                        None => {
+                            memory.forget_before(t);
+                            model.retain(|_, seen| *seen >= t);
+                            floor = t;
+                        }
+                    }
+                    let mut kept: Vec<_> = memory.cells().collect();
+                    kept.sort_by(|a, b| a.0.cmp(&b.0));
+                    let mut want: Vec<_> = model.iter().map(|(&c, &t)| (c, t)).collect();
+                    want.sort_by(|a, b| a.0.cmp(&b.0));
+                    prop_assert_eq!(kept, want);
                 }
             }
 
