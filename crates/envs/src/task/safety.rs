@@ -795,6 +795,9 @@ impl SafetyFilter {
     }
 }
 
+/// A remembered cell and the time it was last seen occupied.
+type SeenCell = ((i32, i32), f64);
+
 /// The filter's remembered cells, bucketed by place: the points a path could reach are found
 /// without visiting all of `reverse_memory_s` of scans along the way the car came, and old cells
 /// are dropped in a sweep now and then rather than every control.
@@ -803,7 +806,7 @@ struct CellMemory {
     /// Each remembered cell's slot in its chunk.
     slot: HashMap<(i32, i32), u32>,
     /// The cells of each chunk (`CHUNK` cells a side), with the time each was last seen.
-    chunks: HashMap<(i32, i32), Vec<((i32, i32), f64)>>,
+    chunks: HashMap<(i32, i32), Vec<SeenCell>>,
     /// Cells last seen before this are forgotten: skipped, and dropped by the next sweep.
     forget_before: f64,
     /// `forget_before` at the last sweep.
@@ -885,7 +888,7 @@ impl CellMemory {
     /// The chunks holding every remembered cell whose centre lies within `reach` metres of
     /// (`x`, `y`) in the odometry frame (and cells farther off; forgotten ones too: see
     /// [`Self::remembers`]).
-    fn around(&self, x: f64, y: f64, reach: f64) -> impl Iterator<Item = &[((i32, i32), f64)]> + '_ {
+    fn around(&self, x: f64, y: f64, reach: f64) -> impl Iterator<Item = &[SeenCell]> + '_ {
         // A cell's chunk is that of its centre; a cell's width of slack for rounding.
         let side = Self::CHUNK as f64 * CELL_M;
         let r = reach + CELL_M;
@@ -902,7 +905,7 @@ impl CellMemory {
 
     /// Every remembered cell and when it was last seen.
     #[cfg(test)]
-    fn cells(&self) -> impl Iterator<Item = ((i32, i32), f64)> + '_ {
+    fn cells(&self) -> impl Iterator<Item = SeenCell> + '_ {
         let after = self.forget_before;
         self.chunks
             .values()
