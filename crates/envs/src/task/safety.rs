@@ -1718,9 +1718,9 @@ mod tests {
                         }
                     }
                     let mut kept: Vec<_> = memory.cells().collect();
-                    kept.sort_by(|a, b| a.0.cmp(&b.0));
+                    kept.sort_by_key(|c| c.0);
                     let mut want: Vec<_> = model.iter().map(|(&c, &t)| (c, t)).collect();
-                    want.sort_by(|a, b| a.0.cmp(&b.0));
+                    want.sort_by_key(|c| c.0);
                     prop_assert_eq!(kept, want);
                 }
             }
