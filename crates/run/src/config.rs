@@ -41,6 +41,11 @@ pub struct RunConfig {
     /// (`SpawnMode::NearObstacle`), so the policy practises recoveries. Evaluation never does.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub recovery_spawn_envs: Vec<usize>,
+    /// Training envs (by index) that drive with the `sim2real` preset's sensor noise, latency
+    /// and randomisation (domain randomisation). Evaluation never does: `--preset sim2real`
+    /// adds them there.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sim2real_envs: Vec<usize>,
     /// The safety filter of the training envs, where it differs from
     /// `env_config.safety_filter` (the one the policy drives behind: evaluation, the car). A
     /// wider filter in training (the shield) teaches the policy margins that a looser one
@@ -123,6 +128,7 @@ impl Default for RunConfig {
             procedural_layouts: 0,
             advisory_filter_envs: Vec::new(),
             recovery_spawn_envs: Vec::new(),
+            sim2real_envs: Vec::new(),
             train_safety_filter: None,
             init_from: None,
             eval_episodes: 3,
@@ -263,6 +269,7 @@ impl RunConfig {
         for (key, envs) in [
             ("advisory_filter_envs", &self.advisory_filter_envs),
             ("recovery_spawn_envs", &self.recovery_spawn_envs),
+            ("sim2real_envs", &self.sim2real_envs),
         ] {
             if let Some(i) = envs.iter().find(|i| **i >= self.n_envs) {
                 return Err(RunError::Config(format!(
@@ -315,6 +322,11 @@ impl RunConfig {
         cfg.safety_filter.advisory |= self.advisory_filter_envs.contains(&i);
         if self.recovery_spawn_envs.contains(&i) {
             cfg.spawn = agvrl_envs::SpawnMode::NearObstacle;
+        }
+        if self.sim2real_envs.contains(&i) {
+            let s2r = EnvConfig::sim2real();
+            cfg.noise = s2r.noise;
+            cfg.randomisation = s2r.randomisation;
         }
         cfg
     }

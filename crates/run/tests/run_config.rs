@@ -69,11 +69,12 @@ fn a_track_path_is_loaded_into_the_config_and_travels_without_the_files() {
 }
 
 /// Per-env training keys reach only the envs they name, and never evaluation: the recovery
-/// spawns and the advising filter; an index past `n_envs` is refused by key.
+/// spawns, the advising filter and the sim2real noise; an index past `n_envs` is refused by key.
 #[test]
 fn per_env_training_keys_reach_their_envs_and_never_evaluation() {
     use agvrl_envs::SpawnMode;
     let text = "env = \"search-urban-20\"\nn_envs = 4\nadvisory_filter_envs = [1]\nrecovery_spawn_envs = [0, 2]\n\
+                sim2real_envs = [3]\n\
                 [env_config]\nbrake_mps2 = 3.0\n[env_config.safety_filter]\nenabled = true\n";
     let c = RunConfig::from_toml(text, "x.toml").unwrap();
     let spawns: Vec<SpawnMode> = (0..4).map(|i| c.train_env_config(i).spawn).collect();
@@ -88,12 +89,27 @@ fn per_env_training_keys_reach_their_envs_and_never_evaluation() {
     );
     let advising: Vec<bool> = (0..4).map(|i| c.train_env_config(i).safety_filter.advisory).collect();
     assert_eq!(advising, [false, true, false, false]);
+    let s2r = agvrl_envs::EnvConfig::sim2real();
+    let noisy: Vec<bool> = (0..4)
+        .map(|i| {
+            let e = c.train_env_config(i);
+            assert_eq!(e.noise == s2r.noise, e.randomisation == s2r.randomisation);
+            e.noise == s2r.noise
+        })
+        .collect();
+    assert_eq!(noisy, [false, false, false, true]);
+    assert_ne!(c.eval_env_config().noise, s2r.noise);
     assert_eq!(c.eval_env_config().spawn, SpawnMode::Random);
     assert!(!c.eval_env_config().safety_filter.advisory);
     assert_eq!(RunConfig::from_toml(&c.to_toml().unwrap(), "back").unwrap(), c);
     // Left out of the written config when unused, so earlier policy files keep their bytes.
     let plain = RunConfig::from_toml("env = \"search-urban-20\"\n", "p.toml").unwrap();
     assert!(!plain.to_toml().unwrap().contains("recovery_spawn_envs"));
+    assert!(!plain.to_toml().unwrap().contains("sim2real_envs"));
+    let e = RunConfig::from_toml(&text.replace("sim2real_envs = [3]", "sim2real_envs = [9]"), "s.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.starts_with("s.toml: sim2real_envs: env 9 does not exist"), "{e}");
     let e = RunConfig::from_toml(&text.replace("[0, 2]", "[4]"), "y.toml")
         .unwrap_err()
         .to_string();
