@@ -494,9 +494,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         env_cfg.new_layout_each_episode = true;
     }
     if a.preset == Some(Preset::Sim2real) {
-        let s2r = EnvConfig::sim2real();
-        env_cfg.noise = s2r.noise;
-        env_cfg.randomisation = s2r.randomisation;
+        env_cfg = env_cfg.with_sim2real_noise();
     }
     match a.safety_filter {
         Some(Switch::Train) => {

@@ -209,6 +209,14 @@ impl EnvConfig {
         }
     }
 
+    /// These settings with the `sim2real` preset's sensor noise, latency and randomisation.
+    pub fn with_sim2real_noise(mut self) -> Self {
+        let s2r = Self::sim2real();
+        self.noise = s2r.noise;
+        self.randomisation = s2r.randomisation;
+        self
+    }
+
     /// Load a track given by path, so that this config carries the track itself (a policy
     /// trained with it then drives it without the files).
     pub fn embed_track(&mut self) -> Result<(), EnvError> {

@@ -324,9 +324,7 @@ impl RunConfig {
             cfg.spawn = agvrl_envs::SpawnMode::NearObstacle;
         }
         if self.sim2real_envs.contains(&i) {
-            let s2r = EnvConfig::sim2real();
-            cfg.noise = s2r.noise;
-            cfg.randomisation = s2r.randomisation;
+            cfg = cfg.with_sim2real_noise();
         }
         cfg
     }
