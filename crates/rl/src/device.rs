@@ -122,7 +122,21 @@ fn cuda() -> Result<Device> {
 
 #[cfg(feature = "wgpu")]
 fn wgpu() -> Result<Device> {
-    Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice))
+    let device = Device::wgpu(burn::tensor::DeviceKind::DefaultDevice);
+    // cubecl opens the adapter at the first operation, and with none it panics on its device
+    // thread and then on ours: one operation here turns that into an error at startup.
+    let probe = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        crate::nets::to_vec(burn::tensor::Tensor::<1>::zeros([1], &device))
+    }));
+    match probe {
+        Ok(Ok(_)) => Ok(device),
+        Ok(Err(e)) => Err(e),
+        Err(_) => Err(RlError::Config(
+            "device 'wgpu': no usable adapter (the panic above says why; \
+             CUBECL_WGPU_DEFAULT_DEVICE picks one, e.g. 'DiscreteGpu(0)')"
+                .into(),
+        )),
+    }
 }
 
 #[cfg(not(feature = "wgpu"))]
