@@ -45,23 +45,26 @@ def main():
         sys.exit(f"{args.dirs[0]}: no *-{args.a}.csv")
     rng = random.Random(0)
     chance, chance_at = 1.0, 1.0
-    print(f"row ratio tables_at_or_above_{args.threshold} same_for_ratio_{args.as_ratio}")
+    print(f"row ratio tables_at_or_above_{args.threshold} the_same_at_ratio_{args.as_ratio}")
     for row in rows:
         pairs = []
         for d in args.dirs:
-            a = finals(os.path.join(d, f"{row}-{args.a}.csv"))
-            b = finals(os.path.join(d, f"{row}-{args.b}.csv"))
+            paths = [os.path.join(d, f"{row}-{driver}.csv") for driver in (args.a, args.b)]
+            for path in paths:
+                if not os.path.isfile(path):
+                    sys.exit(f"{path}: missing (every DIR needs both drivers' files of every row)")
+            a, b = finals(paths[0]), finals(paths[1])
             if sorted(a) != sorted(b):
                 sys.exit(f"{d}/{row}: the drivers' files hold different episodes")
             pairs += [(a[e], b[e]) for e in sorted(a)]
         pooled = sum(p[0] for p in pairs) / max(sum(p[1] for p in pairs), 1e-12)
-        above = above_equal = 0
+        above = above_at = 0
         for _ in range(args.resamples):
             s = [rng.choice(pairs) for _ in range(args.episodes)]
             r = sum(p[0] for p in s) / max(sum(p[1] for p in s), 1e-12)
             above += r >= args.threshold
-            above_equal += r * args.as_ratio / pooled >= args.threshold
-        p, q = above / args.resamples, above_equal / args.resamples
+            above_at += r * args.as_ratio / pooled >= args.threshold
+        p, q = above / args.resamples, above_at / args.resamples
         chance *= p
         chance_at *= q
         print(f"{row} {pooled:.3f} {p:.3f} {q:.3f}")
