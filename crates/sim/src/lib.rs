@@ -1,5 +1,6 @@
 //! agvrl-sim: the simulator. rapier3d physics, URDF vehicles and objects, the paper's Ackermann
-//! actuation, GPS / IMU / LiDAR / camera (RGB, depth, segmentation), and the five AutoVRL scenes.
+//! actuation, GPS / IMU / LiDAR / camera (RGB, depth, segmentation), the five AutoVRL scenes,
+//! and race tracks from map files or generated from a seed (`MapTrack::generated`).
 //!
 //! ```text
 //! Control{throttle, steering} -> DriveModel (w) + ackermann_split (left, right)
@@ -26,8 +27,9 @@ pub mod vehicle;
 pub mod world;
 
 pub use error::{InvalidSetting, SimError};
-pub use scene::{MapTrack, SCENE_IDS, Scene, SceneKind};
+pub use scene::{CircuitInfo, CircuitSettings, MapTrack, SCENE_IDS, Scene, SceneKind};
 pub use sim::{
     CarContact, MAX_CARS, PlanarPose, SceneSource, Sim, SimConfig, SimSettings, VehicleParams, VehicleSource,
+    contact_distance_m,
 };
 pub use vehicle::{Control, DriveModel, DynamicsMode};

@@ -3,7 +3,7 @@
 use crate::SimError;
 use crate::assets::AssetSource;
 use crate::msg::{GpsReading, ImuReading, LaserScan};
-use crate::scene::{MapTrack, Scene, SceneKind};
+use crate::scene::{CircuitSettings, MapTrack, Scene, SceneKind};
 use crate::sensors::fast_ray::FastRay;
 use crate::sensors::imu::ImuState;
 use crate::sensors::{GpsConfig, Lidar, LidarConfig, gps};
@@ -33,6 +33,21 @@ pub enum SceneSource {
     },
     /// A race track loaded from a map file (see [`MapTrack::load`]).
     Map(Box<MapTrack>),
+    /// A seeded race circuit (see [`MapTrack::generated`]): the settings travel, not the walls.
+    Circuit {
+        /// Circuit seed.
+        seed: u64,
+        /// What the circuit is drawn from (defaults when left out).
+        #[serde(default)]
+        settings: CircuitSettings,
+    },
+}
+
+/// How near a car's collider must come to another collider for the physics to report a contact,
+/// metres: rapier's contact prediction distance. A racing episode that ends on contact ends
+/// this far from the wall.
+pub fn contact_distance_m() -> f32 {
+    rapier3d::prelude::IntegrationParameters::default().prediction_distance()
 }
 
 /// Everything that defines a simulation: the scene and the settings.
@@ -264,9 +279,12 @@ impl Sim {
             }
             SceneSource::Procedural { kind, seed, half_m } => Scene::procedural(*kind, *seed, *half_m, 2.0)?,
             SceneSource::Map(t) => Scene::from_map(t)?,
+            SceneSource::Circuit { seed, settings } => Scene::from_map(&MapTrack::generated(*seed, settings)?.0)?,
         };
         if set.subjects > 0 && scene.centreline.is_some() {
-            return Err(invalid("subjects are search targets; a map-file track has none".into()));
+            return Err(invalid(
+                "subjects are search targets; a race track (map file or circuit) has none".into(),
+            ));
         }
         if set.subjects > 0 {
             let file = scene.file.clone().with_subjects(set.subjects, set.subject_seed, 3.0);

@@ -22,8 +22,8 @@ const TRACE_REACH_M: f64 = 10.0;
 pub const SIMPLIFY_PX: f64 = 1.0;
 /// The largest image accepted, pixels a side and in all (F1TENTH's maps are a few thousand a
 /// side; the clearance field takes 8 bytes a pixel).
-const MAX_SIDE_PX: u32 = 8_192;
-const MAX_PIXELS: u64 = 16 << 20;
+pub(crate) const MAX_SIDE_PX: u32 = 8_192;
+pub(crate) const MAX_PIXELS: u64 = 16 << 20;
 
 /// The map_server YAML. Unknown keys are an error: a misspelt threshold would otherwise leave
 /// its default in force without a word.

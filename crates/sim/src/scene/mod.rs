@@ -1,11 +1,14 @@
 //! Scenes: a TOML file (ground, boundary walls, an optional oval track, decals and placed object
 //! models; `file.rs`), the objects it places, built into colliders here, and a seeded procedural
-//! generator per scene kind (`procedural.rs`).
+//! generator per scene kind (`procedural.rs`). Race tracks come from map files (`map_track.rs`)
+//! or are generated as seeded circuits (`circuit.rs`); both build through [`Scene::from_map`].
 
+mod circuit;
 mod file;
 mod map_track;
 mod procedural;
 
+pub use circuit::{CircuitInfo, CircuitSettings, write_map};
 pub use file::{BoundarySpec, Decal, GroundSpec, Placement, SceneFile, SceneKind, SpawnSpec, TrackSpec};
 pub use map_track::{MapTrack, SIMPLIFY_PX};
 
