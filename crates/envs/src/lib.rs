@@ -16,6 +16,7 @@
 
 pub mod api;
 pub mod check;
+pub mod drivers;
 pub mod heldout;
 pub mod pendulum;
 pub mod race_env;
@@ -29,6 +30,9 @@ pub mod wrappers;
 /// Order statistics (agvrl-sim's), for the crates above.
 pub use api::{BoxSpace, Control, Env, EnvError, Info, MultiEnv, MultiStep, RaceSummary, SensorFrame, Step, Vehicle};
 pub use check::{CheckError, check_env};
+pub use drivers::{
+    CarLimits, Driver, FollowTheGap, FollowTheGapSettings, PurePursuit, PurePursuitSettings, RacePath, parse_raceline,
+};
 pub use race_env::{CarInput, RaceEnv, RaceSettings};
 pub use registry::{
     ENV_IDS, ENVS, EnvConfig, EnvSpec, MULTI_ENV_IDS, TaskKind, TrackSetting, lone_car_id, make, make_multi, make_race,

@@ -1,0 +1,51 @@
+//! Classical racing drivers: scripted controllers that map what the car senses to a [`Control`],
+//! as a policy does, so that evaluation, races, the deploy loop and Python can drive with them
+//! (and compare a learned policy against them) through one trait, [`Driver`].
+//!
+//! ```text
+//! VehicleModel + brake_mps2 -> CarLimits
+//! Track | raceline CSV -> RacePath (closed polyline + speed profile from CarLimits)
+//! SensorFrame.gps + .imu, RacePath -> PurePursuit -> Control
+//! SensorFrame.scan (+ .imu)        -> FollowTheGap -> Control
+//! ```
+//!
+//! Both drivers turn a target speed into a throttle the same way ([`CarLimits::throttle`]): the
+//! throttle whose steady speed it is, plus a proportional term on the measured speed.
+
+mod follow_gap;
+mod limits;
+mod pure_pursuit;
+mod raceline;
+
+pub use follow_gap::{FollowTheGap, FollowTheGapSettings};
+pub use limits::CarLimits;
+pub use pure_pursuit::{PurePursuit, PurePursuitSettings};
+pub use raceline::{RacePath, parse_raceline};
+
+use crate::api::{Control, MapInfo, SensorFrame};
+
+/// A scripted driver: maps what the car senses (and, for pure pursuit, its pose and the track)
+/// to a control, like a policy, one control period at a time.
+pub trait Driver: Send {
+    /// Start an episode from its first frame: forget the previous one, and build what the
+    /// driver needs from the episode's map (a real car has none).
+    fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>);
+    /// The control for the period that starts with `frame`.
+    fn control(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Control;
+}
+
+/// Forward speed from the IMU's body-frame velocity, m/s, when the frame carries one.
+fn measured_speed_mps(frame: &SensorFrame) -> Option<f64> {
+    frame.imu.as_ref().map(|imu| imu.lin_vel_b[0]).filter(|v| v.is_finite())
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::CarLimits;
+
+    /// The shipped car's limits on a drive that brakes at `brake_mps2`.
+    pub(crate) fn xtenth(brake_mps2: f64) -> CarLimits {
+        let model = agvrl_sim::SimSettings::default().vehicle_model().unwrap();
+        CarLimits::of(&model, brake_mps2)
+    }
+}
