@@ -29,8 +29,9 @@ pub struct RaceSettings {
     /// Distance between grid rows along the centre line, metres.
     pub grid_gap_m: f32,
     /// Lateral offset of the two grid columns from the centre line, metres, at most: where the
-    /// track is too narrow for it (a slot must stand [`GRID_CLEARANCE_M`] from the walls) the
-    /// columns close in, down to single file.
+    /// track is too narrow for it (a slot must stand [`GRID_MARGIN_M`] beyond the racing rules'
+    /// end limit from the walls, and at least [`GRID_MIN_CLEARANCE_M`]) the columns close in,
+    /// down to single file.
     pub grid_offset_m: f32,
 }
 
@@ -74,8 +75,11 @@ impl RaceSettings {
     }
 }
 
-/// Clearance from a grid slot to the walls, metres: the racing task ends an episode at 0.8.
-pub const GRID_CLEARANCE_M: f32 = 0.95;
+/// Clearance from a grid slot to the walls beyond the racing rules' end limit, metres.
+pub const GRID_MARGIN_M: f32 = 0.15;
+/// The least clearance from a grid slot to the walls, metres: half the car's width and a margin,
+/// where only contact ends an episode.
+pub const GRID_MIN_CLEARANCE_M: f32 = 0.35;
 
 /// A pass counts once the passing car leads by this much along the centre line, metres (and a
 /// pass back once it trails by as much): cars side by side do not swap places every step.
@@ -152,6 +156,7 @@ impl RaceEnv {
         randomisation: Randomisation,
         max_steps: u64,
         held_out: bool,
+        end_below_m: f32,
     ) -> Result<Self, EnvError> {
         settings.validate()?;
         if tasks.len() != settings.cars {
@@ -164,7 +169,8 @@ impl RaceEnv {
             .clone()
             .ok_or_else(|| EnvError::Config("a race needs a track (the oval or a map file)".into()))?;
         let n = settings.cars;
-        let slots = grid(&sim, &track, &settings);
+        let clearance_m = (end_below_m + GRID_MARGIN_M).max(GRID_MIN_CLEARANCE_M);
+        let slots = grid(&sim, &track, &settings, clearance_m);
         let model = sim.vehicle();
         let mut body_x_m = model
             .body_shapes
@@ -216,6 +222,11 @@ impl RaceEnv {
     /// The simulator (read-only): viewers and plots.
     pub fn sim(&self) -> &Sim {
         &self.sim
+    }
+
+    /// The track's map (what a scripted driver with the pose reads).
+    pub fn map(&self) -> &MapInfo {
+        &self.map
     }
 
     /// The track raced on.
@@ -282,7 +293,7 @@ impl RaceEnv {
 
 /// The grid slots, pole first: rows `grid_gap_m` apart behind the start line, columns
 /// alternating left and right of the centre line, as far apart as the track allows.
-fn grid(sim: &Sim, track: &Track, settings: &RaceSettings) -> Vec<PlanarPose> {
+fn grid(sim: &Sim, track: &Track, settings: &RaceSettings, clearance_m: f32) -> Vec<PlanarPose> {
     let slot = |k: usize, offset: f32| {
         let s = -(0.5 * settings.grid_gap_m + settings.grid_gap_m * k as f32);
         let ([x, y], [dx, dy]) = track.centreline_at(s.rem_euclid(track.lap_length_m()));
@@ -297,7 +308,7 @@ fn grid(sim: &Sim, track: &Track, settings: &RaceSettings) -> Vec<PlanarPose> {
     while offset > 0.0
         && !(0..settings.cars).all(|k| {
             let p = slot(k, offset);
-            sim.free_at(p.x_m, p.y_m, GRID_CLEARANCE_M)
+            sim.free_at(p.x_m, p.y_m, clearance_m)
         })
     {
         offset = (offset - 0.05).max(0.0);
@@ -514,6 +525,7 @@ impl RaceEnv {
                     laps: r.laps,
                     last_lap_s: r.last_lap_s,
                     best_lap_s: r.best_lap_s,
+                    first_lap_s: r.lap_times_s.first().copied(),
                     progress_laps: r.distance_m / lap,
                 }),
                 corrected_action: corrected[i].take(),

@@ -3,7 +3,7 @@
 use crate::api::{Env, EnvError, Vehicle};
 use crate::pendulum::Pendulum;
 use crate::sim_vehicle::{Randomisation, SimCar, SimVehicle, SpawnMode};
-use crate::task::racing::RacingConfig;
+use crate::task::racing::{RacingConfig, RacingRules, RacingRulesSetting};
 use crate::task::search::SearchConfig;
 use crate::task::{
     ActionMapping, CommonConfig, ObsConfig, Racing, SafeShaping, SafetyFilterConfig, Search, SearchReward,
@@ -50,8 +50,11 @@ const fn search(id: &'static str, scene: &'static str, kind: SceneKind, half_m: 
     }
 }
 
+/// The racing env on generated circuits ([`agvrl_sim::CircuitSettings`]).
+pub const CIRCUIT_ENV: &str = "racing-circuit";
+
 /// Every env agvrl ships.
-pub const ENVS: [EnvSpec; 6] = [
+pub const ENVS: [EnvSpec; 7] = [
     search("search-outdoor-20", "outdoor-20", SceneKind::Outdoor, 10.0),
     EnvSpec {
         autovrl_slow_penalty: true,
@@ -63,6 +66,13 @@ pub const ENVS: [EnvSpec; 6] = [
         id: "racing-oval",
         task: TaskKind::Racing,
         scene: Some("oval"),
+        procedural: None,
+        autovrl_slow_penalty: false,
+    },
+    EnvSpec {
+        id: CIRCUIT_ENV,
+        task: TaskKind::Racing,
+        scene: Some("circuit"),
         procedural: None,
         autovrl_slow_penalty: false,
     },
@@ -139,9 +149,17 @@ pub struct EnvConfig {
     /// Race on a track from a ROS map file instead of the env's own (racing envs): the map
     /// YAML's path, or the track loaded from it, as run configs and policy files carry it.
     pub track: Option<TrackSetting>,
+    /// The circuit generator's settings (`racing-circuit`); unset, its defaults.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub circuit: Option<agvrl_sim::CircuitSettings>,
     /// Race settings of the multi-car envs ([`MULTI_ENV_IDS`]); unset, their defaults.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub race: Option<crate::race_env::RaceSettings>,
+    /// Racing rules (racing envs): the end rule, the reward, the stall and time limits. Unset
+    /// keys take the track's defaults: the paper's on the oval ([`RacingRules::oval`]),
+    /// [`RacingRules::map_track`] on map-file and generated tracks.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub racing: Option<RacingRulesSetting>,
 }
 
 /// `EnvConfig::track`: a map YAML's path, or the track loaded from it.
@@ -183,7 +201,9 @@ impl Default for EnvConfig {
             new_layout_each_episode: false,
             held_out: false,
             track: None,
+            circuit: None,
             race: None,
+            racing: None,
         }
     }
 }
@@ -277,8 +297,9 @@ pub fn make_vehicle(id: &str, cfg: &EnvConfig) -> Result<Box<dyn crate::Vehicle>
 pub fn make_sim_car(id: &str, cfg: &EnvConfig) -> Result<SimCar, EnvError> {
     let spec = spec(id).filter(|s| s.scene.is_some()).ok_or_else(|| unknown(id))?;
     let sim = sim_config(spec, cfg)?;
-    let v =
-        SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?.with_new_layout_each_episode(cfg.new_layout_each_episode);
+    // racing-circuit draws a new circuit every episode unless a layout_seed pins one.
+    let redraw = cfg.new_layout_each_episode || (spec.id == CIRCUIT_ENV && cfg.layout_seed.is_none());
+    let v = SimVehicle::new(sim, cfg.spawn, cfg.randomisation)?.with_new_layout_each_episode(redraw);
     Ok(if cfg.noise.is_off() {
         SimCar::Exact(Box::new(v))
     } else {
@@ -296,7 +317,25 @@ fn sim_config(spec: &EnvSpec, cfg: &EnvConfig) -> Result<SimConfig, EnvError> {
             "track is a racing setting; {id} is not a racing env"
         )));
     }
+    if cfg.circuit.is_some() && id != CIRCUIT_ENV {
+        return Err(EnvError::Config(format!(
+            "circuit sets the generated circuits of {CIRCUIT_ENV}; {id} does not draw circuits"
+        )));
+    }
     let source = match (&cfg.track, cfg.layout_seed) {
+        (Some(_), _) if id == CIRCUIT_ENV => {
+            return Err(EnvError::Config(format!(
+                "{CIRCUIT_ENV} races on generated circuits: a map-file track is racing-oval's `track`"
+            )));
+        }
+        (None, seed) if id == CIRCUIT_ENV => {
+            let settings = cfg.circuit.unwrap_or_default();
+            settings.validate()?;
+            SceneSource::Circuit {
+                seed: crate::heldout::split(seed.unwrap_or(0), cfg.held_out),
+                settings,
+            }
+        }
         (Some(_), Some(_)) => {
             return Err(EnvError::Config(
                 "a map-file track has no procedural layouts: leave layout_seed unset".into(),
@@ -316,7 +355,7 @@ fn sim_config(spec: &EnvSpec, cfg: &EnvConfig) -> Result<SimConfig, EnvError> {
     if cfg.max_steps == 0 {
         return Err(EnvError::Config("max_steps must be at least 1".into()));
     }
-    if cfg.new_layout_each_episode && cfg.layout_seed.is_none() {
+    if cfg.new_layout_each_episode && cfg.layout_seed.is_none() && id != CIRCUIT_ENV {
         return Err(EnvError::Config(
             "new_layout_each_episode needs layout_seed (a procedural map to redraw)".into(),
         ));
@@ -371,8 +410,9 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
     }
     let safety_filter = cfg.safety_filter.on_drive(cfg.sim.brake_mps2);
     safety_filter.validate()?;
+    let rules = racing_rules(spec, cfg)?;
     let ends_below_m = match spec.task {
-        TaskKind::Racing => RacingConfig::default().terminate_below_m,
+        TaskKind::Racing => rules.end_below_m,
         _ => SearchConfig::default().terminate_below_m,
     };
     if safety_filter.enabled && safety_filter.clearance_m <= ends_below_m {
@@ -392,7 +432,8 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
         Box::new(Racing::new(
             RacingConfig {
                 common,
-                ..RacingConfig::default()
+                rules,
+                top_speed_mps: cfg.sim.vehicle_model()?.top_speed_mps() as f64,
             },
             steering_limit_rad,
         ))
@@ -409,6 +450,27 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
             steering_limit_rad,
         ))
     })
+}
+
+/// The racing rules env `spec` runs under with `cfg`: the track's defaults (the paper's on the
+/// oval, [`RacingRules::map_track`] on a map-file or generated track) under the keys
+/// `cfg.racing` sets.
+pub fn racing_rules(spec: &EnvSpec, cfg: &EnvConfig) -> Result<RacingRules, EnvError> {
+    if spec.task != TaskKind::Racing {
+        if cfg.racing.is_some() {
+            return Err(EnvError::Config(format!(
+                "racing is a racing setting; {} is not a racing env",
+                spec.id
+            )));
+        }
+        return Ok(RacingRules::oval());
+    }
+    let defaults = if cfg.track.is_some() || spec.id == CIRCUIT_ENV {
+        RacingRules::map_track()
+    } else {
+        RacingRules::oval()
+    };
+    RacingRules::resolve(defaults, &cfg.racing.unwrap_or_default())
 }
 
 /// The multi-agent envs [`make_multi`] builds: `racing-duel`, cars racing on the oval or on
@@ -457,7 +519,16 @@ pub fn make_race(id: &str, cfg: &EnvConfig) -> Result<crate::race_env::RaceEnv, 
     let tasks = (0..settings.cars)
         .map(|_| make_task(racing.id, cfg, limit))
         .collect::<Result<Vec<_>, _>>()?;
-    crate::race_env::RaceEnv::new(sim, tasks, settings, cfg.randomisation, cfg.max_steps, cfg.held_out)
+    let end_below_m = racing_rules(racing, cfg)?.end_below_m;
+    crate::race_env::RaceEnv::new(
+        sim,
+        tasks,
+        settings,
+        cfg.randomisation,
+        cfg.max_steps,
+        cfg.held_out,
+        end_below_m,
+    )
 }
 
 /// Build the env registered under `id` with `cfg` (`EnvConfig::default()` for the standard

@@ -21,6 +21,9 @@ pub enum SpawnMode {
     /// the spawn view: every episode starts with a recovery (turn away or reverse). Random's
     /// rule where no such pose turns up.
     NearObstacle,
+    /// On a track: on the start line (the centre line's start), facing the racing direction,
+    /// with Random's lateral and heading jitter, as a race starts. Elsewhere: Random.
+    Line,
 }
 
 /// Nearest return within the spawn view of a [`SpawnMode::NearObstacle`] start, metres: beyond
@@ -112,7 +115,12 @@ pub(crate) fn map_of(sim: &Sim) -> MapInfo {
         outer_radius_m: t.outer_radius_m,
     });
     let mut free_cells = Vec::new();
-    let (nx, ny) = ((2.0 * half[0] / CELL_M) as i32, (2.0 * half[1] / CELL_M) as i32);
+    // Only search reads free cells, and a map-file or generated track rebuilt every episode
+    // would pay for a grid over its whole extent: tracks with a centre line get none.
+    let (nx, ny) = match sim.scene().centreline {
+        Some(_) => (0, 0),
+        None => ((2.0 * half[0] / CELL_M) as i32, (2.0 * half[1] / CELL_M) as i32),
+    };
     for i in 0..nx {
         for j in 0..ny {
             let (x, y) = (
@@ -174,15 +182,21 @@ impl SimVehicle {
         if !self.new_layout_each_episode {
             return Ok(());
         }
-        let SceneSource::Procedural { kind, half_m, .. } = self.sim.config().scene else {
-            return Ok(());
+        let seed = crate::heldout::layout_of_episode(episode_seed);
+        let scene = match &self.sim.config().scene {
+            SceneSource::Procedural { kind, half_m, .. } => SceneSource::Procedural {
+                kind: *kind,
+                seed,
+                half_m: *half_m,
+            },
+            SceneSource::Circuit { settings, .. } => SceneSource::Circuit {
+                seed,
+                settings: *settings,
+            },
+            _ => return Ok(()),
         };
         let cfg = SimConfig {
-            scene: SceneSource::Procedural {
-                kind,
-                seed: crate::heldout::layout_of_episode(episode_seed),
-                half_m,
-            },
+            scene,
             ..self.sim.config().clone()
         };
         self.sim = Sim::new(cfg)?;
@@ -202,7 +216,10 @@ impl SimVehicle {
 
     fn random_pose(&mut self) -> PlanarPose {
         if let Some(t) = &self.map.track {
-            let s = self.rng.random_range(0.0..t.lap_length_m());
+            let s = match self.spawn {
+                SpawnMode::Line => 0.0,
+                _ => self.rng.random_range(0.0..t.lap_length_m()),
+            };
             let ([x, y], [dx, dy]) = t.centreline_at(s);
             let lateral = self.rng.random_range(-0.2..0.2f32);
             let yaw = dy.atan2(dx) + self.rng.random_range(-0.15..0.15f32);
@@ -253,7 +270,7 @@ impl Vehicle for SimVehicle {
         let params = self.randomisation.draw(self.sim.nominal_params(), &mut self.rng);
         self.sim.set_params(params);
         match self.spawn {
-            SpawnMode::Random => {
+            SpawnMode::Random | SpawnMode::Line => {
                 // A car spawned facing a rock it cannot steer around loses the episode before
                 // the policy acts: in open maps the LiDAR fan must see this much free space.
                 for attempt in 0.. {

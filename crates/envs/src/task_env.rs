@@ -104,14 +104,15 @@ impl<V: Vehicle, T: Task> Env for TaskEnv<V, T> {
         }
         self.last = Some(frame);
         let terminated = out.termination.is_some();
-        if terminated {
+        let truncated = out.truncate && !terminated;
+        if terminated || truncated {
             self.ready = false;
         }
         Ok(Step {
             obs,
             reward: out.terms.total(),
             terminated,
-            truncated: false,
+            truncated,
             info: Info {
                 reward_terms: out.terms,
                 termination: out.termination,

@@ -355,8 +355,15 @@ impl RunConfig {
 
     /// Env settings for evaluation episodes: the built-in map, held-out seeds.
     pub fn eval_env_config(&self) -> EnvConfig {
+        // Laps on a map-file or generated circuit are timed from the start line, as races are.
+        let on_circuit = self.env_config.track.is_some() || self.eval_env_id() == agvrl_envs::registry::CIRCUIT_ENV;
+        let spawn = match self.env_config.spawn {
+            agvrl_envs::SpawnMode::Random if on_circuit => agvrl_envs::SpawnMode::Line,
+            s => s,
+        };
         EnvConfig {
             max_steps: self.eval_max_steps.unwrap_or(self.env_config.max_steps),
+            spawn,
             layout_seed: None,
             new_layout_each_episode: false,
             held_out: true,

@@ -92,6 +92,13 @@ pub struct RacingReport {
     pub laps: u32,
     /// The best lap, s (`None`: no lap completed).
     pub best_lap_s: Option<f64>,
+    /// Episodes that completed a lap and ended without a crash (0 in files written before it
+    /// was counted).
+    #[serde(default)]
+    pub lapped: usize,
+    /// The mean over episodes with a lap of each one's first lap, s.
+    #[serde(default)]
+    pub mean_first_lap_s: Option<f64>,
 }
 
 /// A run directory's evaluation: the run's timings, then [`EvalReport`].
@@ -174,6 +181,8 @@ impl EvalReport {
         if let Some(r) = &self.racing {
             v.push(format!("laps={}", r.laps));
             v.push(format!("best_lap_s={}", opt(r.best_lap_s, 2, "none")));
+            v.push(format!("lapped={}/{}", r.lapped, self.episodes));
+            v.push(format!("mean_first_lap_s={}", opt(r.mean_first_lap_s, 2, "none")));
         }
         v
     }

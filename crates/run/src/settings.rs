@@ -74,6 +74,17 @@ impl PolicySettings {
         Ok(settings)
     }
 
+    /// Settings with no policy behind them (a scripted driver's evaluation): `run`, named by
+    /// `name` where a policy file's path would stand.
+    pub fn without_policy(name: &str, run: RunConfig) -> Self {
+        Self {
+            policy: PathBuf::from(name),
+            run: Some(run),
+            source: SettingsSource::None,
+            data: None,
+        }
+    }
+
     /// The policy on the default CPU device (from the contents resolving read, else the file).
     pub fn load_policy(&mut self) -> Result<Policy> {
         let data = match self.data.take() {

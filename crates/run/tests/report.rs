@@ -52,6 +52,8 @@ fn racing_run() -> RunReport {
             racing: Some(RacingReport {
                 laps: 7,
                 best_lap_s: None,
+                lapped: 2,
+                mean_first_lap_s: Some(31.25),
             }),
             ..EvalReport::default()
         },

@@ -105,6 +105,8 @@ pub struct RacingInfo {
     pub last_lap_s: Option<f64>,
     /// Fastest completed lap since reset, seconds.
     pub best_lap_s: Option<f64>,
+    /// The first completed lap since reset, seconds (from the start, wherever the car started).
+    pub first_lap_s: Option<f64>,
     /// Progress along the centre line, laps (fractional, grows in the racing direction).
     pub progress_laps: f64,
 }

@@ -19,7 +19,7 @@ pub use observation::{ArcObs, ImageChannels, ImageObs, ObsConfig, RangeScale, Re
 use serde::{Deserialize, Serialize};
 pub use termination::{common_termination, min_range_ahead_m, min_range_m, min_static_range_m, terminate};
 
-pub use racing::Racing;
+pub use racing::{Racing, RacingReward, RacingRules, RacingRulesSetting};
 pub use reward::{SafeShaping, SearchReward};
 pub use safety::{Intervention, SafetyFilter, SafetyFilterConfig};
 pub use search::{CoverageGrid, Search};
@@ -31,6 +31,9 @@ pub struct Outcome {
     pub terms: RewardTerms,
     /// Why the episode ended, if it did.
     pub termination: Option<TerminationCause>,
+    /// The episode ends without a terminal state (the racing task's stall limit): the env
+    /// reports it truncated.
+    pub truncate: bool,
     /// Racing metrics.
     pub racing: Option<crate::api::RacingInfo>,
     /// Search metrics.

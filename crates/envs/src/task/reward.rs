@@ -198,19 +198,28 @@ pub fn weight_proximity_by_speed(terms: &mut RewardTerms, safe: &SafeShaping, fo
     }
 }
 
-/// R_racing: 5 T^2 - 2 delta^2, or -50 (and the episode ends) when `d < 0.8`.
-pub fn racing(d: f64, t: f64, delta: f64) -> RewardTerms {
-    if d < 0.8 {
-        RewardTerms {
-            collision: PENALTY,
+/// A racing step under `rules`: the paper's R_racing (5 T^2 - 2 delta^2), or `progress_per_m` per
+/// metre `ds_m` gained along the centre line minus `steering_weight` delta^2; only the crash
+/// penalty once `d` is under a positive `end_below_m` (the task ends the episode there).
+pub fn racing(rules: &super::racing::RacingRules, d: f64, t: f64, delta: f64, ds_m: f64) -> RewardTerms {
+    use super::racing::RacingReward;
+    if d < rules.end_below_m as f64 {
+        return RewardTerms {
+            collision: rules.crash_penalty,
             ..RewardTerms::default()
-        }
-    } else {
-        RewardTerms {
+        };
+    }
+    match rules.reward {
+        RacingReward::Paper => RewardTerms {
             throttle: 5.0 * t * t,
             steering: -2.0 * delta * delta,
             ..RewardTerms::default()
-        }
+        },
+        RacingReward::Progress => RewardTerms {
+            progress: rules.progress_per_m * ds_m,
+            steering: -rules.steering_weight * delta * delta,
+            ..RewardTerms::default()
+        },
     }
 }
 
@@ -410,8 +419,21 @@ mod tests {
 
     #[test]
     fn racing_by_hand() {
-        let r = racing(1.2, 0.8, 0.2).total();
+        use crate::task::racing::RacingRules;
+        let paper = RacingRules::oval();
+        let r = racing(&paper, 1.2, 0.8, 0.2, 0.3).total();
         assert!((r - (3.2 - 0.08)).abs() < 1e-12, "{r}");
-        assert_eq!(racing(0.79, 1.0, 0.0).total(), -50.0);
+        assert_eq!(racing(&paper, 0.79, 1.0, 0.0, 0.3).total(), -50.0);
+        // Progress: 2 per metre over 0.06 m, 0.05 per rad^2 at 0.2 rad; nothing for throttle,
+        // and going back costs what going forward pays. Contact-only rules charge nothing near
+        // a wall.
+        let progress = RacingRules {
+            progress_per_m: 2.0,
+            ..RacingRules::map_track()
+        };
+        let r = racing(&progress, 0.05, 1.0, 0.2, 0.06);
+        assert!((r.total() - (0.12 - 0.002)).abs() < 1e-12, "{r:?}");
+        assert_eq!(r.throttle, 0.0);
+        assert_eq!(racing(&progress, 0.05, 1.0, 0.0, -0.06).total(), -0.12);
     }
 }

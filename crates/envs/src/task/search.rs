@@ -382,6 +382,7 @@ impl Task for Search {
         Outcome {
             terms,
             termination,
+            truncate: false,
             racing: None,
             search: Some(self.info()),
         }
