@@ -1,7 +1,7 @@
 //! The `agvrl` command line (the `agvrl` binary, and the `agvrl` script of the Python wheel).
 
 use crate::bench::{self, BenchPart};
-use crate::{eval, policy_file, probe, race, train, view};
+use crate::{circuit, eval, policy_file, probe, race, train, view};
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
@@ -28,6 +28,9 @@ enum Cmd {
     Policy(policy_file::PolicyArgs),
     /// List the environment ids with their observation and action spaces.
     Envs,
+    /// Write a generated circuit (racing-circuit's generator) as a map_server track: YAML, PNG
+    /// and centre-line CSV.
+    Circuit(circuit::CircuitArgs),
     /// Overlay the mean coverage over time of `eval --coverage-csv` files in one PNG.
     CoveragePlot {
         /// The PNG to write.
@@ -109,6 +112,7 @@ fn run(cli: Cli) -> Result<()> {
         Some(Cmd::Race(a)) => race::race(a),
         Some(Cmd::Policy(a)) => policy_file::policy(a),
         Some(Cmd::Envs) => envs(),
+        Some(Cmd::Circuit(a)) => circuit::circuit(a),
         Some(Cmd::Probe(a)) => probe::probe(a),
         Some(Cmd::CoveragePlot { out, title, files }) => coverage_plot(&out, &title, &files),
         Some(Cmd::Bench {

@@ -6,7 +6,7 @@ use crate::eval_bag::EpisodeBags;
 use crate::planner;
 use crate::plots::{self, Path2};
 use crate::viz::{self, Recorder};
-use agvrl_envs::{Env, EnvConfig, Step, make};
+use agvrl_envs::{Env, EnvConfig, Step, Vehicle as _, make};
 use agvrl_rl::Policy;
 use agvrl_run::stats::quantile;
 use agvrl_run::{EvalReport, FilterReport, PolicySettings, RacingReport, SearchReport, SubjectsReport, files};
@@ -51,7 +51,7 @@ fn arg_name(v: impl clap::ValueEnum) -> String {
 #[derive(Args)]
 pub struct EvalArgs {
     /// A run directory written by `agvrl train` (its policy, env and env settings).
-    #[arg(long, required_unless_present = "policy", conflicts_with = "policy")]
+    #[arg(long, required_unless_present_any = ["policy", "racer"], conflicts_with = "policy")]
     pub run: Option<PathBuf>,
     /// A policy file; env and env settings are the ones embedded in it (`agvrl policy FILE`
     /// prints them), or for files written before settings were embedded, FILE.toml beside it,
@@ -92,7 +92,7 @@ pub struct EvalArgs {
     pub episodes: usize,
     /// Sample the policy's actions as in training instead of taking their mean (episode k
     /// seeds the noise with S + k): does the deterministic policy behave as the one trained?
-    #[arg(long, conflicts_with_all = ["random", "planner"])]
+    #[arg(long, conflicts_with_all = ["random", "planner", "racer"])]
     pub sampled: bool,
     /// Record the episodes into this rerun file (.rrd; open it with `rerun FILE`).
     #[arg(long, value_name = "FILE.rrd", conflicts_with = "spawn_viewer")]
@@ -113,18 +113,37 @@ pub struct EvalArgs {
     pub env: Option<String>,
     /// Drive uniform random actions instead of the policy, on the same episodes: the baseline
     /// the policy should beat (e.g. its coverage).
-    #[arg(long, conflicts_with = "planner")]
+    #[arg(long, conflicts_with_all = ["planner", "racer"])]
     pub random: bool,
     /// Drive a coverage planner instead of the policy, on the same episodes and car (search
     /// envs): `map` knows the map and its exact pose (how much ground there is to cover),
     /// `frontier` is a frontier explorer that builds its map from the LiDAR (the classic
     /// exploration baseline). A bare `--planner` is `map`.
-    #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "map", value_name = "KIND")]
+    #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "map", value_name = "KIND",
+          conflicts_with = "racer")]
     pub planner: Option<planner::Knowledge>,
+    /// Drive a classical racer instead of the policy, on the same episodes and car (racing
+    /// envs): pure pursuit along `--raceline` or the centre line, or follow-the-gap from the
+    /// LiDAR alone. The lap times a policy should beat.
+    #[arg(long, value_enum, value_name = "KIND")]
+    pub racer: Option<crate::racer::RacerKind>,
+    /// Pure pursuit's path: F1TENTH's raceline CSV (`s_m; x_m; y_m; psi_rad; ...`) or an x, y
+    /// CSV (default: the track's centre line).
+    #[arg(long, value_name = "FILE.csv", requires = "racer")]
+    pub raceline: Option<PathBuf>,
+    /// The racer's speed: a scale of pure pursuit's speed profile or of follow-the-gap's top
+    /// speed.
+    #[arg(long, default_value_t = 1.0, value_name = "SCALE")]
+    pub speed_scale: f64,
     /// Write every episode's coverage after each control to this CSV
     /// (`episode,step,time_s,coverage`; search envs); `agvrl coverage-plot` overlays several.
     #[arg(long, value_name = "FILE.csv")]
     pub coverage_csv: Option<PathBuf>,
+    /// Write one line per episode to this CSV (`episode,seed,track,lap_m,width_m,min_radius_m,
+    /// ended,laps,first_lap_s,best_lap_s,return`; racing envs): the per-circuit figures of a
+    /// table by track.
+    #[arg(long, value_name = "FILE.csv")]
+    pub episodes_csv: Option<PathBuf>,
 }
 
 /// Who drives an evaluation.
@@ -137,6 +156,8 @@ pub enum Driver<'a> {
     Random,
     /// A coverage planner (`crate::planner`), search envs only.
     Planner(planner::Knowledge),
+    /// A classical racer (`crate::racer`), racing envs only.
+    Racer(Box<dyn agvrl_envs::drivers::Driver>),
 }
 
 /// What deterministic evaluation found.
@@ -146,6 +167,9 @@ pub struct Summary {
     pub collisions: usize,
     pub laps: u32,
     pub best_lap_s: Option<f64>,
+    /// Episodes that lapped without a crash, and each lapping episode's first lap, s.
+    pub lapped: usize,
+    pub first_laps_s: Vec<f64>,
     pub coverage: Option<f64>,
     /// Subjects found / placed, summed over episodes, and the find times.
     pub subjects: (usize, usize, Vec<f64>),
@@ -156,8 +180,87 @@ pub struct Summary {
     pub filter_interventions: Option<u64>,
     /// Path length, summed over episodes (search envs).
     pub distance_m: f64,
+    /// One row per episode of a racing env (`--episodes-csv`).
+    pub episode_rows: Vec<EpisodeRow>,
     /// Per-step figures of search envs.
     pub search: SearchStats,
+}
+
+/// One racing episode: where it drove and how it ended.
+#[derive(Clone, Debug, Default)]
+pub struct EpisodeRow {
+    pub seed: u64,
+    pub track: String,
+    pub lap_m: f64,
+    /// A generated circuit's width and tightest centre-line radius, metres (None elsewhere).
+    pub circuit: Option<(f32, f32)>,
+    pub ended: &'static str,
+    pub laps: u32,
+    pub first_lap_s: Option<f64>,
+    pub best_lap_s: Option<f64>,
+    pub ret: f64,
+}
+
+/// `--episodes-csv`: a header and one line per episode.
+pub fn episodes_csv(rows: &[EpisodeRow]) -> String {
+    let opt = |v: Option<f64>| v.map_or_else(String::new, |x| format!("{x:.3}"));
+    let mut out =
+        String::from("episode,seed,track,lap_m,width_m,min_radius_m,ended,laps,first_lap_s,best_lap_s,return\n");
+    for (k, r) in rows.iter().enumerate() {
+        let (w, rad) = r.circuit.map_or_else(
+            || (String::new(), String::new()),
+            |(w, m)| (format!("{w:.3}"), format!("{m:.3}")),
+        );
+        out.push_str(&format!(
+            "{k},{},{},{:.2},{w},{rad},{},{},{},{},{:.3}\n",
+            r.seed,
+            r.track,
+            r.lap_m,
+            r.ended,
+            r.laps,
+            opt(r.first_lap_s),
+            opt(r.best_lap_s),
+            r.ret
+        ));
+    }
+    out
+}
+
+/// The row of a racing episode that ended with `last` on `env`'s track.
+fn episode_row(
+    env: &crate::episode::SimEnv,
+    env_cfg: &EnvConfig,
+    seed: u64,
+    ret: f64,
+    last: &Step,
+    ended: &'static str,
+) -> Option<EpisodeRow> {
+    let r = last.info.racing.as_ref()?;
+    let inner = env.inner();
+    let scene = inner.vehicle().sim().scene();
+    let track = scene.file.name.clone();
+    let lap_m = inner
+        .vehicle()
+        .map()
+        .and_then(|m| m.track.as_ref())
+        .map_or(0.0, |t| t.lap_length_m() as f64);
+    // A generated circuit's name carries its seed: its width and radius come from regenerating it.
+    let circuit = track
+        .strip_prefix("circuit-")
+        .and_then(|s| s.parse::<u64>().ok())
+        .and_then(|s| agvrl_sim::MapTrack::generated(s, &env_cfg.circuit.unwrap_or_default()).ok())
+        .map(|(_, info)| (info.width_m, info.min_radius_m));
+    Some(EpisodeRow {
+        seed,
+        track,
+        lap_m,
+        circuit,
+        ended,
+        laps: r.laps,
+        first_lap_s: r.first_lap_s,
+        best_lap_s: r.best_lap_s,
+        ret,
+    })
 }
 
 /// What a search evaluation measures step by step: the filter's corrections by kind, the ride
@@ -277,6 +380,9 @@ impl Summary {
             racing: self.racing.then_some(RacingReport {
                 laps: self.laps,
                 best_lap_s: self.best_lap_s,
+                lapped: self.lapped,
+                mean_first_lap_s: (!self.first_laps_s.is_empty())
+                    .then(|| self.first_laps_s.iter().sum::<f64>() / self.first_laps_s.len() as f64),
             }),
         }
     }
@@ -297,6 +403,12 @@ fn account(s: &mut Summary, st: &Step, cov_sum: &mut f64) {
     });
     if let Some(r) = &st.info.racing {
         s.racing = true;
+        if let Some(first) = r.first_lap_s {
+            s.first_laps_s.push(first);
+        }
+        if r.laps >= 1 && !st.terminated {
+            s.lapped += 1;
+        }
         s.laps += r.laps;
         if let Some(b) = r.best_lap_s {
             s.best_lap_s = Some(s.best_lap_s.map_or(b, |x: f64| x.min(b)));
@@ -336,17 +448,25 @@ pub fn evaluate(
         collisions: 0,
         laps: 0,
         best_lap_s: None,
+        lapped: 0,
+        first_laps_s: Vec::new(),
         coverage: None,
         subjects: (0, 0, Vec::new()),
         racing: false,
         ended: Vec::new(),
         filter_interventions: None,
         distance_m: 0.0,
+        episode_rows: Vec::new(),
         search: SearchStats::default(),
     };
     let search = agvrl_envs::registry::spec(env_id).is_some_and(|s| s.task == agvrl_envs::TaskKind::Search);
     if matches!(driver, Driver::Planner(_)) && !search {
         bail!("the planner covers ground: it needs a search env, not {env_id}");
+    }
+    if matches!(driver, Driver::Racer(_))
+        && agvrl_envs::registry::spec(env_id).is_none_or(|s| s.task != agvrl_envs::TaskKind::Racing)
+    {
+        bail!("a racer laps a track: it needs a racing env, not {env_id}");
     }
     if search && env_cfg.safety_filter.enabled {
         s.filter_interventions = Some(0);
@@ -379,8 +499,11 @@ pub fn evaluate(
                 obs(v)
             };
             for k in 0..episodes {
-                let (ret, last) = match driver {
-                    Driver::Planner(kind) => planner::drive(&mut env, kind, seed + k as u64, k, &mut see)?,
+                let (ret, last) = match &mut driver {
+                    Driver::Planner(kind) => planner::drive(&mut env, *kind, seed + k as u64, k, &mut see)?,
+                    Driver::Racer(r) => {
+                        crate::racer::drive(&mut env, r.as_mut(), env_cfg, seed + k as u64, k, &mut see)?
+                    }
                     _ => {
                         if let Driver::Sampled(p) = &mut driver {
                             p.seed(seed + k as u64);
@@ -391,6 +514,10 @@ pub fn evaluate(
                 };
                 s.mean_return += ret;
                 account(&mut s, &last, &mut cov_sum);
+                let ended = s.ended.last().copied().unwrap_or("");
+                if let Some(row) = episode_row(&env, env_cfg, seed + k as u64, ret, &last, ended) {
+                    s.episode_rows.push(row);
+                }
             }
             let f = s.search.filter;
             s.search = SearchStats {
@@ -477,8 +604,15 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         bail!("--episodes must be at least 1");
     }
     let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
-    let mut src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &sets)?;
-    let mut policy = match a.random || a.planner.is_some() {
+    let mut src = match (&a.run, &a.policy, a.racer) {
+        // A racer without a policy drives with the default job's settings under --set.
+        (None, None, Some(kind)) => PolicySettings::without_policy(
+            kind.name(),
+            agvrl_run::RunConfig::from_toml_with(crate::config::DEFAULT_TOML, "the default job", &sets)?,
+        ),
+        _ => PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &sets)?,
+    };
+    let mut policy = match a.random || a.planner.is_some() || a.racer.is_some() {
         true => None,
         false => Some(src.load_policy()?),
     };
@@ -542,11 +676,20 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         let file = policy.as_ref().map(|_| src.policy.as_path());
         watch.bags = Some(EpisodeBags::new(dir, file, &env_id, &env_cfg)?);
     }
-    let driver = match (&mut policy, a.planner) {
-        (Some(p), _) if a.sampled => Driver::Sampled(p),
-        (Some(p), _) => Driver::Policy(p),
-        (None, Some(kind)) => Driver::Planner(kind),
-        (None, None) => Driver::Random,
+    if !(a.speed_scale.is_finite() && a.speed_scale > 0.0 && a.speed_scale <= 2.0) {
+        bail!("--speed-scale must be in (0, 2], got {}", a.speed_scale);
+    }
+    let racer = a.racer.map(|kind| crate::racer::RacerSpec {
+        kind,
+        raceline: a.raceline.clone(),
+        speed_scale: a.speed_scale,
+    });
+    let driver = match (&mut policy, a.planner, &racer) {
+        (Some(p), _, _) if a.sampled => Driver::Sampled(p),
+        (Some(p), _, _) => Driver::Policy(p),
+        (None, Some(kind), _) => Driver::Planner(kind),
+        (None, None, Some(r)) => Driver::Racer(crate::racer::make(r, &env_cfg)?),
+        (None, None, None) => Driver::Random,
     };
     let s = evaluate(driver, &env_id, &env_cfg, a.episodes, seed, &mut |v| watch.see(v))?;
     println!("env={env_id}");
@@ -554,6 +697,16 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         "policy={}",
         if a.random {
             "random".to_string()
+        } else if let Some(r) = &racer {
+            match &r.raceline {
+                Some(p) => format!(
+                    "{} raceline={} speed_scale={}",
+                    r.kind.name(),
+                    p.display(),
+                    r.speed_scale
+                ),
+                None => format!("{} speed_scale={}", r.kind.name(), r.speed_scale),
+            }
         } else if let Some(kind) = a.planner {
             match kind {
                 planner::Knowledge::Map => "planner".to_string(),
@@ -594,6 +747,13 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     for l in s.report().lines() {
         println!("{l}");
     }
+    if let Some(p) = &a.episodes_csv {
+        if s.episode_rows.is_empty() {
+            bail!("--episodes-csv needs a racing env, not {env_id}");
+        }
+        agvrl_run::write_atomic(p, episodes_csv(&s.episode_rows).as_bytes())?;
+        println!("episodes_csv={}", p.display());
+    }
     if let Some(p) = &a.coverage_csv {
         if s.coverage.is_none() {
             bail!("--coverage-csv needs a search env, not {env_id}");
@@ -620,10 +780,11 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             .run
             .as_ref()
             .map_or_else(|| "policy".to_string(), |r| r.algo.to_string());
-        let driver = match (a.random, a.planner) {
-            (true, _) => "random actions",
-            (_, Some(planner::Knowledge::Map)) => "map-aware planner",
-            (_, Some(planner::Knowledge::Frontier)) => "frontier explorer",
+        let driver = match (a.random, a.planner, a.racer) {
+            (true, _, _) => "random actions",
+            (_, Some(planner::Knowledge::Map), _) => "map-aware planner",
+            (_, Some(planner::Knowledge::Frontier), _) => "frontier explorer",
+            (_, _, Some(k)) => k.name(),
             _ => algo.as_str(),
         };
         let on = env_cfg.track_suffix();

@@ -2,6 +2,7 @@
 //! configurations, training into run directories, evaluation, plots and recordings.
 
 pub mod bench;
+pub mod circuit;
 pub mod cli;
 pub mod config;
 // Without rerun, nothing reads what only recordings use.
@@ -14,6 +15,7 @@ pub mod plots;
 pub mod policy_file;
 pub mod probe;
 pub mod race;
+pub mod racer;
 #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
 pub mod selfplay;
 pub mod sink;

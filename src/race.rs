@@ -15,6 +15,12 @@ pub struct RaceArgs {
     /// A policy file per car, or one for every car (repeat the flag).
     #[arg(long = "policy", required = true)]
     pub policies: Vec<PathBuf>,
+    /// A classical racer as another car, after the policies' cars: `pure-pursuit` or
+    /// `follow-the-gap`, optionally `@SCALE` of its speed (`--racer pure-pursuit@0.75`);
+    /// repeat the flag for more. It drives the track's centre line or its LiDAR, its control
+    /// applied as it is.
+    #[arg(long = "racer", value_name = "KIND[@SCALE]")]
+    pub racers: Vec<String>,
     /// Cars on the grid (default: one per policy, two for a single policy; 1 races a lone
     /// car, the lap times to compare with).
     #[arg(long)]
@@ -61,10 +67,20 @@ pub fn race(a: RaceArgs) -> Result<()> {
     if a.races == 0 {
         bail!("--races must be at least 1");
     }
-    let cars = a.cars.unwrap_or(a.policies.len().max(2));
-    if a.policies.len() > 1 && a.policies.len() != cars {
+    let racer_specs = a.racers.iter().map(|r| racer_spec(r)).collect::<Result<Vec<_>>>()?;
+    let policy_cars = match a.cars {
+        Some(n) if n <= racer_specs.len() => bail!(
+            "--cars {n} leaves no car for the policies beside {} racers",
+            racer_specs.len()
+        ),
+        Some(n) => n - racer_specs.len(),
+        None if racer_specs.is_empty() => a.policies.len().max(2),
+        None => a.policies.len(),
+    };
+    let cars = policy_cars + racer_specs.len();
+    if a.policies.len() > 1 && a.policies.len() != policy_cars {
         bail!(
-            "{} policies for {cars} cars: give one policy per car, or one for all",
+            "{} policies for {policy_cars} cars: give one policy per car, or one for all",
             a.policies.len()
         );
     }
@@ -93,6 +109,16 @@ pub fn race(a: RaceArgs) -> Result<()> {
         cfg.max_steps = n;
     }
     let mut env = agvrl_envs::make_race("racing-duel", &cfg)?;
+    let mut racers = racer_specs
+        .iter()
+        .map(|r| crate::racer::make(r, &cfg))
+        .collect::<Result<Vec<_>>>()?;
+    let car_name = |i: usize| match i.checked_sub(policy_cars) {
+        Some(k) => racer_label(&racer_specs[k]),
+        None => a.policies[if a.policies.len() == 1 { 0 } else { i }]
+            .display()
+            .to_string(),
+    };
     for (k, p) in policies.iter().enumerate() {
         p.check_spaces(&env.observation_space(), &env.action_space())
             .map_err(|e| anyhow::anyhow!("{}: {e}", a.policies[k].display()))?;
@@ -118,7 +144,10 @@ pub fn race(a: RaceArgs) -> Result<()> {
                 .map(|i| Path2 {
                     xy: vec![],
                     collided: false,
-                    label: Some(format!("car {i}: {}", name(&a.policies[driver(i)]))),
+                    label: Some(match i < policy_cars {
+                        true => format!("car {i}: {}", name(&a.policies[driver(i)])),
+                        false => format!("car {i}: {}", car_name(i)),
+                    }),
                 })
                 .collect();
         }
@@ -135,13 +164,29 @@ pub fn race(a: RaceArgs) -> Result<()> {
                 }
             }
             let mut actions = Vec::with_capacity(cars);
-            for (i, o) in obs.iter().enumerate() {
+            for (i, o) in obs.iter().enumerate().take(policy_cars) {
                 actions.push(match env.done(i) {
                     true => vec![0.0; 2],
                     false => policies[driver(i)].act(o, true)?,
                 });
             }
-            let st = env.step(&actions)?;
+            let mut controls = Vec::with_capacity(racers.len());
+            for (k, r) in racers.iter_mut().enumerate() {
+                let i = policy_cars + k;
+                if step == 0 {
+                    r.reset(env.frame_of(i), Some(env.map()));
+                }
+                controls.push(match env.done(i) {
+                    true => agvrl_envs::Control::default(),
+                    false => r.control(env.frame_of(i), Some(env.map())),
+                });
+            }
+            let inputs: Vec<agvrl_envs::CarInput<'_>> = actions
+                .iter()
+                .map(|a| agvrl_envs::CarInput::Action(a))
+                .chain(controls.iter().map(|&c| agvrl_envs::CarInput::Control(c)))
+                .collect();
+            let st = env.step_inputs(&inputs)?;
             step += 1;
             for (i, s) in st.agents.iter().enumerate() {
                 if let Some(s) = s {
@@ -189,7 +234,7 @@ pub fn race(a: RaceArgs) -> Result<()> {
         };
         println!(
             "car={i} policy={} wins={} win_rate={:.2} mean_place={:.2} laps_per_race={:.2} mean_lap_s={mean_lap} best_lap_s={} overtakes_per_race={:.2} contacts_per_race={:.2} at_fault_per_race={:.2} time_lost_s_per_race={:.2} crashes={}",
-            a.policies[driver(i)].display(),
+            car_name(i),
             t.wins,
             t.wins as f64 / n,
             t.place_sum as f64 / n,
@@ -218,6 +263,33 @@ pub fn race(a: RaceArgs) -> Result<()> {
         println!("rerun={}", p.display());
     }
     Ok(())
+}
+
+/// `KIND[@SCALE]` of `--racer`.
+fn racer_spec(text: &str) -> Result<crate::racer::RacerSpec> {
+    use clap::ValueEnum;
+    let (kind, scale) = match text.split_once('@') {
+        Some((k, s)) => (
+            k,
+            s.parse::<f64>()
+                .map_err(|_| anyhow::anyhow!("--racer {text}: the scale after @ is not a number"))?,
+        ),
+        None => (text, 1.0),
+    };
+    let kind = crate::racer::RacerKind::from_str(kind, false)
+        .map_err(|_| anyhow::anyhow!("--racer {text}: the kind is pure-pursuit or follow-the-gap"))?;
+    if !(scale.is_finite() && scale > 0.0 && scale <= 1.0) {
+        bail!("--racer {text}: the speed scale must be in (0, 1]");
+    }
+    Ok(crate::racer::RacerSpec {
+        kind,
+        raceline: None,
+        speed_scale: scale,
+    })
+}
+
+fn racer_label(r: &crate::racer::RacerSpec) -> String {
+    format!("{}@{}", r.kind.name(), r.speed_scale)
 }
 
 /// A policy file's name without its directory (a run's policy.agvrl: the run's name).
