@@ -4,11 +4,11 @@
 //! as a policy's actions do.
 
 use crate::episode::{Observer, SimEnv, observe};
-use agvrl_envs::drivers::{CarLimits, Driver, FollowTheGap, PurePursuit, RacePath};
+use agvrl_envs::drivers::Driver;
 use agvrl_envs::{EnvConfig, Step, Vehicle};
 use anyhow::{Context, Result};
 use std::cell::RefCell;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Which classical racer drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -42,33 +42,18 @@ pub struct RacerSpec {
 
 /// Build the racer `spec` for the car of `cfg`.
 pub fn make(spec: &RacerSpec, cfg: &EnvConfig) -> Result<Box<dyn Driver>> {
-    let model = cfg.sim.vehicle_model()?;
-    let limits = CarLimits::of(&model, cfg.sim.brake_mps2);
-    Ok(match spec.kind {
-        RacerKind::PurePursuit => {
-            let path = match &spec.raceline {
-                Some(p) => Some(read_raceline(p, &limits, spec.speed_scale)?),
-                None => None,
-            };
-            let settings = agvrl_envs::drivers::PurePursuitSettings {
-                speed_scale: spec.speed_scale,
-                ..Default::default()
-            };
-            Box::new(PurePursuit::new(settings, limits, path)?)
-        }
-        RacerKind::FollowTheGap => {
-            let settings = agvrl_envs::drivers::FollowTheGapSettings {
-                speed_scale: spec.speed_scale,
-                ..Default::default()
-            };
-            Box::new(FollowTheGap::new(settings, limits)?)
-        }
+    let kind = match spec.kind {
+        RacerKind::PurePursuit => agvrl_envs::drivers::RacerKind::PurePursuit,
+        RacerKind::FollowTheGap => agvrl_envs::drivers::RacerKind::FollowTheGap,
+    };
+    let text = match &spec.raceline {
+        Some(p) => Some(std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?),
+        None => None,
+    };
+    agvrl_envs::drivers::make_racer(kind, cfg, spec.speed_scale, text.as_deref()).map_err(|e| match &spec.raceline {
+        Some(p) => anyhow::anyhow!("{}: {e}", p.display()),
+        None => e.into(),
     })
-}
-
-fn read_raceline(path: &Path, limits: &CarLimits, speed_scale: f64) -> Result<RacePath> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    RacePath::from_csv(&text, limits, speed_scale).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }
 
 /// Drive one episode of `env` with `racer`, reporting every step to `obs`.

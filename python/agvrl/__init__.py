@@ -18,6 +18,7 @@ from agvrl._core import TERMINATION_CAUSES, env_ids as _env_ids, multi_env_ids a
 from agvrl.bag import Bag, Replay, read_bag, replay
 from agvrl.env import AgvrlEnv, make
 from agvrl.policy import Policy
+from agvrl.racer import Racer
 from agvrl.training import RunResult, train
 from agvrl.vector import AgvrlVectorEnv, make_vec
 
@@ -78,6 +79,7 @@ __all__ = [
     "AgvrlVectorEnv",
     "Bag",
     "Policy",
+    "Racer",
     "Replay",
     "RunResult",
     "make",

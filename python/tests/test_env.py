@@ -26,6 +26,7 @@ def test_every_cli_env_id_is_registered():
         "search-urban-20",
         "search-urban-50",
         "racing-oval",
+        "racing-circuit",
         "pendulum",
     }
     for env_id in agvrl.ENV_IDS:
@@ -188,3 +189,30 @@ def test_a_rust_panic_reaches_python_as_runtime_error():
 def test_numpy_scalars_are_settings():
     env = agvrl.make("search-outdoor-20", max_steps=np.int64(7), lidar={"n_rays": np.int32(36)}, brake_mps2=np.float32(2.0))
     assert env.observation_space.shape == agvrl.make("search-outdoor-20", max_steps=7, lidar={"n_rays": 36}).observation_space.shape
+
+
+@pytest.mark.parametrize("kind", ["pure-pursuit", "follow-the-gap"])
+def test_a_racer_laps_a_generated_circuit_through_the_env(kind):
+    # Held-out circuit 0 at the seed eval uses: pure pursuit and follow-the-gap both lap it
+    # (`agvrl eval --racer KIND --env racing-circuit --seed 0`).
+    env = agvrl.make("racing-circuit", max_steps=20_000, held_out=True, spawn="line")
+    racer = agvrl.Racer(kind, env)
+    env.reset(seed=0)
+    laps = 0
+    for _ in range(20_000):
+        obs, reward, terminated, truncated, info = env.step(racer.act())
+        assert not terminated, info
+        laps = info["laps"]
+        if laps >= 1 or truncated:
+            break
+    assert laps >= 1
+
+
+def test_a_racer_names_what_is_wrong():
+    env = agvrl.make("racing-oval")
+    with pytest.raises(ValueError, match="pure-pursuit or follow-the-gap"):
+        agvrl.Racer("slow-poke", env)
+    with pytest.raises(ValueError, match="speed_scale"):
+        agvrl.Racer("pure-pursuit", env, speed_scale=0.0)
+    with pytest.raises(RuntimeError, match="reset"):
+        agvrl.Racer("pure-pursuit", env).act()

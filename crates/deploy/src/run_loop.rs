@@ -139,11 +139,20 @@ pub struct Tick {
     pub inference: Option<(Vec<f32>, Vec<f32>)>,
 }
 
+/// What picks the actions of a drive.
+pub enum Brain {
+    /// A trained policy, deterministic actions from the task's observation.
+    Policy(Box<Policy>),
+    /// A classical racer (pure pursuit, follow-the-gap): its control on the frame, as the
+    /// action that maps to it, so the task's mapping and safety filter apply as to a policy's.
+    Racer(Box<dyn agvrl_envs::drivers::Driver>, agvrl_envs::ActionMapping),
+}
+
 /// A policy driving a vehicle through a task's observation and action mapping.
 pub struct DriveLoop<V, T> {
     vehicle: V,
     task: T,
-    policy: Policy,
+    brain: Brain,
     cfg: DriveConfig,
     ticks: u64,
     clock_s: f64,
@@ -154,13 +163,28 @@ pub struct DriveLoop<V, T> {
 
 impl<V: Vehicle, T: Task> DriveLoop<V, T> {
     /// Check the policy against the task and reset the vehicle.
-    pub fn new(mut vehicle: V, mut task: T, policy: Policy, cfg: DriveConfig, seed: u64) -> Result<Self, DeployError> {
+    pub fn new(vehicle: V, task: T, policy: Policy, cfg: DriveConfig, seed: u64) -> Result<Self, DeployError> {
         let action_space = agvrl_envs::BoxSpace::uniform(2, -1.0, 1.0);
         policy
             .check_spaces(&task.observation_space(), &action_space)
             .map_err(DeployError::Mismatch)?;
+        Self::with_brain(vehicle, task, Brain::Policy(Box::new(policy)), cfg, seed)
+    }
+
+    /// Reset the vehicle and drive it with `brain` (a racer starts its episode on the first
+    /// frame).
+    pub fn with_brain(
+        mut vehicle: V,
+        mut task: T,
+        mut brain: Brain,
+        cfg: DriveConfig,
+        seed: u64,
+    ) -> Result<Self, DeployError> {
         let frame = vehicle.reset(seed).map_err(vehicle_err)?;
         task.reset(&frame, vehicle.map());
+        if let Brain::Racer(driver, _) = &mut brain {
+            driver.reset(&frame, vehicle.map());
+        }
         let clock_s = frame.stamp_s;
         let wall = wall_clock_s();
         let wall_offset_s = if frame.stamp_s > DATE_STAMP_S {
@@ -181,7 +205,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
         Ok(Self {
             vehicle,
             task,
-            policy,
+            brain,
             cfg,
             ticks: 0,
             clock_s,
@@ -269,7 +293,15 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             Err(ev) => (Control::default(), Some(ev), None),
             Ok(()) => {
                 let obs = self.task.observe(&frame);
-                match self.policy.act(&obs, true) {
+                let acted = match &mut self.brain {
+                    Brain::Policy(p) => p.act(&obs, true).map_err(|e| e.to_string()),
+                    Brain::Racer(driver, mapping) => {
+                        let c = driver.control(&frame, self.vehicle.map());
+                        let [a0, a1] = mapping.action(c, self.vehicle.steering_limit_rad());
+                        Ok(vec![a0 as f32, a1 as f32])
+                    }
+                };
+                match acted {
                     Ok(a) if a.iter().all(|v| v.is_finite()) => {
                         let c = self.task.control(&a, self.vehicle.steering_limit_rad(), &frame);
                         intervention = self.task.intervention();
@@ -280,7 +312,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
                         Some(Event::Inference("non-finite action".into())),
                         Some((obs, a)),
                     ),
-                    Err(e) => (Control::default(), Some(Event::Inference(e.to_string())), None),
+                    Err(e) => (Control::default(), Some(Event::Inference(e)), None),
                 }
             }
         };

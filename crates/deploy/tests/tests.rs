@@ -1477,3 +1477,39 @@ fn a_served_race_refuses_bad_opponents_and_car_counts() {
     );
     assert!(e.contains("--namespace"), "{e}");
 }
+
+/// A classical racer drives through the drive loop as a policy does: pure pursuit and
+/// follow-the-gap each lap the bean on the simulated car without a termination or a watchdog
+/// event; a bad raceline is named by its line.
+#[test]
+fn a_racer_laps_the_bean_through_the_drive_loop() {
+    use agvrl_deploy::run_loop::Brain;
+    use agvrl_envs::drivers::{RacerKind, make_racer};
+    let yaml = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tracks/bean.yaml");
+    let cfg = EnvConfig {
+        track: Some(agvrl_envs::TrackSetting::Path(yaml)),
+        ..EnvConfig::default()
+    };
+    for kind in RacerKind::ALL {
+        let v = make_vehicle("racing-oval", &cfg).unwrap();
+        let task = make_task("racing-oval", &cfg, v.steering_limit_rad()).unwrap();
+        let brain = Brain::Racer(make_racer(kind, &cfg, 1.0, None).unwrap(), cfg.action_mapping);
+        let mut lp = DriveLoop::with_brain(v, task, brain, DriveConfig::default(), 0).unwrap();
+        let mut laps = 0;
+        for _ in 0..2400 {
+            let t = lp.tick().unwrap();
+            assert_eq!(t.termination, None, "{}", kind.name());
+            assert_eq!(t.event, None, "{}", kind.name());
+            laps = t.racing.map_or(0, |r| r.laps);
+            if laps >= 1 {
+                break;
+            }
+        }
+        assert!(laps >= 1, "{} did not lap the bean", kind.name());
+    }
+    let e = make_racer(RacerKind::PurePursuit, &cfg, 1.0, Some("x, y\n1, oops\n"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("raceline") && e.contains("line 2"), "{e}");
+}

@@ -104,6 +104,7 @@ fn build(env_id: &str, cfg: &EnvConfig) -> Result<Inner, EnvError> {
 struct Env {
     inner: Mutex<Single>,
     id: String,
+    cfg: EnvConfig,
     obs_space: agvrl_envs::BoxSpace,
     act_space: agvrl_envs::BoxSpace,
     dt_s: f64,
@@ -135,6 +136,7 @@ impl Env {
                 id: env_id.to_string(),
                 has_camera: cfg.sim.camera.is_some(),
                 renders,
+                cfg,
             })
         })
     }
@@ -255,6 +257,79 @@ impl Env {
                         .map_err(|e| PyRuntimeError::new_err(format!("render: {e}")))
                 })
                 .transpose()
+        })
+    }
+}
+
+/// A classical racer (`agvrl.Racer` wraps it): pure pursuit or follow-the-gap, acting on an
+/// env's last frame as a policy acts on its observation.
+#[pyclass(module = "agvrl._core")]
+struct Racer {
+    driver: Mutex<Box<dyn agvrl_envs::drivers::Driver>>,
+}
+
+#[pymethods]
+impl Racer {
+    /// `Racer(kind, env, speed_scale=1.0, raceline=None)`: `kind` is `pure-pursuit` or
+    /// `follow-the-gap`; `env` the racing env it drives (its car's limits); `raceline` a CSV
+    /// path for pure pursuit (default: the track's centre line).
+    #[new]
+    #[pyo3(signature = (kind, env, speed_scale=1.0, raceline=None))]
+    fn new(kind: &str, env: &Env, speed_scale: f64, raceline: Option<PathBuf>) -> PyResult<Self> {
+        guard(|| {
+            let kind = match kind {
+                "pure-pursuit" => agvrl::racer::RacerKind::PurePursuit,
+                "follow-the-gap" => agvrl::racer::RacerKind::FollowTheGap,
+                other => {
+                    return Err(PyValueError::new_err(format!(
+                        "unknown racer '{other}': pure-pursuit or follow-the-gap"
+                    )));
+                }
+            };
+            if !(speed_scale.is_finite() && speed_scale > 0.0 && speed_scale <= 1.0) {
+                return Err(PyValueError::new_err(format!(
+                    "speed_scale must be in (0, 1], got {speed_scale}"
+                )));
+            }
+            let spec = agvrl::racer::RacerSpec {
+                kind,
+                raceline,
+                speed_scale,
+            };
+            let driver = agvrl::racer::make(&spec, &env.cfg)
+                .map_err(|e| PyValueError::new_err(agvrl_run::error_line(e.as_ref())))?;
+            Ok(Self {
+                driver: Mutex::new(driver),
+            })
+        })
+    }
+
+    /// The action (float32, the env's action space) the racer takes on `env`'s last frame;
+    /// right after a reset it starts its episode (pure pursuit finds its place on the path).
+    fn act<'py>(&self, py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        guard(|| {
+            let a = py.detach(|| {
+                guard(|| {
+                    let g = lock(&env.inner)?;
+                    let Inner::Sim(sim_env) = &g.env else {
+                        return Err(PyValueError::new_err("a racer drives a vehicle env"));
+                    };
+                    let inner = sim_env.inner();
+                    let Some(frame) = inner.last_frame() else {
+                        return Err(PyRuntimeError::new_err("reset the env before the racer acts"));
+                    };
+                    use agvrl_envs::Vehicle as _;
+                    let map = inner.vehicle().map();
+                    let mut d = lock(&self.driver)?;
+                    if g.len == 0 {
+                        d.reset(frame, map);
+                    }
+                    let c = d.control(frame, map);
+                    let [a0, a1] = env.cfg.action_mapping.action(c, inner.vehicle().steering_limit_rad());
+                    Ok(vec![a0 as f32, a1 as f32])
+                })
+            })?;
+            Ok(PyArray1::from_vec(py, a))
         })
     }
 }
@@ -818,6 +893,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<VecEnv>()?;
     m.add_class::<multi::MultiEnv>()?;
     m.add_class::<Policy>()?;
+    m.add_class::<Racer>()?;
     m.add_function(wrap_pyfunction!(train, m)?)?;
     m.add_function(wrap_pyfunction!(bench_rust, m)?)?;
     m.add_function(wrap_pyfunction!(env_ids, m)?)?;

@@ -99,6 +99,7 @@ fn agrees(key: &str, text: &str, json: &Value) -> bool {
             .filter(|e| !e.is_empty())
             .eq(a.iter().map(|e| e.as_str().unwrap())),
         ("subjects_found", Some(n)) => text == format!("{n}/{}", json["subjects_placed"]),
+        ("lapped", Some(n)) => text == format!("{n}/{}", json["episodes"]),
         (k, Some(n)) if k.starts_with("coverage_") && k.ends_with("_reached") => {
             text == format!("{n}/{}", json["episodes"])
         }

@@ -55,6 +55,18 @@ struct Args {
     /// config.toml of the run directory holding it).
     #[arg(long)]
     policy: Option<PathBuf>,
+    /// Drive a classical racer instead of a policy: `pure-pursuit` (along --raceline, else the
+    /// track's centre line; needs the pose: the simulator's, or the car's odometry topic) or
+    /// `follow-the-gap` (the LiDAR alone). The env is --env (default racing-oval) with --track.
+    #[arg(long, value_name = "KIND", conflicts_with_all = ["run", "policy", "check_trace", "replay"])]
+    racer: Option<String>,
+    /// The racer's speed: a scale of pure pursuit's speed profile or of follow-the-gap's top
+    /// speed, in (0, 1].
+    #[arg(long, default_value_t = 1.0, requires = "racer")]
+    speed_scale: f64,
+    /// Pure pursuit's path: F1TENTH's raceline CSV or an x, y CSV, in the map frame of the pose.
+    #[arg(long, value_name = "FILE.csv", requires = "racer")]
+    raceline: Option<PathBuf>,
     /// Override one of the policy's settings, KEY=VALUE as `agvrl train --set`
     /// (`--set env_config.safety_filter.clearance_m=0.9`).
     #[arg(long, value_name = "KEY=VALUE")]
@@ -236,8 +248,11 @@ fn run() -> Result<()> {
     if let Some(sim_env) = &a.serve_sim {
         return serve_sim(&a, sim_env, &env_cfg);
     }
+    if let Some(kind) = &a.racer {
+        return drive_racer(&a, kind, &env, &env_cfg);
+    }
     let Some(mut src) = src else {
-        bail!("give --run DIR or --policy FILE (e.g. assets/policies/racing-oval-ppo.agvrl)");
+        bail!("give --run DIR or --policy FILE (e.g. assets/policies/racing-oval-ppo.agvrl), or --racer KIND");
     };
     let mut policy = src.load_policy()?;
     if let Some(trace) = &a.check_trace {
@@ -276,6 +291,69 @@ fn run() -> Result<()> {
         }
         VehicleKind::Ros2 => drive_ros2(&a, &src, &env, &env_cfg, policy, drive),
     }
+}
+
+/// `--racer KIND`: a classical racer drives the simulated car or a ROS 2 car through the env's
+/// task (its action mapping and safety filter), with the watchdog of a policy's drive.
+fn drive_racer(a: &Args, kind: &str, env: &str, env_cfg: &EnvConfig) -> Result<()> {
+    use agvrl_envs::drivers::{RacerKind, make_racer};
+    let kind = RacerKind::of(kind)?;
+    if !(a.speed_scale.is_finite() && a.speed_scale > 0.0 && a.speed_scale <= 1.0) {
+        bail!("--speed-scale must be in (0, 1], got {}", a.speed_scale);
+    }
+    let raceline = match &a.raceline {
+        Some(p) => Some(std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?),
+        // A real car has no map: pure pursuit there follows the track's centre line.
+        None if kind == RacerKind::PurePursuit && a.vehicle == VehicleKind::Ros2 => {
+            let Some(t) = &env_cfg.track else {
+                bail!("pure pursuit on a ROS 2 car follows --raceline FILE or the centre line of --track MAP.yaml");
+            };
+            let t = t.load()?;
+            Some(t.centreline.iter().map(|p| format!("{}, {}\n", p[0], p[1])).collect())
+        }
+        None => None,
+    };
+    let driver = make_racer(kind, env_cfg, a.speed_scale, raceline.as_deref())
+        .map_err(|e| anyhow::anyhow!("--racer {}: {e}", kind.name()))?;
+    let brain = agvrl_deploy::run_loop::Brain::Racer(driver, env_cfg.action_mapping);
+    let drive = DriveConfig {
+        rate_hz: a.rate_hz,
+        realtime: a.realtime,
+        ..DriveConfig::default()
+    };
+    if a.record.is_some() {
+        bail!("--record records a policy's drive; drive the racer without it");
+    }
+    match a.vehicle {
+        VehicleKind::Sim => {
+            let vehicle = make_vehicle(env, env_cfg)?;
+            let task = make_task(env, env_cfg, vehicle.steering_limit_rad())?;
+            drive_loop(a, DriveLoop::with_brain(vehicle, task, brain, drive, a.seed)?, None)
+        }
+        VehicleKind::Ros2 => racer_ros2(a, env, env_cfg, brain, drive),
+    }
+}
+
+#[cfg(feature = "ros2")]
+fn racer_ros2(
+    a: &Args,
+    env: &str,
+    env_cfg: &EnvConfig,
+    brain: agvrl_deploy::run_loop::Brain,
+    drive: DriveConfig,
+) -> Result<()> {
+    let mut cfg = ros2_config(a)?;
+    cfg.check_lidar(&env_cfg.sim.lidar)?;
+    cfg.drive
+        .for_trained_top_speed(env_cfg.sim.vehicle_model()?.top_speed_mps());
+    let task = make_task(env, env_cfg, cfg.drive.steering_limit_rad)?;
+    let vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime, None)?;
+    drive_loop(a, DriveLoop::with_brain(vehicle, task, brain, drive, a.seed)?, None)
+}
+
+#[cfg(not(feature = "ros2"))]
+fn racer_ros2(_: &Args, _: &str, _: &EnvConfig, _: agvrl_deploy::run_loop::Brain, _: DriveConfig) -> Result<()> {
+    bail!("this agvrl-drive was built without ROS 2 (feature ros2)")
 }
 
 #[cfg(feature = "ros2")]

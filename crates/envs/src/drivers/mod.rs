@@ -34,6 +34,69 @@ pub trait Driver: Send {
     fn control(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Control;
 }
 
+/// Which classical racer: the names commands and settings use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RacerKind {
+    /// [`PurePursuit`]: needs the pose and the track (or a raceline).
+    PurePursuit,
+    /// [`FollowTheGap`]: the LiDAR alone.
+    FollowTheGap,
+}
+
+impl RacerKind {
+    /// Every kind, in the order commands list them.
+    pub const ALL: [Self; 2] = [Self::PurePursuit, Self::FollowTheGap];
+
+    /// `pure-pursuit` or `follow-the-gap`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::PurePursuit => "pure-pursuit",
+            Self::FollowTheGap => "follow-the-gap",
+        }
+    }
+
+    /// The kind named `name`.
+    pub fn of(name: &str) -> Result<Self, crate::EnvError> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name() == name)
+            .ok_or_else(|| crate::EnvError::Config(format!("unknown racer '{name}': pure-pursuit or follow-the-gap")))
+    }
+}
+
+/// The racer `kind` for the car of `cfg` at `speed_scale` (of pure pursuit's speed profile, of
+/// follow-the-gap's top speed); pure pursuit drives `raceline` (a raceline or centre-line CSV's
+/// text) when given, else the track's centre line.
+pub fn make_racer(
+    kind: RacerKind,
+    cfg: &crate::EnvConfig,
+    speed_scale: f64,
+    raceline: Option<&str>,
+) -> Result<Box<dyn Driver>, crate::EnvError> {
+    let model = cfg.sim.vehicle_model()?;
+    let limits = CarLimits::of(&model, cfg.sim.brake_mps2);
+    Ok(match kind {
+        RacerKind::PurePursuit => {
+            let path = raceline
+                .map(|text| RacePath::from_csv(text, &limits, speed_scale))
+                .transpose()
+                .map_err(|e| crate::EnvError::Config(format!("raceline: {e}")))?;
+            let settings = PurePursuitSettings {
+                speed_scale,
+                ..Default::default()
+            };
+            Box::new(PurePursuit::new(settings, limits, path)?)
+        }
+        RacerKind::FollowTheGap => {
+            let settings = FollowTheGapSettings {
+                speed_scale,
+                ..Default::default()
+            };
+            Box::new(FollowTheGap::new(settings, limits)?)
+        }
+    })
+}
+
 /// Forward speed from the IMU's body-frame velocity, m/s, when the frame carries one.
 fn measured_speed_mps(frame: &SensorFrame) -> Option<f64> {
     frame.imu.as_ref().map(|imu| imu.lin_vel_b[0]).filter(|v| v.is_finite())
