@@ -245,32 +245,3 @@ fn follow_the_gap_laps_the_oval_and_the_map_tracks_without_contact() {
     }
 }
 
-/// Lap times of both drivers on the oval, the bean and the sweepers at speed_scale 1 from the
-/// tracks' start: `cargo test --release -p agvrl-envs --test drivers -- --ignored --nocapture`.
-#[test]
-#[ignore = "a report, not a check"]
-fn lap_times_of_both_drivers_on_every_validation_track() {
-    for track in [None, Some("bean"), Some("sweepers")] {
-        let cfg = config(track, SpawnMode::Fixed);
-        let path = profile_path(&cfg);
-        println!(
-            "{}: centre line {:.2} m, profile lap {:.2} s",
-            track.unwrap_or("oval"),
-            path.lap_length_m(),
-            path.lap_time_s()
-        );
-        for (name, run) in [
-            ("pure pursuit", drive(&mut pure_pursuit(), &cfg, 0, 3)),
-            ("follow the gap", drive(&mut follow_the_gap(), &cfg, 0, 3)),
-        ] {
-            let laps: Vec<String> = run.lap_s.iter().map(|t| format!("{t:.2}")).collect();
-            println!(
-                "  {name}: laps {} s, contact {:?}, max offset {:.3} m (after lap 1: {:.3} m)",
-                laps.join(", "),
-                run.contact_s,
-                run.max_offset_m(|_| true),
-                run.max_offset_m(|s| s.lap > 0)
-            );
-        }
-    }
-}
