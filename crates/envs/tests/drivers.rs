@@ -244,4 +244,3 @@ fn follow_the_gap_laps_the_oval_and_the_map_tracks_without_contact() {
         }
     }
 }
-
