@@ -1513,3 +1513,20 @@ fn a_racer_laps_the_bean_through_the_drive_loop() {
         .to_string();
     assert!(e.contains("raceline") && e.contains("line 2"), "{e}");
 }
+
+/// The shipped generalist drives a held-out generated circuit (a seed from the evaluation half,
+/// never trained on) in agvrl-drive: a full lap with no crash and no watchdog event.
+#[test]
+fn the_shipped_generalist_laps_a_held_out_circuit_in_agvrl_drive() {
+    let seed = (agvrl_envs::heldout::EVAL_BIT | 5).to_string();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
+        .arg("--policy")
+        .arg(shipped_policy("racing-any-track"))
+        .args(["--steps", "9000", "--seed", &seed, "--quiet"])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.contains(" events=0 terminations=0 "), "{out}");
+    assert!(!out.contains(" laps=0 "), "{out}");
+}
