@@ -277,27 +277,19 @@ impl Racer {
     #[pyo3(signature = (kind, env, speed_scale=1.0, raceline=None))]
     fn new(kind: &str, env: &Env, speed_scale: f64, raceline: Option<PathBuf>) -> PyResult<Self> {
         guard(|| {
-            let kind = match kind {
-                "pure-pursuit" => agvrl::racer::RacerKind::PurePursuit,
-                "follow-the-gap" => agvrl::racer::RacerKind::FollowTheGap,
-                other => {
-                    return Err(PyValueError::new_err(format!(
-                        "unknown racer '{other}': pure-pursuit or follow-the-gap"
-                    )));
-                }
-            };
+            let kind = agvrl_envs::drivers::RacerKind::of(kind).map_err(env_err)?;
             if !(speed_scale.is_finite() && speed_scale > 0.0 && speed_scale <= 1.0) {
                 return Err(PyValueError::new_err(format!(
                     "speed_scale must be in (0, 1], got {speed_scale}"
                 )));
             }
-            let spec = agvrl::racer::RacerSpec {
-                kind,
-                raceline,
-                speed_scale,
-            };
-            let driver = agvrl::racer::make(&spec, &env.cfg)
-                .map_err(|e| PyValueError::new_err(agvrl_run::error_line(e.as_ref())))?;
+            let raceline = raceline
+                .map(|p| {
+                    std::fs::read_to_string(&p).map_err(|e| PyValueError::new_err(format!("{}: {e}", p.display())))
+                })
+                .transpose()?;
+            let driver =
+                agvrl_envs::drivers::make_racer(kind, &env.cfg, speed_scale, raceline.as_deref()).map_err(env_err)?;
             Ok(Self {
                 driver: Mutex::new(driver),
             })

@@ -111,4 +111,14 @@ pub(crate) mod tests {
         let model = agvrl_sim::SimSettings::default().vehicle_model().unwrap();
         CarLimits::of(&model, brake_mps2)
     }
+
+    /// `n` points evenly round a circle of radius `r` about the origin, counter-clockwise.
+    pub(crate) fn circle(r: f64, n: usize) -> Vec<[f32; 2]> {
+        (0..n)
+            .map(|k| {
+                let a = k as f64 * std::f64::consts::TAU / n as f64;
+                [(r * a.cos()) as f32, (r * a.sin()) as f32]
+            })
+            .collect()
+    }
 }

@@ -250,7 +250,7 @@ fn rear_axle(limits: &CarLimits, gps: &agvrl_sim::msg::GpsReading) -> [f64; 2] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::drivers::tests::xtenth;
+    use crate::drivers::tests::{circle, xtenth};
     use agvrl_sim::msg::{GpsReading, ImuReading};
 
     const DT_S: f64 = 1.0 / 30.0;
@@ -304,15 +304,6 @@ mod tests {
             out.push(([x, y], v(w)));
         }
         out
-    }
-
-    fn circle(r: f64, n: usize) -> Vec<[f32; 2]> {
-        (0..n)
-            .map(|k| {
-                let a = k as f64 * std::f64::consts::TAU / n as f64;
-                [(r * a.cos()) as f32, (r * a.sin()) as f32]
-            })
-            .collect()
     }
 
     /// On a circle of radius R the goal point lies on the path, and the circle through the rear

@@ -344,16 +344,7 @@ fn profile(kappa: &[f64], spacing_m: f64, limits: &CarLimits) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::drivers::tests::xtenth;
-
-    fn circle(r: f64, n: usize) -> Vec<[f32; 2]> {
-        (0..n)
-            .map(|k| {
-                let a = k as f64 * std::f64::consts::TAU / n as f64;
-                [(r * a.cos()) as f32, (r * a.sin()) as f32]
-            })
-            .collect()
-    }
+    use crate::drivers::tests::{circle, xtenth};
 
     /// An F1TENTH raceline of a circle of radius `r`, counter-clockwise, in the repository's
     /// format (two id lines, the column header, then `; `-separated rows).
