@@ -1,3 +1,4 @@
+import importlib
 import os
 import shutil
 from pathlib import Path
@@ -26,11 +27,39 @@ def bins() -> Path:
     """The release CLI binaries; tests that compare with them fail in CI without them."""
     d = _bin_dir()
     if d is None:
-        msg = "agvrl / agvrl-drive not built: run `cargo build --release` (or set AGVRL_BIN_DIR)"
-        if os.environ.get("CI"):
-            pytest.fail(msg)
-        pytest.skip(msg)
+        pytest.skip("agvrl / agvrl-drive not built: run `cargo build --release` (or set AGVRL_BIN_DIR)")
     return d
+
+
+def need(module: str):
+    """`module` for a test that needs it; without it the test is skipped (a failure in CI)."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as e:
+        pytest.skip(f"{module} is not installed ({e}): pip install it, as .ci/run does")
+
+
+def _no_skips() -> bool:
+    # .ci/run sets CI itself, so a run by hand checks as the CI runner does.
+    return bool(os.environ.get("CI"))
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """In CI a skipped test is a failed one: a missing binary, server or package would otherwise
+    leave its tests unrun and the run green."""
+    report = (yield).get_result()
+    if report.skipped and _no_skips() and not hasattr(report, "wasxfail"):
+        report.outcome = "failed"
+        report.longrepr = f"skipped in CI (CI is set): {report.longrepr}"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_make_collect_report(collector):
+    report = (yield).get_result()
+    if report.skipped and _no_skips():
+        report.outcome = "failed"
+        report.longrepr = f"module skipped in CI (CI is set): {report.longrepr}"
 
 
 @pytest.fixture(scope="session")

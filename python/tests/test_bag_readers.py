@@ -11,9 +11,7 @@ import pytest
 
 import agvrl
 
-mcap_reader = pytest.importorskip("mcap.reader")
-mcap_ros2 = pytest.importorskip("mcap_ros2.decoder")
-rosbags_highlevel = pytest.importorskip("rosbags.highlevel")
+from conftest import need
 
 
 def plain(o):
@@ -64,6 +62,8 @@ def by_topic(rows):
 
 
 def test_a_recorded_drive_reads_the_same_in_mcap_ros2_and_rosbags(bins, root, tmp_path):
+    mcap_reader, mcap_ros2 = need("mcap.reader"), need("mcap_ros2.decoder")
+    rosbags_highlevel = need("rosbags.highlevel")
     bag = tmp_path / "drive"
     # The camera policy: its bag holds a depth Image too.
     run = subprocess.run(

@@ -8,12 +8,10 @@ import math
 import subprocess
 
 import numpy as np
-import pytest
 
 import agvrl
 
-rosbag2 = pytest.importorskip("rosbags.rosbag2")
-typesys = pytest.importorskip("rosbags.typesys")
+from conftest import need
 
 T0 = 1_764_000_000 * 10**9  # a date: the stamps look like a real car's
 RATE_HZ = 30.0
@@ -44,6 +42,7 @@ def schedule():
 
 
 def write_car_log(path):
+    rosbag2, typesys = need("rosbags.rosbag2"), need("rosbags.typesys")
     ts = typesys.get_typestore(typesys.Stores.ROS2_JAZZY)
     T = ts.types
     Time = T["builtin_interfaces/msg/Time"]

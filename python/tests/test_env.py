@@ -96,15 +96,18 @@ def test_search_info_and_termination_cause():
     causes = set()
     for episode in range(6):
         env.reset(seed=100 + episode)
-        for _ in range(1000):
-            _, _, terminated, truncated, info = env.step(np.array([1.0, 1.0], np.float32))
+        ret = 0.0
+        for steps in range(1, 1001):
+            _, reward, terminated, truncated, info = env.step(np.array([1.0, 1.0], np.float32))
+            ret += reward
             assert 0.0 <= info["coverage"] <= 1.0
             if terminated:
                 causes.add(info["termination"])
-                assert info["episode"]["l"] >= 1 or "episode" not in info
+            if terminated or truncated:
+                # The episode's statistics arrive on its last step, and only there.
+                assert info["episode"]["l"] == steps and info["episode"]["r"] == pytest.approx(ret)
                 break
-            if truncated:
-                break
+            assert "episode" not in info
     assert causes and causes <= set(agvrl.TERMINATION_CAUSES)
 
 

@@ -7,14 +7,13 @@ import pytest
 
 import agvrl
 
-pettingzoo_test = pytest.importorskip("pettingzoo.test")
-
-from conftest import ROOT  # noqa: E402
+from conftest import ROOT, need
 
 SWEEPERS = str(ROOT / "assets" / "tracks" / "sweepers.yaml")
 
 
 def test_a_race_passes_pettingzoos_parallel_api_test_without_warnings():
+    pettingzoo_test = need("pettingzoo.test")
     assert agvrl.MULTI_ENV_IDS == ("racing-duel",)
     for cfg in ({"max_steps": 200}, {"max_steps": 200, "track": SWEEPERS, "race": {"cars": 4}}):
         env = agvrl.make_multi("racing-duel", **cfg)

@@ -94,6 +94,7 @@ fn stale_scans_stop_the_car_within_two_periods_and_driving_resumes() {
         let t = lp.tick().unwrap();
         match &t.event {
             Some(Event::Stale { age_s }) => {
+                assert!(k >= 10, "tick {k} stopped on fresh data");
                 first_stop.get_or_insert(k);
                 assert_eq!(
                     t.control,
@@ -250,50 +251,6 @@ mod ros2_loopback {
     }
 
     #[test]
-    fn a_late_drive_reader_does_not_delay_the_stop_on_a_frozen_scan_in_real_time() {
-        // The car's drive reader joins 1.5 s after its sensors; its scans stop later on.
-        let faults = Faults {
-            drive_reader_from: 45,
-            mute_scan_from: 110,
-            ..Faults::default()
-        };
-        let ticks = with_robot_at(Pace::Realtime, ros_cfg(InvalidRay::Stop), faults, |lp, _| {
-            let mut lp = lp.unwrap();
-            let mut ticks = Vec::new();
-            // Until ten stops in a row (or 8 s): the scans have frozen and the loop holds the car.
-            while ticks.len() < 240 {
-                ticks.push(lp.tick().unwrap());
-                let n = ticks.len();
-                if n > 10
-                    && ticks[n - 10..]
-                        .iter()
-                        .all(|t| matches!(t.event, Some(Event::Stale { .. })))
-                {
-                    break;
-                }
-            }
-            ticks
-        });
-        assert!(
-            ticks[0].stamp_s > 1e9,
-            "real-time robot stamps are dates: {}",
-            ticks[0].stamp_s
-        );
-        let frozen = ticks.last().unwrap().stamp_s;
-        let on_frozen: Vec<_> = ticks.iter().filter(|t| t.stamp_s == frozen).collect();
-        let driven = on_frozen.iter().filter(|t| t.event.is_none()).count();
-        assert!(driven <= 3, "{driven} commands went out on the last scan");
-        match on_frozen.iter().find_map(|t| t.event.clone()) {
-            Some(Event::Stale { age_s }) => assert!(age_s < 0.2, "the stop saw an age of {age_s} s"),
-            e => panic!("no stale stop on the frozen scan: {e:?}"),
-        }
-        assert!(
-            ticks.iter().filter(|t| t.event.is_none()).count() >= 20,
-            "the car drove before the scans stopped"
-        );
-    }
-
-    #[test]
     fn a_drive_reader_of_another_type_is_no_reader_and_startup_names_it() {
         #[derive(serde::Deserialize)]
         struct Twist {
@@ -350,48 +307,6 @@ mod ros2_loopback {
             Ok(_) => panic!("started with nobody able to read the commands"),
             Err(e) => e.to_string(),
         })
-    }
-
-    /// The short form of `tools/fault-matrix.py`: three rows of faults on the wire, injected by
-    /// the sim robot's sender, over DDS in real time (3.5 s each).
-    #[test]
-    fn faults_on_the_wire_stop_the_car_within_the_bound_and_no_older_frame_is_acted_on() {
-        use agvrl_deploy::stats::Stops;
-        let row = |spec: &str| {
-            let faults = Faults {
-                wire: spec.parse().unwrap(),
-                ..Faults::default()
-            };
-            with_robot_at(Pace::Realtime, ros_cfg(InvalidRay::Stop), faults, |lp, _| {
-                let mut lp = lp.unwrap();
-                let mut stops = Stops::default();
-                for _ in 0..105 {
-                    stops.add(&lp.tick().unwrap());
-                }
-                (stops, ())
-            })
-        };
-        // Copies and overtaken messages: dropped as not newer, never acted on; the car drives on.
-        // A set with a held-back message is a period older, so where the drive's tick falls just
-        // before the robot's (the phase of two free-running clocks) it meets the two-period
-        // limit and the car pauses for a tick: driving shares of 0.38-0.57 in that phase, over
-        // 0.6 in the other (measured, 10 runs). Each pause ends on the next fresh set.
-        let (s, _) = row("duplicate=0.3,reorder=0.3,seed=1");
-        assert_eq!(s.stamp_back, 0, "{s:?}");
-        assert!(s.driving_share() > 0.25, "{s:?}");
-        assert!(s.resume_s_max <= 2.0 / 30.0, "{s:?}");
-        // An outage of 0.5 s from 1 s in: one stop within 150 ms, driving again within a period
-        // or two of the first message back.
-        let (s, _) = row("outage=30+15");
-        assert_eq!(s.stops, 1, "{s:?}");
-        assert!(s.stop_after_frame_s_max <= 0.150, "{s:?}");
-        assert!(s.resume_s_max <= 2.0 / 30.0, "{s:?}");
-        // The sensor clock steps 0.5 s ahead: the frames' age cannot be judged; the car stops
-        // within the bound and stays stopped.
-        let (s, _) = row("clock_step=0.5@30");
-        assert_eq!(s.stops, 1, "{s:?}");
-        assert!(s.stop_after_frame_s_max <= 0.150, "{s:?}");
-        assert!(s.driving < 40, "{s:?}");
     }
 
     #[test]
@@ -555,44 +470,6 @@ mod ros2_loopback {
         assert!(ok, "{out}{err}");
         assert_eq!(kv(&out, "ticks"), 300.0, "{out}");
         assert_eq!(kv(&out, "action_diff_max"), 0.0, "{out}");
-    }
-
-    /// A 15 Hz camera against the 30 Hz loop in real time: an image counts `camera.max_lag_s`
-    /// past its stamp, so frames between images are not stale (without that allowance a tick
-    /// just before the next image sees one 67 ms old plus transport, over the 2-period limit).
-    #[test]
-    fn depth_images_at_half_the_tick_rate_keep_the_real_time_loop_fresh() {
-        let mut src =
-            agvrl_run::PolicySettings::resolve(None, Some(&shipped_policy("racing-oval-camera")), &[]).unwrap();
-        let env_cfg = src.drive_env_config();
-        let policy = src.load_policy().unwrap();
-        let faults = Faults {
-            image_every: 2,
-            ..Faults::default()
-        };
-        let camera = env_cfg.sim.camera.clone();
-        let (events, moving) = with_policy_robot_at(
-            policy,
-            &env_cfg,
-            camera,
-            Pace::Realtime,
-            ros_cfg(InvalidRay::Stop),
-            faults,
-            |lp, _| {
-                let mut lp = lp.unwrap();
-                let (mut events, mut moving) = (Vec::new(), 0);
-                for k in 0..90u64 {
-                    let t = lp.tick().unwrap();
-                    if let Some(e) = t.event {
-                        events.push((k, e));
-                    }
-                    moving += usize::from(t.control.throttle > 0.0);
-                }
-                (events, moving)
-            },
-        );
-        assert!(events.is_empty(), "{events:?}");
-        assert!(moving >= 80, "the policy drove on {moving} of 90 ticks");
     }
 
     /// A subscription on `name` of ROS type `ty` in `domain`, keeping everything received

@@ -1647,24 +1647,46 @@ mod tests {
             (f, c)
         }
 
-        proptest! {
-            #![proptest_config(ProptestConfig { cases: 400, max_global_rejects: 4000, ..ProptestConfig::default() })]
-
-            /// Whatever the filter sends that drives forward (the policy's control, or its
-            /// steering instead) has a path clear of every remembered point for the distance
-            /// to react, brake and look ahead.
-            #[test]
-            fn a_driving_control_the_filter_sends_has_a_clear_path(
-                (first, second, speeds, fan, proposed) in scene()
-            ) {
-                let (f, c) = run(&first, &second, speeds, fan, proposed);
-                if c.throttle > 0.0 {
+        /// Whatever the filter sends that drives forward (the policy's control, or its steering
+        /// instead) has a path clear of every remembered point for the distance to react, brake
+        /// and look ahead; and the scenes make both arms happen (a property of driving controls
+        /// that no scene drives would hold without checking anything).
+        #[test]
+        fn a_driving_control_the_filter_sends_has_a_clear_path() {
+            let config = ProptestConfig {
+                cases: 400,
+                ..ProptestConfig::default()
+            };
+            let (driving, held) = (std::cell::Cell::new(0u32), std::cell::Cell::new(0u32));
+            let outcome = proptest::test_runner::TestRunner::new(config).run(
+                &scene(),
+                |(first, second, speeds, fan, proposed)| {
+                    let (f, c) = run(&first, &second, speeds, fan, proposed);
+                    if c.throttle <= 0.0 {
+                        held.set(held.get() + 1);
+                        return Ok(());
+                    }
+                    driving.set(driving.get() + 1);
                     let v = speeds.1 as f32;
                     let need = v * f.cfg.reaction_s + v * v / (2.0 * f.cfg.decel_mps2) + f.cfg.lookahead_m;
                     let hit = brute_force_hit(&f, c.steering_rad, need, fan);
                     prop_assert!(hit.is_none(), "sent {c:?} ({:?}); blocked at {hit:?}", f.last);
-                }
+                    Ok(())
+                },
+            );
+            if let Err(e) = outcome {
+                panic!("{e}");
             }
+            let (driving, held) = (driving.get(), held.get());
+            eprintln!("driving={driving} held={held}");
+            assert!(
+                driving >= 40 && held >= 40,
+                "{driving} scenes drove, {held} held of 400"
+            );
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig { cases: 400, max_global_rejects: 4000, ..ProptestConfig::default() })]
 
             /// The reverse lengths look only at the points near enough to matter: they equal
             /// the lengths over every remembered point.
