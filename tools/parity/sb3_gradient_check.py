@@ -97,9 +97,10 @@ def main():
             g = t.grad.detach().numpy()
             sb3_grads[i][k] = (g.T if g.ndim == 2 else g.reshape(sb3_grads[i][k].shape))
         sb3_grads[8][0] = pol.log_std.grad.detach().numpy().reshape(sb3_grads[8][0].shape)
+        # "clip_fraction" is agvrl's at dump time; "sb3_clip_fraction" is SB3's, what the test checks.
         golden = {k: d[k] for k in ["shapes", "params", "obs", "actions", "old_log_prob", "advantages", "returns",
                                     "clip_fraction"]}
-        golden.update(use_sde=sde, sb3_pg_loss=policy_loss.item(), sb3_vf_loss=value_loss.item(),
+        golden.update(use_sde=sde, sb3_pg_loss=policy_loss.item(), sb3_vf_loss=value_loss.item(), sb3_clip_fraction=cf,
                       sb3_grads=[g.reshape(-1).tolist() for g in sb3_grads])
         json.dump(golden, open(out, "w"))
         print(f"wrote {out}")

@@ -4,20 +4,65 @@ use agvrl_rl::nets::Activation;
 use agvrl_rl::sac::EntCoef;
 use agvrl_rl::{PpoConfig, SacConfig};
 
+/// `SacConfig::default()` against SB3's `SAC.__init__` defaults, field by field (the pattern
+/// names every field, so a new one must be added here). One deliberate difference:
+/// `gradient_steps` is -1 (SB3's meaning: as many gradient steps as env steps collected) where
+/// SB3's default is 1 per round; with one env both take one gradient step per env step.
 #[test]
-fn sac_defaults_are_sb3s() {
+fn sac_defaults_are_sb3s_with_one_gradient_step_per_env_step() {
+    let SacConfig {
+        learning_rate,
+        buffer_size,
+        learning_starts,
+        batch_size,
+        tau,
+        gamma,
+        train_freq,
+        gradient_steps,
+        ent_coef,
+        target_update_interval,
+        target_entropy,
+        net_arch,
+        normalize_obs,
+        image,
+    } = SacConfig::default();
     let c = SacConfig::default();
-    assert_eq!(c.learning_rate, 3e-4);
-    assert_eq!(c.buffer_size, 1_000_000);
-    assert_eq!(c.learning_starts, 100);
-    assert_eq!(c.batch_size, 256);
-    assert_eq!(c.tau, 0.005);
-    assert_eq!(c.gamma, 0.99);
-    assert_eq!(c.train_freq, 1);
-    // SB3's -1: one gradient step per env step collected, which is SB3's default (1) on one env.
-    assert_eq!(c.gradient_steps, -1);
-    assert_eq!(c.gradient_steps_per_round(1), 1);
-    assert_eq!(c.gradient_steps_per_round(8), 8);
+    assert_eq!(learning_rate, 3e-4);
+    assert_eq!(buffer_size, 1_000_000);
+    assert_eq!(learning_starts, 100);
+    assert_eq!(batch_size, 256);
+    assert_eq!(tau, 0.005);
+    assert_eq!(gamma, 0.99);
+    assert_eq!(train_freq, 1);
+    // The shipped default: -1, not SB3's 1.
+    assert_eq!(gradient_steps, -1);
+    assert_eq!(
+        c.gradient_steps_per_round(1),
+        1,
+        "SB3's gradient_steps = 1 with n_envs = 1"
+    );
+    assert_eq!(
+        c.gradient_steps_per_round(8),
+        8,
+        "one per env step, where SB3's 1 would be one per 8"
+    );
+    assert_eq!(ent_coef, EntCoef::Auto("auto".into()));
+    assert_eq!(ent_coef.auto_init().unwrap(), Some(1.0), "SB3's \"auto\" starts at 1.0");
+    assert_eq!(target_update_interval, 1);
+    // SB3's target_entropy "auto" is -dim(action); None resolves to the same in `Sac::new`.
+    assert_eq!(target_entropy, None);
+    // SB3's net_arch for SAC: [256, 256] for actor and critics.
+    assert_eq!(net_arch, vec![256, 256]);
+    // SB3 normalises nothing without VecNormalize and has no image unless the env has one.
+    assert!(!normalize_obs);
+    assert!(image.is_none());
+    // SB3's use_sde = False: agvrl's SAC has no gSDE, so there is no field to check.
+}
+
+/// `gradient_steps` from a TOML table: a count as given, -1 as one per env step of the round
+/// (`train_freq` x n_envs), and 0 or below -1 refused by name.
+#[test]
+fn sac_gradient_steps_from_toml_count_per_round() {
     let c = SacConfig::from_toml("train_freq = 2\ngradient_steps = 3").unwrap();
     assert_eq!(c.gradient_steps_per_round(8), 3);
     let c = SacConfig::from_toml("train_freq = 2").unwrap();
@@ -26,12 +71,6 @@ fn sac_defaults_are_sb3s() {
         let e = SacConfig::from_toml(bad).unwrap_err().to_string();
         assert!(e.contains("gradient_steps"), "{bad}: {e}");
     }
-    assert_eq!(c.ent_coef, EntCoef::Auto("auto".into()));
-    assert_eq!(c.ent_coef.auto_init().unwrap(), Some(1.0));
-    assert_eq!(c.target_update_interval, 1);
-    assert_eq!(c.target_entropy, None);
-    assert_eq!(c.net_arch, vec![256, 256]);
-    assert!(!c.normalize_obs);
 }
 
 #[test]

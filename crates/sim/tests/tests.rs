@@ -1078,18 +1078,85 @@ mod camera_images {
         assert_eq!(f, same, "rendering is deterministic");
     }
 
+    /// All 16 entries of both matrices against PyBullet's own `computeViewMatrix` and
+    /// `computeProjectionMatrixFOV` (pybullet 3.2.7, `tools/parity/pybullet_camera_matrices.py`,
+    /// its output pasted). Flat column-major as PyBullet returns them: entry `c * 4 + r` is row
+    /// `r`, column `c`, so each line of four below is one column.
     #[test]
     fn view_and_projection_matrices_match_pybullet() {
-        let v = compute_view_matrix([1.0, 2.0, 3.0], [1.0, 2.0, 0.0], [0.0, 1.0, 0.0]);
-        // Looking straight down with y up: camera x = world x, camera z = world z.
-        let p = [1.0f32, 2.0, 0.0, 1.0];
-        let cam: Vec<f32> = (0..4).map(|r| (0..4).map(|c| v[c * 4 + r] * p[c]).sum()).collect();
-        assert!(
-            (cam[2] + 3.0).abs() < 1e-5 && cam[0].abs() < 1e-5 && cam[1].abs() < 1e-5,
-            "{cam:?}"
-        );
-        let m = compute_projection_matrix_fov(90.0, 2.0, 0.1, 10.0);
-        assert!((m[5] - 1.0).abs() < 1e-6 && (m[0] - 0.5).abs() < 1e-6 && m[11] == -1.0);
+        #[rustfmt::skip]
+        let views = [
+            // Straight down with y up.
+            (
+                [1.0, 2.0, 3.0],
+                [1.0, 2.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [
+                    1.0, 0.0, -0.0, 0.0,
+                    -0.0, 1.0, -0.0, 0.0,
+                    0.0, 0.0, 1.0, 0.0,
+                    -1.0, -2.0, -3.0, 1.0,
+                ],
+            ),
+            // Oblique, z up as on a car: no entry is trivially 0 or 1.
+            (
+                [0.3, -1.2, 0.8],
+                [2.0, 0.5, 0.1],
+                [0.0, 0.0, 1.0],
+                [
+                    0.70710677, 0.19767386, -0.6789146, 0.0,
+                    -0.70710677, 0.19767386, -0.6789146, 0.0,
+                    0.0, 0.9601302, 0.27955306, 0.0,
+                    -1.0606601, -0.5901977, -0.83466566, 1.0,
+                ],
+            ),
+        ];
+        #[rustfmt::skip]
+        let projections = [
+            (
+                [90.0, 2.0, 0.1, 10.0],
+                [
+                    0.49999997, 0.0, 0.0, 0.0,
+                    0.0, 0.99999994, 0.0, 0.0,
+                    0.0, 0.0, -1.020202, -1.0,
+                    0.0, 0.0, -0.20202021, 0.0,
+                ],
+            ),
+            // agvrl's default camera (80 deg, 0.01 to 100 m) at 4:3.
+            (
+                [80.0, 4.0 / 3.0, 0.01, 100.0],
+                [
+                    0.8938151, 0.0, 0.0, 0.0,
+                    0.0, 1.1917535, 0.0, 0.0,
+                    0.0, 0.0, -1.0002, -1.0,
+                    0.0, 0.0, -0.020002, 0.0,
+                ],
+            ),
+        ];
+        let same = |ours: [f32; 16], pybullet: [f32; 16], what: &str| {
+            for (k, (a, b)) in ours.iter().zip(&pybullet).enumerate() {
+                assert!(
+                    (a - b).abs() <= 1e-6 * b.abs().max(1.0),
+                    "{what}: entry {k} (row {}, column {}): {a} vs PyBullet's {b}",
+                    k % 4,
+                    k / 4
+                );
+            }
+        };
+        for (eye, target, up, want) in views {
+            same(
+                compute_view_matrix(eye, target, up),
+                want,
+                &format!("view from {eye:?}"),
+            );
+        }
+        for ([fov, aspect, near, far], want) in projections {
+            same(
+                compute_projection_matrix_fov(fov, aspect, near, far),
+                want,
+                &format!("projection fov {fov}"),
+            );
+        }
     }
 }
 
@@ -1432,11 +1499,11 @@ mod several_cars {
         s.linvel_w_of(i).x
     }
 
-    /// Two cars head-on at top speed, the second twice as heavy: they never pass through each
-    /// other, both report the contact at a point between them, and over the impact the
-    /// momentum one car loses is what the other gains, up to what the tyres can push meanwhile
-    /// (the drive's largest force times the impact's length); rapier's contacts are inelastic,
-    /// so both end at the common speed (m1 v1 + m2 v2) / (m1 + m2).
+    /// Two cars head-on at top speed, the second twice as heavy, in both dynamics modes: they
+    /// never pass through each other, both report the contact at a point between them, and over
+    /// the impact the momentum one car loses is what the other gains, up to what the tyres can
+    /// push meanwhile (the drive's largest force times the impact's length); rapier's contacts
+    /// are inelastic, so both end at the common speed (m1 v1 + m2 v2) / (m1 + m2).
     #[test]
     fn two_cars_driven_into_each_other_exchange_momentum_and_never_pass_through() {
         let settings = SimSettings {
@@ -1500,40 +1567,38 @@ mod several_cars {
                 before.0 > 0.95 * top && -before.1 > 0.95 * top,
                 "{mode:?}: speeds {before:?} at impact, top speed {top}"
             );
-            let _ = step;
-            if mode == DynamicsMode::Raycast {
-                // Replay up to the impact, then until the closing speed is gone.
-                s.reset_cars(&[at(-8.0, 0.0, 0.0), at(8.0, 0.0, std::f32::consts::PI)])
-                    .unwrap();
-                for _ in 0..step {
-                    s.step_cars(&[full, full]).unwrap();
-                }
-                let mut steps = 0;
-                while speed_x(&s, 0) - speed_x(&s, 1) > 0.1 * (before.0 - before.1) {
-                    s.step_cars(&[full, full]).unwrap();
-                    steps += 1;
-                    assert!(steps < 50, "{mode:?}: the impact did not stop the closing speed");
-                }
-                let after = (speed_x(&s, 0), speed_x(&s, 1));
-                let tyres = 2.0 * drive_n * steps as f32 * settings.control_period_s as f32;
-                let p0 = m[0] * before.0 + m[1] * before.1;
-                let dp = m[0] * after.0 + m[1] * after.1 - p0;
+            // Replay up to the impact, then until the closing speed is gone.
+            s.reset_cars(&[at(-8.0, 0.0, 0.0), at(8.0, 0.0, std::f32::consts::PI)])
+                .unwrap();
+            for _ in 0..step {
+                s.step_cars(&[full, full]).unwrap();
+            }
+            let mut steps = 0;
+            while speed_x(&s, 0) - speed_x(&s, 1) > 0.1 * (before.0 - before.1) {
+                s.step_cars(&[full, full]).unwrap();
+                steps += 1;
+                assert!(steps < 50, "{mode:?}: the impact did not stop the closing speed");
+            }
+            // The base's speed stands for the whole car's: the wheels move with it along x.
+            let after = (speed_x(&s, 0), speed_x(&s, 1));
+            let tyres = 2.0 * drive_n * steps as f32 * settings.control_period_s as f32;
+            let p0 = m[0] * before.0 + m[1] * before.1;
+            let dp = m[0] * after.0 + m[1] * after.1 - p0;
+            assert!(
+                tyres < 0.25 * m[0] * before.0,
+                "{mode:?}: the bound ({tyres} N s over {steps} steps) must be small against the momentum ({} N s)",
+                m[0] * before.0
+            );
+            assert!(
+                dp.abs() <= tyres,
+                "{mode:?}: total momentum changed by {dp} N s in the impact (tyres: {tyres}); speeds {before:?} -> {after:?}"
+            );
+            let common = p0 / (m[0] + m[1]);
+            for v in [after.0, after.1] {
                 assert!(
-                    tyres < 0.25 * m[0] * before.0,
-                    "the bound ({tyres} N s over {steps} steps) must be small against the momentum ({} N s)",
-                    m[0] * before.0
+                    (v - common).abs() <= 0.1 * (before.0 - before.1) + tyres / m[0],
+                    "{mode:?}: speeds {after:?} after the impact, inelastic closed form {common}"
                 );
-                assert!(
-                    dp.abs() <= tyres,
-                    "total momentum changed by {dp} N s in the impact (tyres: {tyres}); speeds {before:?} -> {after:?}"
-                );
-                let common = p0 / (m[0] + m[1]);
-                for v in [after.0, after.1] {
-                    assert!(
-                        (v - common).abs() <= 0.1 * (before.0 - before.1) + tyres / m[0],
-                        "speeds {after:?} after the impact, inelastic closed form {common}"
-                    );
-                }
             }
         }
     }

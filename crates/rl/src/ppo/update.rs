@@ -355,10 +355,14 @@ impl<E: Env> Ppo<E> {
     }
 
     /// Loss and gradients (before clipping) of one minibatch at `params` (agvrl's layout; `adv`
-    /// already normalised): `(pg_loss, vf_loss, grads)`. For checking against another
-    /// implementation's numbers (tests against Stable-Baselines3's).
+    /// already normalised): `(pg_loss, vf_loss, clip_fraction, grads)`. For checking against
+    /// another implementation's numbers (tests against Stable-Baselines3's).
     #[doc(hidden)]
-    pub fn gradients_at(&mut self, params: Vec<Vec<f32>>, minibatch: [&[f32]; 5]) -> Result<(f64, f64, Vec<Vec<f32>>)> {
+    pub fn gradients_at(
+        &mut self,
+        params: Vec<Vec<f32>>,
+        minibatch: [&[f32]; 5],
+    ) -> Result<(f64, f64, f64, Vec<Vec<f32>>)> {
         if params.len() != self.params.data.len()
             || params.iter().zip(&self.params.data).any(|(p, q)| p.len() != q.len())
         {
@@ -369,7 +373,7 @@ impl<E: Env> Ppo<E> {
         self.params.data = params;
         let [obs, act, old_lp, adv, ret] = minibatch;
         let (h, g) = self.minibatch(obs.to_vec(), act.to_vec(), old_lp, adv, ret, None)?;
-        Ok((h.pg_loss, h.vf_loss, g))
+        Ok((h.pg_loss, h.vf_loss, h.clip_fraction, g))
     }
 
     pub(crate) fn update(&mut self, r: &Rollout) -> Result<()> {
@@ -545,10 +549,21 @@ mod tests {
         assert_eq!(h.correction > 0.0, correction_coef > 0.0);
         assert!((fused - loss).abs() < 1e-4, "{fused} vs {loss}");
         assert!(h.clip_fraction > 0.0 && h.clip_fraction < 1.0);
-        let close = |p: &[f32], q: &[f32]| p.iter().zip(q).all(|(p, q)| (p - q).abs() < 1e-5 + 1e-3 * q.abs());
-        assert!(close(&h.d_mean, &d_mean), "{:?}\n{:?}", &h.d_mean[..6], &d_mean[..6]);
-        assert!(close(&h.d_value, &d_value));
-        assert!(close(&h.d_log_std, &d_log_std), "{:?} {:?}", h.d_log_std, d_log_std);
+        // Equal lengths first: a zip would pass a missing gradient.
+        let close = |p: &[f32], q: &[f32], name: &str| {
+            assert!(
+                !q.is_empty() && p.len() == q.len(),
+                "{name}: {} values vs {}",
+                p.len(),
+                q.len()
+            );
+            for (k, (p, q)) in p.iter().zip(q).enumerate() {
+                assert!((p - q).abs() < 1e-5 + 1e-3 * q.abs(), "{name}[{k}]: {p} vs {q}");
+            }
+        };
+        close(&h.d_mean, &d_mean, "d_mean");
+        close(&h.d_value, &d_value, "d_value");
+        close(&h.d_log_std, &d_log_std, "d_log_std");
     }
 
     /// An env of `o`-value observations and 2 actions, only for building learners of that shape.
@@ -702,6 +717,7 @@ mod tests {
             let surrogate =
                 (mean * t3(d_mean.clone(), [1, n, a])).sum() + (value * t3(d_value.clone(), [1, n, 1])).sum();
             let auto = grads_of(&params, &surrogate.backward()).unwrap();
+            assert_eq!(host_grads.len(), auto.len(), "{what}");
             for k in (0..auto.len()).filter(|k| *k != l.log_std) {
                 close(&host_grads[k], &auto[k], &format!("grad {k}"));
             }
@@ -719,6 +735,7 @@ mod tests {
                 // Products of other shapes round differently: equal to f32 rounding.
                 let near = |p: f64, q: f64| (p - q).abs() < 1e-5 * (1.0 + q.abs());
                 assert!(near(h1.pg_loss, h2.pg_loss) && near(h1.vf_loss, h2.vf_loss), "{what}");
+                assert_eq!(g1.len(), g2.len(), "{what}");
                 for (k, (p, q)) in g1.iter().zip(&g2).enumerate() {
                     close(p, q, &format!("split grad {k}"));
                 }
