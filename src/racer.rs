@@ -81,6 +81,9 @@ pub fn drive(
             let mut r = racer.borrow_mut();
             if k == 0 {
                 r.reset(frame, map);
+                if let Some(n) = r.raceline_points_moved() {
+                    eprintln!("episode {episode}: raceline_points_moved={n}");
+                }
             }
             let c = r.control(frame, map);
             let [a0, a1] = cfg.action_mapping.action(c, vehicle.steering_limit_rad());

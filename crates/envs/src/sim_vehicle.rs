@@ -144,7 +144,11 @@ pub(crate) fn map_of(sim: &Sim) -> MapInfo {
         .collect();
     let track = match (oval, &sim.scene().centreline) {
         (Some(t), _) => Some(crate::api::Track::Oval(t)),
-        (None, Some(c)) => Some(crate::api::Track::Path(crate::api::PathTrack::new(c.clone()))),
+        (None, Some(c)) => Some(crate::api::Track::Path(
+            crate::api::PathTrack::new(c.clone())
+                .with_clearance(centreline_clearance(sim, c))
+                .expect("one clearance per point"),
+        )),
         (None, None) => None,
     };
     MapInfo {
@@ -154,6 +158,28 @@ pub(crate) fn map_of(sim: &Sim) -> MapInfo {
         cell_m: CELL_M,
         subjects,
     }
+}
+
+/// Largest clearance measured at a centre-line point, metres: far wider than any lane a car
+/// races on, and a bound that keeps the first point's search short.
+const MAX_CLEARANCE_M: f32 = 10.0;
+
+/// Distance from each point of the closed centre line `c` to the nearest wall, metres (at most
+/// [`MAX_CLEARANCE_M`]). A point's clearance is at most its predecessor's plus the step between
+/// them, so each search starts from that bound.
+fn centreline_clearance(sim: &Sim, c: &[[f32; 2]]) -> Vec<f32> {
+    let mut out: Vec<f32> = Vec::with_capacity(c.len());
+    for (i, p) in c.iter().enumerate() {
+        let bound = match i.checked_sub(1) {
+            Some(j) => {
+                let q = c[j];
+                (out[j] + (p[0] - q[0]).hypot(p[1] - q[1]) + 1e-3).min(MAX_CLEARANCE_M)
+            }
+            None => MAX_CLEARANCE_M,
+        };
+        out.push(sim.clearance_at(p[0], p[1], bound));
+    }
+    out
 }
 
 impl SimVehicle {

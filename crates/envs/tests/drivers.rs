@@ -244,3 +244,40 @@ fn follow_the_gap_laps_the_oval_and_the_map_tracks_without_contact() {
         }
     }
 }
+
+/// Pure pursuit along a raceline too wide for the car, the bean's centre line moved to 0.1 m
+/// from its right-hand wall (the car's side would be in the wall), laps the bean without
+/// touching it: at reset the fit pulls the raceline in to leave the car its half width and
+/// `wall_margin_m` from the wall.
+#[test]
+fn pure_pursuit_fits_a_too_wide_raceline_and_laps_the_bean_without_contact() {
+    let cfg = config(Some("bean"), SpawnMode::Fixed);
+    let mut car = make_sim_car("racing-oval", &cfg).unwrap();
+    car.reset(0).unwrap();
+    let track = car.map().unwrap().track.clone().unwrap();
+    let Track::Path(centre) = &track else {
+        panic!("the bean is a centre line")
+    };
+    let clearance = centre.clearances_m().expect("the map measures the clearance");
+    let pts = centre.points();
+    let n = pts.len();
+    let wide: Vec<[f32; 2]> = (0..n)
+        .map(|i| {
+            let (a, b) = (pts[(i + n - 1) % n], pts[(i + 1) % n]);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let l = dx.hypot(dy);
+            // To the right of the racing direction.
+            let o = clearance[i] - 0.1;
+            [pts[i][0] + o * dy / l, pts[i][1] - o * dx / l]
+        })
+        .collect();
+    let limits = xtenth();
+    let path = RacePath::new(&wide, &limits, 1.0).unwrap();
+    let len = path.len();
+    let mut driver = PurePursuit::new(PurePursuitSettings::default(), limits, Some(path)).unwrap();
+    let run = drive(&mut driver, &cfg, 0, 1);
+    let moved = driver.raceline_points_moved().expect("the raceline was fitted");
+    assert!(moved > len / 2, "{moved} of {len} points moved");
+    assert_eq!(run.contact_s, None, "{:?}", run.lap_s);
+    assert_eq!(run.lap_s.len(), 1);
+}

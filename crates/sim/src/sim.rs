@@ -897,6 +897,32 @@ impl Sim {
         })
     }
 
+    /// Distance from (x, y) to the nearest scene object, metres, measured as [`Sim::free_at`]
+    /// tests (from a vertical line from 0.1 m to 1 m above the ground), so `free_at` with a
+    /// smaller radius is free; `max_m` when nothing is nearer (a known upper bound, such as a
+    /// neighbour's clearance plus the step to it, makes the search cheaper).
+    pub fn clearance_at(&self, x: f32, y: f32, max_m: f32) -> f32 {
+        let line = rapier3d::parry::shape::Segment::new(Vector::new(0.0, 0.0, -0.45), Vector::new(0.0, 0.0, 0.45));
+        let pose = Pose::from_parts(Vector::new(x, y, 0.55), Rotation::IDENTITY);
+        let mut best = max_m;
+        for e in &self.world.statics.entries {
+            if e.object_id.is_none() || e.aabb.maxs.z < 0.1 || e.aabb.mins.z > 1.0 {
+                continue;
+            }
+            // The box's horizontal distance bounds the shape's from below.
+            let dx = (e.aabb.mins.x - x).max(x - e.aabb.maxs.x).max(0.0);
+            let dy = (e.aabb.mins.y - y).max(y - e.aabb.maxs.y).max(0.0);
+            if dx.hypot(dy) >= best {
+                continue;
+            }
+            let d = rapier3d::parry::query::distance(&pose, &line, &e.pose, e.shape.as_ref())
+                .map(|d| d.distance)
+                .unwrap_or(0.0);
+            best = best.min(d);
+        }
+        best
+    }
+
     /// The physics world (read-only), for renderers and tests. With free flight the vehicle's
     /// colliders keep the pose of the last step that went through rapier; the vehicle's pose is
     /// `base_pose`.

@@ -2239,3 +2239,22 @@ mod circuits {
         assert!((pose.yaw_rad - yaw).abs() < 0.02, "{pose:?} vs yaw {yaw}");
     }
 }
+
+/// `clearance_at` is the distance to the nearest wall: in a square room with inner faces at
+/// +-2 m, 2 m less the larger coordinate; capped at its bound; and `free_at` agrees on either
+/// side of it.
+#[test]
+fn clearance_at_is_the_distance_to_the_nearest_wall() {
+    let r = room(2.0, "clearance");
+    let s = sim(r.src(), DynamicsMode::Raycast);
+    for (x, y) in [(0.0f32, 0.0f32), (1.5, 0.2), (-0.3, -1.9), (1.2, 1.4)] {
+        let expected = 2.0 - x.abs().max(y.abs());
+        let c = s.clearance_at(x, y, 10.0);
+        assert!((c - expected).abs() < 1e-4, "({x}, {y}): {c}, expected {expected}");
+        assert!(
+            s.free_at(x, y, c - 0.01) && !s.free_at(x, y, c + 0.01),
+            "({x}, {y}): {c}"
+        );
+        assert_eq!(s.clearance_at(x, y, 0.5 * expected), 0.5 * expected);
+    }
+}

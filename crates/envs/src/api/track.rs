@@ -89,6 +89,8 @@ pub struct PathTrack {
     points: Vec<[f32; 2]>,
     /// Arc length at each point; the last entry is the lap.
     cum_s: Vec<f32>,
+    /// Distance from each point to the nearest wall, metres, when known.
+    clearance_m: Option<Vec<f32>>,
 }
 
 impl PathTrack {
@@ -103,7 +105,51 @@ impl PathTrack {
             s += ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
             cum_s.push(s);
         }
-        Self { points, cum_s }
+        Self {
+            points,
+            cum_s,
+            clearance_m: None,
+        }
+    }
+
+    /// The track with the distance from each centre-line point to the nearest wall, metres (one
+    /// per point, in order; a list of another length is an error).
+    pub fn with_clearance(mut self, clearance_m: Vec<f32>) -> Result<Self, String> {
+        if clearance_m.len() != self.points.len() {
+            return Err(format!(
+                "{} clearances for {} centre-line points",
+                clearance_m.len(),
+                self.points.len()
+            ));
+        }
+        self.clearance_m = Some(clearance_m);
+        Ok(self)
+    }
+
+    /// The centre-line points, metres, in racing order.
+    pub fn points(&self) -> &[[f32; 2]] {
+        &self.points
+    }
+
+    /// Distance from each centre-line point to the nearest wall, metres, when known.
+    pub fn clearances_m(&self) -> Option<&[f32]> {
+        self.clearance_m.as_deref()
+    }
+
+    /// Distance from the centre-line point at arc length `s` to the nearest wall, metres
+    /// (linear between the points), when known.
+    pub fn clearance_at_m(&self, s: f32) -> Option<f32> {
+        let c = self.clearance_m.as_ref()?;
+        let n = self.points.len();
+        let s = s.rem_euclid(self.lap_length_m());
+        let i = self.cum_s[1..].partition_point(|&v| v <= s).min(n - 1);
+        let len = self.cum_s[i + 1] - self.cum_s[i];
+        let t = if len > 0.0 {
+            ((s - self.cum_s[i]) / len).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        Some(c[i] + t * (c[(i + 1) % n] - c[i]))
     }
 
     /// Length of the centre line, metres.
@@ -198,6 +244,25 @@ impl Track {
         match self {
             Self::Oval(t) => t.centreline_at(s),
             Self::Path(t) => t.centreline_at(s),
+        }
+    }
+
+    /// Signed distance from the centre line, metres (the oval: positive outwards; a centre
+    /// line: positive on the right of the racing direction).
+    pub fn lateral_offset_m(&self, x: f32, y: f32) -> f32 {
+        match self {
+            Self::Oval(t) => t.lateral_offset_m(x, y),
+            Self::Path(t) => t.lateral_offset_m(x, y),
+        }
+    }
+
+    /// Distance from the centre-line point at arc length `s` to the nearest wall, metres: the
+    /// oval's half lane, `(outer - inner radius) / 2`; a centre line's where the map measured it
+    /// (`SimVehicle` does), else None.
+    pub fn clearance_at_m(&self, s: f32) -> Option<f32> {
+        match self {
+            Self::Oval(t) => Some(0.5 * (t.outer_radius_m - t.inner_radius_m)),
+            Self::Path(t) => t.clearance_at_m(s),
         }
     }
 }

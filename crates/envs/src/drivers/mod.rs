@@ -32,6 +32,12 @@ pub trait Driver: Send {
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>);
     /// The control for the period that starts with `frame`.
     fn control(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Control;
+    /// How many points of its raceline the driver moved to fit the car on the last reset's
+    /// track (pure pursuit with a raceline, on a map whose track knows its clearance); None
+    /// where no fit ran.
+    fn raceline_points_moved(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// Which classical racer: the names commands and settings use.

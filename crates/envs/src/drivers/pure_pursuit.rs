@@ -12,6 +12,11 @@ const SEARCH_BACK_M: f64 = 1.0;
 /// How far ahead of the last nearest point a window search looks, metres: several periods at
 /// top speed.
 const SEARCH_AHEAD_M: f64 = 4.0;
+/// Lookahead per metre of the rear axle's distance from the path, when that exceeds the
+/// speed's lookahead: a car off the path (at the start, on the centre line, of a raceline that
+/// runs near a wall) joins it at about `atan(1/5)` = 11 degrees, so it does not cross it at a
+/// steep angle and overshoot towards the wall behind it.
+const JOIN_LOOKAHEAD_PER_M: f64 = 5.0;
 
 /// Settings of [`PurePursuit`] (a TOML table; unknown keys are an error). The defaults are tuned
 /// for XTENTH-CAR (1.79 m/s, 0.33 m wheelbase, 0.36 rad) on the oval and the shipped map tracks
@@ -32,6 +37,11 @@ pub struct PurePursuitSettings {
     /// Throttle added per m/s the measured speed falls short of the target (taken away above
     /// it), 1/(m/s); used when the frame carries an IMU.
     pub speed_gain_per_mps: f64,
+    /// Room a raceline leaves between the car's side and the nearest wall, metres: at reset,
+    /// on a map whose track knows its clearance, every raceline point further from the centre
+    /// line than the clearance less the car's half width less this moves in to that distance
+    /// ([`RacePath::fit_to`]).
+    pub wall_margin_m: f64,
 }
 
 impl Default for PurePursuitSettings {
@@ -47,6 +57,11 @@ impl Default for PurePursuitSettings {
             lookahead_per_mps: 0.2,
             lookahead_max_m: 2.0,
             speed_gain_per_mps: 1.0,
+            // Pure pursuit's tracking error off a raceline's bends (up to 0.11 m on F1TENTH's
+            // circuits), the 0.02 m at which contact counts, and walls traced from 0.05 m map
+            // pixels, which bulge between the centre-line points the clearance is measured at:
+            // at 0.1 and 0.15 m XTENTH-CAR still touched a wall on some of them.
+            wall_margin_m: 0.2,
         }
     }
 }
@@ -72,6 +87,7 @@ impl PurePursuitSettings {
         for (name, v) in [
             ("lookahead_per_mps", self.lookahead_per_mps),
             ("speed_gain_per_mps", self.speed_gain_per_mps),
+            ("wall_margin_m", self.wall_margin_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(format!("pure_pursuit.{name} must be finite and >= 0, got {v}"));
@@ -109,6 +125,10 @@ pub struct PurePursuit {
     limits: CarLimits,
     /// Whether the path is built from each episode's map (none was given to `new`).
     from_map: bool,
+    /// The raceline given to `new`, before any fit.
+    raceline: Option<RacePath>,
+    /// The track the path was last fitted to, and how many raceline points the fit moved.
+    fitted: Option<(crate::api::Track, usize)>,
     path: Option<RacePath>,
     /// Index of the path point nearest the rear axle at the last control.
     nearest_idx: Option<usize>,
@@ -129,6 +149,8 @@ impl PurePursuit {
             settings,
             limits,
             from_map: path.is_none(),
+            raceline: path.clone(),
+            fitted: None,
             path,
             nearest_idx: None,
         })
@@ -205,11 +227,27 @@ impl Driver for PurePursuit {
             self.path = map
                 .and_then(|m| m.track.as_ref())
                 .and_then(|t| RacePath::from_track(t, &self.limits, self.settings.speed_scale).ok());
+        } else if let (Some(raceline), Some(track)) = (self.raceline.as_ref(), map.and_then(|m| m.track.as_ref())) {
+            // Fit the raceline to the car on this track, once per track (a generated circuit
+            // changes every episode). A fit that fails (a degenerate result) keeps the raceline.
+            if self.fitted.as_ref().is_none_or(|(t, _)| t != track) {
+                let (path, moved) = raceline
+                    .fit_to(track, &self.limits, self.settings.wall_margin_m)
+                    .unwrap_or_else(|_| (raceline.clone(), 0));
+                self.path = Some(path);
+                self.fitted = Some((track.clone(), moved));
+            }
         }
         if let (Some(path), Some(gps)) = (self.path.as_ref(), frame.gps.as_ref()) {
             let c = rear_axle(&self.limits, gps);
             nearest(path, &mut self.nearest_idx, c, self.settings.lookahead_max_m);
         }
+    }
+
+    /// How many points of the raceline given to `new` the last fit to a map's track moved (see
+    /// [`PurePursuitSettings::wall_margin_m`]); None before a fit, or without a raceline.
+    fn raceline_points_moved(&self) -> Option<usize> {
+        self.fitted.as_ref().map(|(_, n)| *n)
     }
 
     fn control(&mut self, frame: &SensorFrame, _map: Option<&MapInfo>) -> Control {
@@ -220,7 +258,12 @@ impl Driver for PurePursuit {
         let c = rear_axle(&self.limits, gps);
         let i = nearest(path, &mut self.nearest_idx, c, self.settings.lookahead_max_m);
         let measured = measured_speed_mps(frame);
-        let ld = self.settings.lookahead_m(measured.unwrap_or(path.speeds_mps()[i]));
+        let p = path.points()[i];
+        let off_m = (p[0] - c[0]).hypot(p[1] - c[1]);
+        let ld = self
+            .settings
+            .lookahead_m(measured.unwrap_or(path.speeds_mps()[i]))
+            .max(JOIN_LOOKAHEAD_PER_M * off_m);
         let (g, j) = goal_point(path, c, i, ld);
         let (dx, dy) = (g[0] - c[0], g[1] - c[1]);
         let d = dx.hypot(dy).max(1e-6);

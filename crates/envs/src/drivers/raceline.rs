@@ -25,6 +25,8 @@ pub struct RacePath {
     spacing_m: f64,
     curvature_1pm: Vec<f64>,
     speed_mps: Vec<f64>,
+    /// The profile's scale, to rebuild it for a fitted path.
+    speed_scale: f64,
 }
 
 impl RacePath {
@@ -62,7 +64,45 @@ impl RacePath {
             spacing_m,
             curvature_1pm,
             speed_mps,
+            speed_scale,
         })
+    }
+
+    /// The path fitted to `track` for a car of `limits`, and how many of its points moved. Each
+    /// point further from the centre line than the track allows, its clearance at the nearest
+    /// centre-line point less the car's half width less `margin_m` (at least 0), moves
+    /// straight towards that centre-line point to that distance; the moved points make a new
+    /// path as [`RacePath::new`] does (resampled, with its curvature and speed profile at this
+    /// path's scale). A path that needs no move, or a track without clearances, gives the path
+    /// unchanged.
+    ///
+    /// The clearance is the distance to the nearest wall on either side, so the wall the point
+    /// moves towards is at least that far from the centre line.
+    pub fn fit_to(&self, track: &Track, limits: &CarLimits, margin_m: f64) -> Result<(Self, usize), String> {
+        let mut moved = 0;
+        let mut points = Vec::with_capacity(self.points.len());
+        for &p in &self.points {
+            let s = track.centreline_s(p[0] as f32, p[1] as f32);
+            let Some(clearance) = track.clearance_at_m(s) else {
+                return Ok((self.clone(), 0));
+            };
+            let (c, _) = track.centreline_at(s);
+            let c = [c[0] as f64, c[1] as f64];
+            let v = [p[0] - c[0], p[1] - c[1]];
+            let off = v[0].hypot(v[1]);
+            let room = (clearance as f64 - limits.half_width_m - margin_m).max(0.0);
+            if off > room {
+                moved += 1;
+                let k = room / off;
+                points.push([(c[0] + k * v[0]) as f32, (c[1] + k * v[1]) as f32]);
+            } else {
+                points.push([p[0] as f32, p[1] as f32]);
+            }
+        }
+        if moved == 0 {
+            return Ok((self.clone(), 0));
+        }
+        Ok((Self::new(&points, limits, self.speed_scale)?, moved))
     }
 
     /// The centre line of `track` (the oval's closed form, or a map-file track's polyline),
@@ -450,6 +490,54 @@ mod tests {
         // Points that parse but make no lap.
         let e = RacePath::new(&[[0.0, 0.0], [0.0, 0.0], [0.0, 0.0]], &xtenth(0.0), 1.0).unwrap_err();
         assert!(e.contains("0.000 m long"), "{e}");
+    }
+
+    /// A circle track of centre radius 3 m whose walls are 0.6 m either side.
+    fn circle_track() -> Track {
+        let track = crate::api::PathTrack::new(circle(3.0, 200)).with_clearance(vec![0.6; 200]);
+        Track::Path(track.unwrap())
+    }
+
+    /// A raceline 0.05 m from the circle track's outer wall, and one 0.05 m from its inner wall,
+    /// move in until every point leaves the car's half width and the margin to the wall.
+    #[test]
+    fn a_raceline_along_a_wall_is_pulled_in_to_leave_the_car_room() {
+        let (limits, track, margin) = (xtenth(0.0), circle_track(), 0.2);
+        for r in [3.55, 2.45] {
+            let line = RacePath::new(&circle(r, 300), &limits, 1.0).unwrap();
+            let (fitted, moved) = line.fit_to(&track, &limits, margin).unwrap();
+            assert_eq!(moved, line.len(), "r {r}");
+            for p in fitted.points() {
+                let (x, y) = (p[0] as f32, p[1] as f32);
+                let s = track.centreline_s(x, y);
+                let room = track.clearance_at_m(s).unwrap() - track.lateral_offset_m(x, y).abs();
+                assert!(
+                    room as f64 >= limits.half_width_m + margin - 1e-3,
+                    "r {r}: {p:?} leaves {room} m"
+                );
+            }
+            // Pulled in as far as needed, not further: to 0.6 - 0.192 - 0.2 m off the centre line.
+            let rho = fitted.points()[0][0].hypot(fitted.points()[0][1]);
+            assert!(
+                (rho - 3.0).abs() > 0.6 - limits.half_width_m - margin - 2e-3,
+                "r {r}: {rho}"
+            );
+            // A wider path's profile was rebuilt for its new curvature.
+            assert!((fitted.curvatures_1pm()[0] - 1.0 / rho).abs() < 0.01, "r {r}");
+        }
+    }
+
+    /// A raceline that leaves the car room everywhere comes out unchanged, as does any raceline
+    /// on a track whose clearance is unknown.
+    #[test]
+    fn a_raceline_inside_the_track_is_not_moved() {
+        let (limits, margin) = (xtenth(0.0), 0.2);
+        let line = RacePath::new(&circle(3.15, 300), &limits, 1.0).unwrap();
+        let (fitted, moved) = line.fit_to(&circle_track(), &limits, margin).unwrap();
+        assert_eq!((moved, &fitted), (0, &line));
+        let unknown = Track::Path(crate::api::PathTrack::new(circle(3.0, 200)));
+        let wide = RacePath::new(&circle(3.55, 300), &limits, 1.0).unwrap();
+        assert_eq!(wide.fit_to(&unknown, &limits, margin).unwrap(), (wide.clone(), 0));
     }
 
     #[test]
