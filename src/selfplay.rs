@@ -2,13 +2,14 @@
 //! `RaceEnv` whose car 0 the learner drives; the other cars are driven in-process by
 //! opponents drawn per race from a pool of the learner's snapshots (the newest half the time,
 //! else any earlier one, so the policy keeps beating its past selves). The training loop adds
-//! a snapshot after every chunk; draws come from each env's own seeded stream, so a run replays
-//! bit for bit on the same CPU.
+//! a snapshot after every chunk, saved in the run directory's `pool/` for a resume; draws come
+//! from each env's own seeded stream, so a run replays bit for bit on the same CPU.
 
 use agvrl_envs::{BoxSpace, Env, EnvConfig, EnvError, Info, MultiEnv as _, RaceEnv, Step};
 use agvrl_rl::{Policy, PolicyData};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, RwLock};
 
 /// Probability that an opponent is the newest snapshot rather than an earlier one.
@@ -24,6 +25,49 @@ impl Pool {
         if let Ok(mut g) = self.0.write() {
             g.push(Arc::new(data));
         }
+    }
+
+    /// Add the snapshot taken at `steps`, first saved as `dir/<steps>.agvrl`.
+    pub fn push_saved(&self, data: PolicyData, dir: &Path, steps: u64) -> agvrl_rl::Result<()> {
+        data.save(&dir.join(format!("{steps}.agvrl")))?;
+        self.push(data);
+        Ok(())
+    }
+
+    /// Add the snapshots saved in `dir` up to `steps` (a resumed run's checkpoint), oldest
+    /// first: the pool the run held then. Later ones (a kill between a snapshot and the
+    /// checkpoint) are removed, as the resumed run takes them again. Nothing when `dir` does not
+    /// exist (a run from before pools were saved).
+    pub fn restore(&self, dir: &Path, steps: u64) -> anyhow::Result<()> {
+        let entries = match std::fs::read_dir(dir) {
+            Ok(e) => e,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+            Err(e) => return Err(anyhow::Error::new(e).context(format!("reading {}", dir.display()))),
+        };
+        let mut saved: Vec<(u64, PathBuf)> = vec![];
+        for entry in entries {
+            let path = entry?.path();
+            let step = path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .and_then(|n| n.strip_suffix(".agvrl"))
+                .and_then(|n| n.parse::<u64>().ok());
+            match step {
+                Some(s) if s <= steps => saved.push((s, path)),
+                Some(_) => std::fs::remove_file(&path)?,
+                None => {}
+            }
+        }
+        saved.sort();
+        for (_, path) in saved {
+            self.push(PolicyData::load(&path)?);
+        }
+        Ok(())
+    }
+
+    /// The snapshots, oldest first.
+    pub fn snapshots(&self) -> Vec<Arc<PolicyData>> {
+        self.0.read().map_or(vec![], |g| g.clone())
     }
 
     /// Snapshots held.

@@ -8,7 +8,7 @@ use crate::selfplay::{Pool, SelfPlayEnv};
 use crate::viz::{self, Recorder, Sink};
 use agvrl_envs::wrappers::TimeLimit;
 use agvrl_envs::{Env, VecEnv, make};
-use agvrl_rl::{Algorithm, Control, DeviceChoice, Learner, Policy, Ppo, Progress, Sac};
+use agvrl_rl::{Algorithm, Control, Device, DeviceChoice, Learner, Policy, Ppo, Progress, Sac};
 use agvrl_run::{Run, RunDir, RunReport, files, stamp, write_atomic};
 use anyhow::{Context, Result};
 use clap::Args;
@@ -185,13 +185,62 @@ fn vec_env(cfg: &RunConfig, pool: &Pool) -> Result<VecEnv<Box<dyn Env>>> {
     Ok(VecEnv::new(envs, cfg.threads)?)
 }
 
-/// The opponent pool of a self-play run, holding `learner`'s first snapshot; `None` for
-/// other runs.
-fn pool_of(cfg: &RunConfig, pool: Pool, learner: &dyn Learner) -> Option<Pool> {
-    agvrl_envs::MULTI_ENV_IDS.contains(&cfg.env.as_str()).then(|| {
-        pool.push(learner.policy_data());
-        pool
-    })
+/// The opponent pool of a self-play run; `None` for other runs.
+fn pool_of(cfg: &RunConfig, pool: Pool) -> Option<Pool> {
+    agvrl_envs::MULTI_ENV_IDS.contains(&cfg.env.as_str()).then_some(pool)
+}
+
+/// A new learner for `cfg` (warm-started from `cfg.init_from`, a run directory, when set) and
+/// its self-play pool, still empty.
+fn new_learner(cfg: &RunConfig, device: &Device) -> Result<(Box<dyn Learner>, Option<Pool>)> {
+    let pool = Pool::default();
+    let learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
+        let mut ppo = Ppo::new(cfg.ppo.clone(), vec_env(cfg, &pool)?, device, cfg.seed)?;
+        if let Some(from) = &cfg.init_from {
+            let added = inputs_added_since(cfg, from)?;
+            ppo.warm_start(&from.join(files::CHECKPOINT), &added)
+                .with_context(|| format!("init_from = {}", from.display()))?;
+            eprintln!(
+                "starting from the weights of {} ({} observation inputs added)",
+                from.display(),
+                added.len()
+            );
+        }
+        Box::new(ppo_with_threads(ppo, cfg))
+    } else {
+        Box::new(sac_with_threads(
+            Sac::new(cfg.sac.clone(), vec_env(cfg, &pool)?, device, cfg.seed)?,
+            cfg,
+        )?)
+    };
+    Ok((learner, pool_of(cfg, pool)))
+}
+
+/// The learner of the run whose files `file` names, at its checkpoint, on new envs, and its
+/// self-play pool as the run held it then (saved in `pool/`).
+fn resumed_learner(
+    cfg: &RunConfig,
+    file: &dyn Fn(&str) -> PathBuf,
+    device: &Device,
+) -> Result<(Box<dyn Learner>, Option<Pool>)> {
+    let ckpt = file(files::CHECKPOINT);
+    let pool = Pool::default();
+    let learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
+        Box::new(ppo_with_threads(
+            Ppo::load_checkpoint(&ckpt, vec_env(cfg, &pool)?, device)?,
+            cfg,
+        ))
+    } else {
+        Box::new(sac_with_threads(
+            Sac::load_checkpoint(&ckpt, vec_env(cfg, &pool)?, device)?,
+            cfg,
+        )?)
+    };
+    let pool = pool_of(cfg, pool);
+    if let Some(p) = &pool {
+        p.restore(&file(files::POOL), learner.num_timesteps())?;
+    }
+    Ok((learner, pool))
 }
 
 pub fn train(a: TrainArgs) -> Result<()> {
@@ -217,21 +266,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
         // The run stays as it was until the continued one is complete (see RunDir::resume).
         let run = RunDir::resume(dir)?;
         let cfg = RunConfig::load(&run.file(files::CONFIG))?;
-        let ckpt = run.file(files::CHECKPOINT);
-        // A resumed self-play run's pool starts again from the resumed policy.
-        let pool = Pool::default();
-        let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
-            Box::new(ppo_with_threads(
-                Ppo::load_checkpoint(&ckpt, vec_env(&cfg, &pool)?, &device)?,
-                &cfg,
-            ))
-        } else {
-            Box::new(sac_with_threads(
-                Sac::load_checkpoint(&ckpt, vec_env(&cfg, &pool)?, &device)?,
-                &cfg,
-            )?)
-        };
-        let pool = pool_of(&cfg, pool, learner.as_ref());
+        let (mut learner, pool) = resumed_learner(&cfg, &|name: &str| run.file(name), &device)?;
         let target = match a.steps {
             Some(more) => learner.num_timesteps() + more,
             None => cfg.steps,
@@ -338,27 +373,7 @@ pub fn train_run(
         "training {} on {} for {} steps (seed {}, {} envs)",
         cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs
     );
-    let pool = Pool::default();
-    let mut learner: Box<dyn Learner> = if cfg.algo == Algorithm::Ppo {
-        let mut ppo = Ppo::new(cfg.ppo.clone(), vec_env(&cfg, &pool)?, device, cfg.seed)?;
-        if let Some(from) = &cfg.init_from {
-            let added = inputs_added_since(&cfg, from)?;
-            ppo.warm_start(&from.join(files::CHECKPOINT), &added)
-                .with_context(|| format!("init_from = {}", from.display()))?;
-            eprintln!(
-                "starting from the weights of {} ({} observation inputs added)",
-                from.display(),
-                added.len()
-            );
-        }
-        Box::new(ppo_with_threads(ppo, &cfg))
-    } else {
-        Box::new(sac_with_threads(
-            Sac::new(cfg.sac.clone(), vec_env(&cfg, &pool)?, device, cfg.seed)?,
-            &cfg,
-        )?)
-    };
-    let pool = pool_of(&cfg, pool, learner.as_ref());
+    let (mut learner, pool) = new_learner(&cfg, device)?;
     // Created once the learner stands, so a setting it refuses leaves no run directory behind.
     let run = match out {
         Some(out) => RunDir::create(out)?,
@@ -564,16 +579,25 @@ fn learn_in_chunks(
             Control::Continue
         }
     };
+    // A new run's first opponent is its first policy (a run resumed from before pools were
+    // saved starts its pool again from the resumed policy).
+    if let Some(p) = pool.filter(|p| p.is_empty()) {
+        p.push_saved(learner.policy_data(), &file(files::POOL), learner.num_timesteps())?;
+    }
     let per_chunk = cfg.steps.div_ceil(10).clamp(1, 50_000);
     while learner.num_timesteps() < target && !stop.load(Ordering::SeqCst) {
         learner.learn(per_chunk.min(target - learner.num_timesteps()), &mut on_progress)?;
-        // The history first, then the checkpoint: a kill between them leaves rows past the
-        // checkpoint, which a resume drops (`metrics_up_to`), never a gap.
+        // The history and the snapshot first, then the checkpoint: a kill between them leaves
+        // rows and a snapshot past the checkpoint, which a resume drops (`metrics_up_to`,
+        // `Pool::restore`), never a gap.
         let csv = metrics_csv(previous_csv, &rows.borrow());
         write_atomic(&file(files::METRICS), csv.as_bytes())?;
-        learner.save_checkpoint(&file(files::CHECKPOINT))?;
         if let Some(p) = pool {
-            p.push(learner.policy_data());
+            p.push_saved(learner.policy_data(), &file(files::POOL), learner.num_timesteps())?;
+        }
+        learner.save_checkpoint(&file(files::CHECKPOINT))?;
+        if cfg.restart_episodes_at_checkpoints {
+            learner.restart_episodes();
         }
     }
     learner.save_checkpoint(&file(files::CHECKPOINT))?;
@@ -714,6 +738,78 @@ mod tests {
         // A resume of a run with this header keeps its rows as they are.
         assert_eq!(metrics_csv(&csv, &[]), csv);
         assert_eq!(plots::curve_of_csv(&csv), [(200.0, 1.5), (300.0, 1.5)]);
+    }
+
+    /// A self-play run resumed from its run directory trains on as the run that never stopped,
+    /// opponent pool included. What no file holds: the races under way and the envs' random
+    /// streams (the `Env` trait has no snapshot), so the resumed run starts new races; the run
+    /// that never stopped starts new ones at the same step (`Learner::restart_episodes`), and
+    /// everything else, the learner from checkpoint.ckpt and the opponents from pool/, must
+    /// come back bit for bit.
+    #[test]
+    fn a_resumed_self_play_run_trains_as_if_never_stopped_opponent_pool_included() {
+        let sets = [
+            "steps=640",
+            "n_envs=2",
+            "threads=1",
+            "ppo.n_steps=32",
+            "ppo.batch_size=32",
+            "ppo.n_epochs=1",
+            "ppo.net_arch=[16]",
+            "env_config.max_steps=100",
+        ]
+        .map(String::from);
+        let cfg = RunConfig::from_toml_with(include_str!("../configs/duel.toml"), "duel.toml", &sets).unwrap();
+        let device = agvrl_rl::default_device();
+        // A chunk is one rollout (64 steps); the run stops after five of its ten.
+        let (n, end) = (cfg.steps / 2, cfg.steps);
+        let dir = tempfile::tempdir().unwrap();
+        let (straight_dir, resumed_dir) = (dir.path().join("straight"), dir.path().join("resumed"));
+        let in_dir = |d: &std::path::Path| {
+            let d = d.to_path_buf();
+            move |name: &str| d.join(name)
+        };
+        let (straight_file, resumed_file) = (in_dir(&straight_dir), in_dir(&resumed_dir));
+        let no_stop = AtomicBool::new(false);
+        let chunks = |l: &mut dyn Learner, pool: Option<&Pool>, file: &dyn Fn(&str) -> PathBuf, target| {
+            learn_in_chunks(l, &cfg, target, file, "", &no_stop, ProgressMode::None, pool).unwrap();
+        };
+
+        let (mut straight, straight_pool) = new_learner(&cfg, &device).unwrap();
+        chunks(straight.as_mut(), straight_pool.as_ref(), &straight_file, n);
+        straight.restart_episodes();
+        chunks(straight.as_mut(), straight_pool.as_ref(), &straight_file, end);
+
+        let (mut first, first_pool) = new_learner(&cfg, &device).unwrap();
+        chunks(first.as_mut(), first_pool.as_ref(), &resumed_file, n);
+        let at_n = first.policy_data();
+        drop((first, first_pool));
+        let (mut resumed, resumed_pool) = resumed_learner(&cfg, &resumed_file, &device).unwrap();
+        assert_eq!(resumed.num_timesteps(), n);
+        let pool_at_n = resumed_pool.as_ref().unwrap().snapshots();
+        assert_eq!(pool_at_n.len(), 6, "the first policy and five chunks' snapshots");
+        chunks(resumed.as_mut(), resumed_pool.as_ref(), &resumed_file, end);
+
+        assert_ne!(
+            resumed.policy_data().params,
+            at_n.params,
+            "no training after the resume"
+        );
+        let bytes = |p: &agvrl_rl::PolicyData| p.to_bytes().unwrap();
+        assert!(
+            bytes(&straight.policy_data()) == bytes(&resumed.policy_data()),
+            "the resumed run's policy differs from the one never stopped"
+        );
+        let read = |f: &dyn Fn(&str) -> PathBuf, name: &str| std::fs::read(f(name)).unwrap();
+        assert!(
+            read(&straight_file, files::CHECKPOINT) == read(&resumed_file, files::CHECKPOINT),
+            "the checkpoints differ"
+        );
+        let (a, b) = (straight_pool.unwrap().snapshots(), resumed_pool.unwrap().snapshots());
+        assert_eq!((a.len(), b.len()), (11, 11));
+        for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert!(bytes(x) == bytes(y), "opponent snapshot {k} differs");
+        }
     }
 
     #[test]

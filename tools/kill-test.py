@@ -6,8 +6,15 @@ After every kill the run must be in one of two states, and a resume must finish 
   with a clear error when the kill came before the first checkpoint;
 - a finished run directory exactly as it was before the resume that was killed.
 
-Each finished run is checked: every file present, the policy readable (`agvrl policy`), and the
-metrics' steps increasing, without a gap or a repeat at a resume.
+Each finished run is checked: every file present, the policy readable (`agvrl policy`), the
+metrics' steps increasing, without a gap or a repeat at a resume, and the run the same as the
+one never killed: the same policy file, bit for bit, and the same metrics (all but the
+wall-clock column). That holds because every run here restarts its episodes at each checkpoint
+(`restart_episodes_at_checkpoints`), as a resume must: the envs' state is in no checkpoint.
+Everything the learner owns comes back from the files.
+
+A kill that came after the process had exited is not counted as a kill; the test fails when
+no kill landed.
 
     tools/kill-test.py [--agvrl target/release/agvrl] [--kills 20] [--seed 0] [--full-disk]
 
@@ -27,10 +34,16 @@ import time
 from pathlib import Path
 
 REQUIRED = ["config.toml", "policy.agvrl", "checkpoint.ckpt", "metrics.csv", "eval.txt", "eval.json"]
-# A short racing run: 40 updates of 4 x 256 steps, a checkpoint every tenth, one evaluation episode.
-TRAIN = ["--env", "racing-oval", "--steps", "40960", "--n-envs", "4", "--set", "ppo.n_steps=256",
-         "--set", "eval_episodes=1", "--set", "eval_max_steps=1500", "--progress", "json"]
+# A short racing run: 40 updates of 4 x 256 steps, a checkpoint every tenth, one evaluation
+# episode; every run at the same seed, so each is held against the one never killed.
+TRAIN = ["--env", "racing-oval", "--seed", "0", "--steps", "40960", "--n-envs", "4", "--set", "ppo.n_steps=256",
+         "--set", "eval_episodes=1", "--set", "eval_max_steps=1500",
+         "--set", "restart_episodes_at_checkpoints=true", "--progress", "json"]
 MODES = ["update", "checkpoint", "evaluation", "random"]
+# metrics.csv's wall-clock column, which no two runs share.
+WALL_CLOCK = "steps_per_s"
+# Per trial, whether its kill landed (the process still ran).
+LANDED = []
 
 
 def hashes(d: Path) -> dict:
@@ -40,6 +53,24 @@ def hashes(d: Path) -> dict:
 def metric_steps(d: Path) -> list:
     lines = (d / "metrics.csv").read_text().splitlines()[1:]
     return [int(line.split(",")[0]) for line in lines]
+
+
+def metrics_but_wall_clock(d: Path) -> list:
+    header, *rows = (d / "metrics.csv").read_text().splitlines()
+    skip = header.split(",").index(WALL_CLOCK)
+    return [[v for k, v in enumerate(r.split(",")) if k != skip] for r in rows]
+
+
+def same_as(d: Path, reference: Path):
+    """`d` trained as `reference`, the run never killed: the same policy file and metrics."""
+    if (d / "policy.agvrl").read_bytes() != (reference / "policy.agvrl").read_bytes():
+        raise Broken(f"{d}/policy.agvrl differs from that of the run never killed")
+    mine, theirs = metrics_but_wall_clock(d), metrics_but_wall_clock(reference)
+    if mine != theirs:
+        first = next((k for k, (a, b) in enumerate(zip(mine, theirs)) if a != b), min(len(mine), len(theirs)))
+        raise Broken(f"{d}/metrics.csv differs from the run never killed from row {first + 1}: "
+                     f"{mine[first] if first < len(mine) else None} against "
+                     f"{theirs[first] if first < len(theirs) else None}")
 
 
 class Broken(Exception):
@@ -64,8 +95,10 @@ def start(cmd):
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def kill_when(p, mode: str, watch: Path, rng: random.Random) -> str:
-    """Kill `p` at the moment `mode` names; returns what it was doing then."""
+def kill_when(p, mode: str, watch: Path, rng: random.Random, span: float) -> str:
+    """Kill `p` at the moment `mode` names (`random`: within `span` seconds, the time the same
+    command took unkilled); returns what it was doing then, starting with "killed" or "exited"
+    (the kill came too late)."""
     if mode == "update":
         # After the k-th progress line (k random), a random few ms into the next update.
         k = rng.randint(1, 3)
@@ -94,8 +127,9 @@ def kill_when(p, mode: str, watch: Path, rng: random.Random) -> str:
                 break
             time.sleep(0.002)
     else:
-        time.sleep(rng.uniform(0.0, 2.5))
+        time.sleep(rng.uniform(0.0, 0.9 * span))
     state = "exited" if p.poll() is not None else "killed"
+    LANDED.append(state == "killed")
     if state == "killed":
         p.send_signal(signal.SIGKILL)
     p.wait()
@@ -110,14 +144,15 @@ def resume(agvrl: str, d: Path, more=None):
     return subprocess.run(cmd, capture_output=True, text=True)
 
 
-def trial_new(agvrl, root: Path, i: int, mode: str, rng) -> str:
+def trial_new(agvrl, root: Path, i: int, mode: str, rng, reference: Path, span: float) -> str:
     out = root / f"run-{i}"
     partial = Path(f"{out}.partial")
-    p = start([agvrl, "train", "--out", str(out), "--seed", str(i)] + TRAIN)
-    state = kill_when(p, mode, partial, rng)
+    p = start([agvrl, "train", "--out", str(out)] + TRAIN)
+    state = kill_when(p, mode, partial, rng, span)
     if out.exists():
         check_finished(agvrl, out)
-        return f"{state}; the run had finished"
+        same_as(out, reference)
+        return f"{state}; the run had finished, as the one never killed"
     if not partial.is_dir():
         raise Broken(f"neither {out} nor {partial} exists after the kill")
     had_ckpt = (partial / "checkpoint.ckpt").exists()
@@ -131,15 +166,20 @@ def trial_new(agvrl, root: Path, i: int, mode: str, rng) -> str:
     if partial.exists() or not out.is_dir():
         raise Broken(f"the resumed {partial} was not published as {out}")
     check_finished(agvrl, out, 40960)
-    return f"{state}; resumed to the end"
+    same_as(out, reference)
+    return f"{state}; resumed to the end, as the one never killed"
 
 
-def trial_resume(agvrl, root: Path, done: Path, mode: str, rng) -> str:
+def trial_resume(agvrl, root: Path, i: int, finished: Path, mode: str, rng, reference: Path, span: float) -> str:
+    """Kill a resume (8192 more steps) of a copy of `finished`, then resume it by 2048 steps:
+    as `reference`, `finished` resumed by 2048 steps unkilled."""
+    done = root / f"resume-{i}"
+    shutil.copytree(finished, done)
     before = hashes(done)
     last = metric_steps(done)[-1]
     p = start([agvrl, "train", "--resume", str(done), "--steps", "8192", "--progress", "json"])
     staging = Path(f"{done}.resume.partial")
-    state = kill_when(p, mode, staging, rng)
+    state = kill_when(p, mode, staging, rng, span)
     after = hashes(done)
     if after != before:
         changed = sorted(k for k in set(before) | set(after) if before.get(k) != after.get(k))
@@ -158,7 +198,8 @@ def trial_resume(agvrl, root: Path, done: Path, mode: str, rng) -> str:
     got = metric_steps(done)
     if got[-1] <= steps_before:
         raise Broken(f"{done}: the resume added no metrics ({got[-1]} <= {steps_before})")
-    return f"{state}; unchanged, and the next resume finished"
+    same_as(done, reference)
+    return f"{state}; unchanged, and the next resume finished as the one never killed"
 
 
 def full_disk(agvrl, root: Path) -> list:
@@ -221,20 +262,32 @@ def main():
     root = Path(tempfile.mkdtemp(prefix="agvrl-kill-"))
     outcomes = []
     try:
-        # One finished run for the resume kills.
-        r = subprocess.run([a.agvrl, "train", "--out", str(root / "done")] + TRAIN, capture_output=True, text=True)
+        # The runs never killed: a training (the new trainings' reference, and the run the
+        # resume kills resume), and that run resumed by 2048 steps (the resumes' reference).
+        done, resumed = root / "done", root / "done-resumed"
+        t0 = time.monotonic()
+        r = subprocess.run([a.agvrl, "train", "--out", str(done)] + TRAIN, capture_output=True, text=True)
         if r.returncode != 0:
             sys.exit(f"the first training failed: {r.stderr[-500:]}")
-        check_finished(a.agvrl, root / "done", 40960)
+        train_s = time.monotonic() - t0
+        check_finished(a.agvrl, done, 40960)
+        shutil.copytree(done, resumed)
+        t0 = time.monotonic()
+        r = resume(a.agvrl, resumed, 2048)
+        if r.returncode != 0:
+            sys.exit(f"the reference resume failed: {r.stderr[-500:]}")
+        # The resume killed (by 8192 steps) takes longer: a random kill within this lands.
+        resume_s = time.monotonic() - t0
+        check_finished(a.agvrl, resumed)
         for i in range(a.kills):
             mode = MODES[i % len(MODES)]
             of = "train" if (i // len(MODES)) % 2 == 0 else "resume"
             t0 = time.monotonic()
             try:
                 if of == "train":
-                    what = trial_new(a.agvrl, root, i, mode, rng)
+                    what = trial_new(a.agvrl, root, i, mode, rng, done, train_s)
                 else:
-                    what = trial_resume(a.agvrl, root, root / "done", mode, rng)
+                    what = trial_resume(a.agvrl, root, i, done, mode, rng, resumed, resume_s)
                 ok = True
             except Broken as e:
                 what, ok = f"BROKEN: {e}", False
@@ -250,8 +303,11 @@ def main():
     finally:
         shutil.rmtree(root, ignore_errors=True)
     bad = [o for o in outcomes if not o[3]]
-    print(f"kills={len([o for o in outcomes if o[0] >= 0])} broken={len(bad)}")
-    sys.exit(1 if bad else 0)
+    landed = sum(LANDED)
+    print(f"kills={landed} exited_before_the_kill={len(LANDED) - landed} broken={len(bad)}")
+    if LANDED and not landed:
+        print("no kill landed: every process had exited first")
+    sys.exit(1 if bad or (LANDED and not landed) else 0)
 
 
 if __name__ == "__main__":

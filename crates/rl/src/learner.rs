@@ -19,6 +19,8 @@ pub trait Learner {
     fn save_checkpoint(&self, path: &Path) -> Result<()>;
     /// The policy as it stands (what a policy file stores).
     fn policy_data(&self) -> PolicyData;
+    /// Start fresh episodes at the next step, as a learner resumed from a checkpoint does.
+    fn restart_episodes(&mut self);
 }
 
 impl<E: Env> Learner for Ppo<E> {
@@ -34,6 +36,9 @@ impl<E: Env> Learner for Ppo<E> {
     fn policy_data(&self) -> PolicyData {
         Ppo::policy_data(self)
     }
+    fn restart_episodes(&mut self) {
+        Ppo::restart_episodes(self)
+    }
 }
 
 impl<E: Env> Learner for Sac<E> {
@@ -48,5 +53,8 @@ impl<E: Env> Learner for Sac<E> {
     }
     fn policy_data(&self) -> PolicyData {
         Sac::policy_data(self)
+    }
+    fn restart_episodes(&mut self) {
+        Sac::restart_episodes(self)
     }
 }

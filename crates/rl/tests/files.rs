@@ -12,18 +12,6 @@ fn tmp(name: &str) -> PathBuf {
     dir.join(format!("{name}-{}", std::process::id()))
 }
 
-fn same_bytes(a: &std::path::Path, b: &std::path::Path) {
-    let (x, y) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
-    let first = x.iter().zip(&y).position(|(p, q)| p != q);
-    assert!(
-        x == y,
-        "lengths {} {}, first difference at {first:?}: {:?}",
-        x.len(),
-        y.len(),
-        first.map(|i| String::from_utf8_lossy(&x[i.saturating_sub(60)..(i + 20).min(x.len())]).into_owned())
-    );
-}
-
 fn small_sac(seed: u64) -> Sac<crate::reach::Reach> {
     let cfg = SacConfig {
         net_arch: vec![32, 32],
@@ -133,20 +121,14 @@ fn a_large_sac_policy_file_stays_under_10_mb() {
     assert!(bytes.len() > 4 * (100 * 256 + 256 * 256), "weights are in the file");
 }
 
+/// A checkpoint loads only into its own algorithm on its own env, and not once truncated.
+/// (That a resumed learner trains on as if never stopped: resume.rs.)
 #[test]
-fn sac_checkpoint_resumes_the_same_state() {
+fn checkpoints_of_another_algorithm_another_env_or_truncated_are_refused() {
     let sac = small_sac(3);
     let a = tmp("sac-a.ckpt");
-    let b = tmp("sac-b.ckpt");
     sac.save_checkpoint(&a).unwrap();
-    let mut resumed = Sac::load_checkpoint(&a, vec_env(2), &default_device()).unwrap();
-    resumed.save_checkpoint(&b).unwrap();
-    same_bytes(&a, &b);
-    assert_eq!(resumed.num_timesteps(), sac.num_timesteps());
-    assert_eq!(resumed.policy_data(), sac.policy_data());
-    resumed.learn(50, &mut |_| Control::Continue).unwrap();
-    assert_eq!(resumed.num_timesteps(), sac.num_timesteps() + 50);
-    // Wrong algorithm and wrong env are refused.
+    assert!(Sac::load_checkpoint(&a, vec_env(2), &default_device()).is_ok());
     assert!(matches!(
         Ppo::load_checkpoint(&a, vec_env(2), &default_device()),
         Err(RlError::Mismatch { .. })
@@ -156,10 +138,6 @@ fn sac_checkpoint_resumes_the_same_state() {
         Sac::load_checkpoint(&a, pend, &default_device()),
         Err(RlError::Mismatch { .. })
     ));
-}
-
-#[test]
-fn ppo_checkpoint_resumes_the_same_state() {
     let cfg = PpoConfig {
         n_steps: 64,
         net_arch: vec![16],
@@ -168,17 +146,14 @@ fn ppo_checkpoint_resumes_the_same_state() {
     };
     let mut ppo = Ppo::new(cfg, vec_env(2), &default_device(), 4).unwrap();
     ppo.learn(128, &mut |_| Control::Continue).unwrap();
-    let (a, b) = (tmp("ppo-a.ckpt"), tmp("ppo-b.ckpt"));
-    ppo.save_checkpoint(&a).unwrap();
-    let resumed = Ppo::load_checkpoint(&a, vec_env(2), &default_device()).unwrap();
-    resumed.save_checkpoint(&b).unwrap();
-    same_bytes(&a, &b);
-    assert_eq!(resumed.policy_data(), ppo.policy_data());
-    let mut bytes = std::fs::read(&a).unwrap();
+    let b = tmp("ppo-b.ckpt");
+    ppo.save_checkpoint(&b).unwrap();
+    assert!(Ppo::load_checkpoint(&b, vec_env(2), &default_device()).is_ok());
+    let mut bytes = std::fs::read(&b).unwrap();
     bytes.truncate(bytes.len() - 7);
-    std::fs::write(&a, &bytes).unwrap();
+    std::fs::write(&b, &bytes).unwrap();
     assert!(matches!(
-        Ppo::load_checkpoint(&a, vec_env(2), &default_device()),
+        Ppo::load_checkpoint(&b, vec_env(2), &default_device()),
         Err(RlError::BadFile { .. })
     ));
 }

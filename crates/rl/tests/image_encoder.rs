@@ -227,20 +227,12 @@ fn sac_cnn_policy_and_checkpoint_round_trip() {
     assert_ne!(resumed.policy_data().encoder.unwrap().params, before);
 }
 
+/// (That a resumed learner with the CNN trains on as if never stopped: resume.rs.)
 #[test]
-fn ppo_cnn_checkpoint_resumes_the_same_state() {
-    let ppo = small_ppo(1, false);
-    let (a, b) = (tmp("ppo-cnn-a.ckpt"), tmp("ppo-cnn-b.ckpt"));
-    ppo.save_checkpoint(&a).unwrap();
-    let resumed = Ppo::load_checkpoint(&a, vec_env(2), &default_device()).unwrap();
-    resumed.save_checkpoint(&b).unwrap();
-    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
-    assert_eq!(resumed.policy_data(), ppo.policy_data());
-    assert_eq!(
-        small_ppo(1, false).policy_data(),
-        ppo.policy_data(),
-        "deterministic per seed"
-    );
+fn ppo_with_the_cnn_is_deterministic_per_seed() {
+    let a = small_ppo(1, false).policy_data();
+    assert_eq!(small_ppo(1, false).policy_data(), a);
+    assert_ne!(small_ppo(2, false).policy_data().encoder, a.encoder);
 }
 
 #[test]

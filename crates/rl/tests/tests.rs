@@ -5,5 +5,6 @@ mod files;
 mod image_encoder;
 mod learning;
 mod reach;
+mod resume;
 mod sb3_numerics;
 mod seeding;

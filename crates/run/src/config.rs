@@ -29,6 +29,13 @@ pub struct RunConfig {
     pub n_envs: usize,
     /// Threads stepping the envs; SAC's gradient steps split their minibatch over as many.
     pub threads: usize,
+    /// Start new episodes after every checkpoint, as a resumed run does (the envs' state is in
+    /// no checkpoint), so a run killed and resumed, a preempted job, trains bit for bit as one
+    /// that ran through (not one stopped by Ctrl-C or SIGTERM: its checkpoint falls where it
+    /// stopped, between the others). Off: the episodes under way at a checkpoint run on, and
+    /// only a resume cuts them (bootstrapped, as a time limit).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub restart_episodes_at_checkpoints: bool,
     /// How many of the `n_envs` training envs drive on seeded procedural layouts of the env's
     /// kind and size instead of its built-in map (layout randomisation; evaluation always uses
     /// the map of `env_config`).
@@ -125,6 +132,7 @@ impl Default for RunConfig {
             seed: 0,
             n_envs: 8,
             threads: 2,
+            restart_episodes_at_checkpoints: false,
             procedural_layouts: 0,
             advisory_filter_envs: Vec::new(),
             recovery_spawn_envs: Vec::new(),

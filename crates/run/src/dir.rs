@@ -25,6 +25,9 @@ pub mod files {
     pub const TRAJECTORY: &str = "trajectory.png";
     /// The first evaluation episode, for the rerun viewer.
     pub const RECORDING: &str = "eval.rrd";
+    /// A self-play run's opponents: the learner's snapshots, `<steps>.agvrl` each (the step
+    /// count it was taken at), which a resume draws from again.
+    pub const POOL: &str = "pool";
 }
 
 /// `YYYYMMDD-HHMMSS` in UTC: the start of a run directory's default name.

@@ -293,6 +293,14 @@ impl<E: Env> Ppo<E> {
         })
     }
 
+    /// Start fresh episodes at the next step (envs reset with a seed from the run seed and the
+    /// step count), as a learner resumed from a checkpoint does: the envs' mid-episode state is
+    /// not in a checkpoint, so a run that restarts its episodes where it checkpoints resumes
+    /// bit for bit as if it had never stopped.
+    pub fn restart_episodes(&mut self) {
+        self.last = None;
+    }
+
     /// Visit minibatches in rollout order instead of shuffled (to replay an update step for
     /// step in another implementation; see `tools/parity/`).
     #[doc(hidden)]
@@ -401,7 +409,10 @@ impl<E: Env> Ppo<E> {
             None => {
                 let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
                 let (o0, _) = self.env.reset(Some(seed))?;
-                if let Some(n) = &mut self.normalizer {
+                // After a resume (or `restart_episodes`) the normaliser has already counted the
+                // observations the run stood on, which these replace: counting them too would
+                // leave it a batch ahead of the run that never stopped.
+                if let Some(n) = self.normalizer.as_mut().filter(|_| self.num_timesteps == 0) {
                     n.update_rows(&o0, o);
                 }
                 (o0, vec![true; n_envs])

@@ -217,6 +217,12 @@ impl<E: Env> Sac<E> {
         self.target_dev = self.critic_target.to_device(&self.device);
     }
 
+    /// Start fresh episodes at the next step, as a learner resumed from a checkpoint does (see
+    /// [`crate::Ppo::restart_episodes`]).
+    pub fn restart_episodes(&mut self) {
+        self.last_obs = None;
+    }
+
     /// Let each gradient step split its minibatch over `threads` threads (default 1). The
     /// result is deterministic for a given thread count but differs from other counts in the
     /// last float bits.
@@ -258,7 +264,6 @@ impl<E: Env> Sac<E> {
         let target = self.num_timesteps + steps;
         let n_envs = self.env.n_envs();
         let gradient_steps = self.cfg.gradient_steps_per_round(n_envs);
-        let mut vec_steps = 0u64;
         while self.num_timesteps < target {
             let obs = match self.last_obs.take() {
                 Some(o) => o,
@@ -266,7 +271,9 @@ impl<E: Env> Sac<E> {
                     // First reset uses the run seed; after a resume, a seed derived from the step count.
                     let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
                     let (o, _) = self.env.reset(Some(seed))?;
-                    if let Some(n) = &mut self.normalizer {
+                    // After a resume the normaliser has already counted the observations these
+                    // replace (as PPO's).
+                    if let Some(n) = self.normalizer.as_mut().filter(|_| self.num_timesteps == 0) {
                         n.update_rows(&o, self.obs_dim);
                     }
                     o
@@ -306,7 +313,9 @@ impl<E: Env> Sac<E> {
             self.episodes.record(&st.infos);
             self.num_timesteps += n_envs as u64;
             self.last_obs = Some(st.obs);
-            vec_steps += 1;
+            // Counted over the run, not this call, so training in chunks (or resumed) keeps
+            // the cadence of one straight call.
+            let vec_steps = self.num_timesteps / n_envs as u64;
             if self.num_timesteps > self.cfg.learning_starts && vec_steps.is_multiple_of(self.cfg.train_freq) {
                 for _ in 0..gradient_steps {
                     self.update()?;
