@@ -7,6 +7,7 @@
 //! parsed by the same serde types as a run TOML, so a bad key reads as it does in the CLI.
 
 mod config;
+mod f110;
 mod info;
 mod multi;
 
@@ -884,6 +885,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Env>()?;
     m.add_class::<VecEnv>()?;
     m.add_class::<multi::MultiEnv>()?;
+    m.add_class::<f110::F110Sim>()?;
     m.add_class::<Policy>()?;
     m.add_class::<Racer>()?;
     m.add_function(wrap_pyfunction!(train, m)?)?;
