@@ -498,6 +498,15 @@ mod cli {
                 .any(|l| l.starts_with("scene=oval mode=raycast") && l.contains("sim_steps_per_s=")),
             "{out}"
         );
+        // The circuit figures tools/f110-bench.sh reads, at every car count.
+        for c in [1, 2, 8] {
+            assert!(
+                out.lines().any(|l| l.starts_with("circuit=")
+                    && l.contains(&format!("circuit_cars{c}_sim_s_per_wall_s="))
+                    && l.contains(&format!("circuit_cars{c}_scans_per_s="))),
+                "{out}"
+            );
+        }
     }
 
     #[test]

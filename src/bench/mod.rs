@@ -2,6 +2,7 @@
 //! after a warm-up. The code lives here, not in the library crates, so their public APIs hold
 //! only what users drive.
 
+mod circuit;
 mod deploy;
 mod envs;
 mod rl;
@@ -17,8 +18,11 @@ fn median(v: Vec<f64>) -> f64 {
 /// A part of `agvrl bench`.
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum BenchPart {
-    /// The simulator: physics, LiDAR, camera.
+    /// The simulator: physics, LiDAR, camera, racing on a generated circuit.
     Sim,
+    /// Racing on a generated 400 m circuit alone (1,081-beam LiDAR, 1, 2 and 8 cars): the
+    /// figures tools/f110-bench.sh sets beside f1tenth_gym's.
+    Circuit,
     /// Envs and VecEnv.
     Envs,
     /// The learners' updates and inference.
@@ -38,6 +42,11 @@ pub fn run(quick: bool, learning: bool, only: Option<BenchPart>, backend: agvrl_
     );
     if want(BenchPart::Sim) {
         for l in sim::run(quick).into_iter().chain(sim::camera(quick)) {
+            println!("{l}");
+        }
+    }
+    if want(BenchPart::Sim) || only == Some(BenchPart::Circuit) {
+        for l in circuit::run(quick) {
             println!("{l}");
         }
     }

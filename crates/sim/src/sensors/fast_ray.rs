@@ -10,6 +10,10 @@ use rapier3d::prelude::*;
 pub enum FastRay {
     /// A convex solid as the intersection of half-spaces `n . x <= d` (world frame).
     Planes(Vec<(Vector, f32)>),
+    /// A box as three pairs of opposite half-spaces `n . x <= d+` and `-n . x <= d-` (world
+    /// frame): the planes a cuboid's `Planes` would hold, in the same order, each pair's dot
+    /// products taken once (negating a dot product is exact, so the casts agree to the bit).
+    Cuboid([(Vector, f32, f32); 3]),
     /// A finite cylinder (world frame): centre, unit axis, radius, half height.
     Cylinder {
         /// Centre.
@@ -30,14 +34,12 @@ impl FastRay {
     pub fn new(shape: &SharedShape, pose: &Pose) -> Self {
         if let Some(c) = shape.as_cuboid() {
             let he = c.half_extents;
-            let mut planes = Vec::with_capacity(6);
-            for i in 0..3 {
+            let pair = |i: usize| {
                 let n = pose.rotation * Vector::ith(i, 1.0);
                 let d = n.dot(pose.translation);
-                planes.push((n, d + he[i]));
-                planes.push((-n, -d + he[i]));
-            }
-            return FastRay::Planes(planes);
+                (n, d + he[i], -d + he[i])
+            };
+            return FastRay::Cuboid([pair(0), pair(1), pair(2)]);
         }
         if let Some(p) = shape.as_convex_polyhedron() {
             let pts: Vec<Vector> = p.points().iter().map(|v| pose * *v).collect();
@@ -91,6 +93,35 @@ impl FastRay {
                 }
                 Some((t0, n0))
             }
+            FastRay::Cuboid(pairs) => {
+                let (mut t0, mut t1) = (0.0f32, max_t);
+                let mut n0 = Vector::ZERO;
+                for &(n, off_pos, off_neg) in pairs {
+                    let nd = n.dot(d);
+                    let no = n.dot(o);
+                    // The planes (n, off_pos) and (-n, off_neg), in this order, as `Planes`
+                    // takes them: (-n).d = -nd and off_neg - (-n).o = off_neg + no exactly.
+                    for (denom, dist, sign) in [(nd, off_pos - no, 1.0f32), (-nd, off_neg + no, -1.0)] {
+                        if denom.abs() < 1e-12 {
+                            if dist < 0.0 {
+                                return None;
+                            }
+                        } else {
+                            let t = dist / denom;
+                            if denom > 0.0 {
+                                t1 = t1.min(t);
+                            } else if t > t0 {
+                                t0 = t;
+                                n0 = n * sign;
+                            }
+                            if t0 > t1 {
+                                return None;
+                            }
+                        }
+                    }
+                }
+                Some((t0, n0))
+            }
             FastRay::Cylinder { c, a, r, h } => {
                 let t = cast_cylinder(o - *c, d, *a, *r, *h, max_t)?;
                 let p = o + d * t - *c;
@@ -113,9 +144,38 @@ impl FastRay {
     pub fn cast(&self, o: Vector, d: Vector, max_t: f32) -> Option<f32> {
         match self {
             FastRay::Parry(s, p) => s.cast_ray(p, &Ray::new(o, d), max_t, true),
+            FastRay::Cuboid(pairs) => cast_cuboid(pairs, o, d, max_t),
             _ => self.cast_normal(o, d, max_t).map(|(t, _)| t),
         }
     }
+}
+
+/// `cast_normal`'s `Cuboid` arm without the normal: the same operations in the same order.
+#[inline]
+fn cast_cuboid(pairs: &[(Vector, f32, f32); 3], o: Vector, d: Vector, max_t: f32) -> Option<f32> {
+    let (mut t0, mut t1) = (0.0f32, max_t);
+    for &(n, off_pos, off_neg) in pairs {
+        let nd = n.dot(d);
+        let no = n.dot(o);
+        for (denom, dist) in [(nd, off_pos - no), (-nd, off_neg + no)] {
+            if denom.abs() < 1e-12 {
+                if dist < 0.0 {
+                    return None;
+                }
+            } else {
+                let t = dist / denom;
+                if denom > 0.0 {
+                    t1 = t1.min(t);
+                } else if t > t0 {
+                    t0 = t;
+                }
+                if t0 > t1 {
+                    return None;
+                }
+            }
+        }
+    }
+    Some(t0)
 }
 
 fn cast_cylinder(o: Vector, d: Vector, a: Vector, r: f32, h: f32, max_t: f32) -> Option<f32> {

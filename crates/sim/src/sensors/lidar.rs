@@ -84,6 +84,9 @@ pub struct Lidar {
     dirs_s: Vec<Vector>,
     /// (distance to the box, index) of the scene entries a scan may reach.
     candidates: Vec<(f32, usize)>,
+    /// A scan's world ray directions and their reciprocals, kept between scans (no allocation).
+    dirs: Vec<Vector>,
+    inv: Vec<Vector>,
 }
 
 impl Lidar {
@@ -100,6 +103,8 @@ impl Lidar {
             cfg,
             dirs_s,
             candidates: Vec::new(),
+            dirs: Vec::new(),
+            inv: Vec::new(),
         }
     }
 
@@ -120,8 +125,11 @@ impl Lidar {
         let origin = pose_w.translation;
         let rmax = self.cfg.range_max_m;
         let n = self.dirs_s.len();
-        let dirs: Vec<Vector> = self.dirs_s.iter().map(|d| pose_w.rotation * *d).collect();
-        let inv: Vec<Vector> = dirs.iter().map(|d| d.recip()).collect();
+        let (mut dirs, mut inv) = (std::mem::take(&mut self.dirs), std::mem::take(&mut self.inv));
+        dirs.clear();
+        dirs.extend(self.dirs_s.iter().map(|d| pose_w.rotation * *d));
+        inv.clear();
+        inv.extend(dirs.iter().map(|d| d.recip()));
         // Vertical reach of the fan: rays climb or dip at most this far within range.
         let dz = dirs.iter().map(|d| d.z.abs()).fold(0.0f32, f32::max) * rmax + 1e-3;
         let reach = Aabb::new(
@@ -172,11 +180,11 @@ impl Lidar {
             } else {
                 (0, n as i64 - 1)
             };
-            if lo > hi || (lo..=hi).all(|k| best[k.rem_euclid(n as i64) as usize] <= d) {
+            if lo > hi || (lo..=hi).all(|k| best[ray_index(k, n)] <= d) {
                 continue;
             }
             for k in lo..=hi {
-                let i = k.rem_euclid(n as i64) as usize;
+                let i = ray_index(k, n);
                 if !slab_hit(&e.aabb, origin, inv[i], best[i]) {
                     continue;
                 }
@@ -209,7 +217,19 @@ impl Lidar {
             scan.points_w.push((origin + dirs[i] * best[i]).to_array());
             scan.object_id.push(best_id[i].flatten());
         }
+        (self.dirs, self.inv) = (dirs, inv);
         scan
+    }
+}
+
+/// Ray `k` of a span from [`ray_span`], wrapped into `0..n` (a full circle's spans cross 0);
+/// `rem_euclid`'s integer division only where `k` lies outside, not at every ray.
+#[inline]
+fn ray_index(k: i64, n: usize) -> usize {
+    if (0..n as i64).contains(&k) {
+        k as usize
+    } else {
+        k.rem_euclid(n as i64) as usize
     }
 }
 
