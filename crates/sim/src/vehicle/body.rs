@@ -282,9 +282,18 @@ impl Body {
         // Only a climb or a roll or pitch brings the chassis nearer the ground.
         let drop = 2.0 * (v.z.abs() + w.truncate().length() * radius) * period_s + prediction + GROUND_MARGIN_M;
         let reach = car.loosened(gap);
+        // A wall's own box, not only its bounding box: a long wall along a diagonal straight has
+        // a bounding box over the whole track beside it.
+        let reach_box = Cuboid::new(reach.half_extents());
+        let reach_pose = Pose::from_translation(reach.center());
         let clear = world.statics.entries.iter().all(|e| match e.object_id {
             None => lowest - drop > e.aabb.maxs.z,
-            Some(_) => !e.aabb.intersects(&reach),
+            Some(_) => {
+                !e.aabb.intersects(&reach)
+                    || !rapier3d::parry::query::intersection_test(&reach_pose, &reach_box, &e.pose, e.shape.as_ref())
+                        .map(|i| i.intersecting)
+                        .unwrap_or(true)
+            }
         });
         clear.then_some(reach)
     }
