@@ -2258,3 +2258,133 @@ fn clearance_at_is_the_distance_to_the_nearest_wall() {
         assert_eq!(s.clearance_at(x, y, 0.5 * expected), 0.5 * expected);
     }
 }
+
+mod f1tenth {
+    //! The F1TENTH car (assets/vehicles/f1tenth.toml) against closed forms and f1tenth_gym's
+    //! single-track model.
+    use super::*;
+
+    /// f1tenth_gym's wheelbase lf + lr, metres.
+    const L_F1TENTH: f64 = 0.3302;
+
+    /// The F1TENTH car at 40 Hz (configs/f1tenth.toml's period and substeps) in a 60 m room.
+    fn f1tenth_sim(name: &str, mode: DynamicsMode) -> (Sim, Room) {
+        let r = room(30.0, name);
+        let s = Sim::new(SimConfig {
+            scene: r.src(),
+            settings: SimSettings {
+                vehicle: "f1tenth".into(),
+                dynamics: mode,
+                control_period_s: 0.025,
+                substeps: 3,
+                ..Default::default()
+            },
+        })
+        .unwrap();
+        (s, r)
+    }
+
+    /// The throttle whose steady wheel speed gives `v` m/s.
+    fn throttle_for(s: &Sim, v: f64) -> f64 {
+        let d = s.nominal_params().drive;
+        let w = v / s.vehicle().drive_radius_m() as f64;
+        (w * (d.c_d * w + d.c_r)) / d.c_t
+    }
+
+    /// Settle on the arc for `settle` periods, then the mean speed and yaw rate over `measure`.
+    fn circle(s: &mut Sim, v: f64, delta: f64, settle: usize, measure: usize) -> (f64, f64) {
+        let c = Control {
+            throttle: throttle_for(s, v),
+            steering_rad: delta,
+        };
+        run(s, c, settle);
+        let (mut v_sum, mut w_sum) = (0.0, 0.0);
+        for _ in 0..measure {
+            s.step(c).unwrap();
+            assert!(s.contacts().is_empty(), "the circle met a wall");
+            v_sum += s.forward_speed_mps() as f64;
+            w_sum += s.yaw_rate_radps() as f64;
+        }
+        (v_sum / measure as f64, w_sum / measure as f64)
+    }
+
+    #[test]
+    fn the_f1tenth_car_has_f1tenth_gyms_geometry_mass_and_drive() {
+        let (s, _r) = f1tenth_sim("f1t-spec", DynamicsMode::Raycast);
+        let m = s.vehicle();
+        assert!((m.wheelbase_m as f64 - L_F1TENTH).abs() < 1e-5, "{}", m.wheelbase_m);
+        assert!((m.mass_kg - 3.74).abs() < 1e-4, "{}", m.mass_kg);
+        let com = m.mass_props.local_com;
+        assert!(
+            (com.x - 0.17145).abs() < 1e-4 && (com.z - 0.024).abs() < 1e-4,
+            "{com:?}"
+        );
+        let iz = m.mass_props.reconstruct_inertia_matrix().z_axis.z;
+        assert!((iz - 0.04712).abs() < 1e-4, "I_z {iz}");
+        assert_eq!(m.spec.steering.max_rad, 0.4189);
+        // Launch at a_max = 9.51 m/s^2, top speed 10 m/s.
+        let a0 = m.spec.drive.c_t * m.drive_radius_m() as f64;
+        assert!((a0 - 9.51).abs() < 1e-3, "a0 {a0}");
+        assert!((m.top_speed_mps() - 10.0).abs() < 0.01, "{}", m.top_speed_mps());
+        assert!(
+            s.contacts().is_empty(),
+            "the car at rest touches something: {:?}",
+            s.contacts()
+        );
+    }
+
+    /// Ray-cast mode only: in multibody mode this car does not drive off at a low throttle (its
+    /// 0.05 m wheels' velocity motors on a 3.74 kg car stall: v = 0), a gap of that mode.
+    #[test]
+    fn low_speed_turning_radius_is_wheelbase_over_tan_delta() {
+        for delta in [0.25f64, -0.4] {
+            let (mut s, _r) = f1tenth_sim("f1t-turn", DynamicsMode::Raycast);
+            let (v, w) = circle(&mut s, 0.5, delta, 200, 80);
+            let r = v / w;
+            let expect = L_F1TENTH / delta.tan();
+            assert!(
+                (r - expect).abs() / expect.abs() < 0.05,
+                "delta {delta}: radius {r} vs {expect}"
+            );
+        }
+    }
+
+    /// Golden yaw rates of f1tenth_gym's single-track model (`vehicle_dynamics_st` integrated,
+    /// and the closed-form steady state, which agree to 4 digits) at a front wheel angle of
+    /// 0.04 rad: `python3 tools/parity/f1tenth_st_yaw.py`.
+    const GYM_YAW_3: f64 = 0.3378;
+    const GYM_YAW_6: f64 = 0.5575;
+
+    /// At 3 m/s agvrl's car turns within 10 % of f1tenth_gym's. At 6 m/s it does not, and this
+    /// is the gap, named: agvrl's ray-cast tyres have no cornering stiffness (no slip angle from
+    /// C_Sf 4.718, C_Sr 5.4562); what understeer the car has comes from the ray-cast friction
+    /// solver and the load moving across on the suspension, less than f1tenth_gym's linear tyres
+    /// (understeer gradient (1/C_Sf - 1/C_Sr) / mu = 0.0273 rad per g). Its yaw rate at 6 m/s
+    /// is 18 % above f1tenth_gym's (and 8 % below the kinematic v tan(delta) / L).
+    #[test]
+    fn steady_cornering_yaw_rate_against_f1tenth_gyms_single_track_model() {
+        let delta = 0.04f64;
+        let (mut s, _r) = f1tenth_sim("f1t-corner", DynamicsMode::Raycast);
+        for (v_set, gym) in [(3.0, GYM_YAW_3), (6.0, GYM_YAW_6)] {
+            s.reset(PlanarPose {
+                x_m: 0.0,
+                y_m: -8.0,
+                yaw_rad: 0.0,
+            })
+            .unwrap();
+            let (v, w) = circle(&mut s, v_set, delta, 400, 80);
+            assert!((v - v_set).abs() / v_set < 0.03, "speed {v} vs {v_set}");
+            // Scaled to the set speed: both models' yaw rates are near proportional to it here.
+            let w = w * v_set / v;
+            let gap = (w - gym) / gym;
+            if v_set == 3.0 {
+                assert!(gap.abs() < 0.10, "3 m/s: yaw rate {w} vs f1tenth_gym {gym} ({gap:+.3})");
+            } else {
+                assert!(
+                    (gap - 0.18).abs() < 0.05,
+                    "6 m/s: yaw rate {w} vs f1tenth_gym {gym} ({gap:+.3}), the named gap is +0.18"
+                );
+            }
+        }
+    }
+}
