@@ -635,7 +635,7 @@ mod cli {
         let o = agvrl(&["bench", "--only", "physics"]);
         assert!(!o.status.success());
         assert!(
-            stderr(&o).contains("[possible values: sim, envs, rl, deploy, learning]"),
+            stderr(&o).contains("[possible values: sim, circuit, envs, rl, deploy, learning]"),
             "{}",
             stderr(&o)
         );
