@@ -72,23 +72,8 @@ impl FastRay {
                 let (mut t0, mut t1) = (0.0f32, max_t);
                 let mut n0 = Vector::ZERO;
                 for (n, off) in planes {
-                    let denom = n.dot(d);
-                    let dist = off - n.dot(o);
-                    if denom.abs() < 1e-12 {
-                        if dist < 0.0 {
-                            return None;
-                        }
-                    } else {
-                        let t = dist / denom;
-                        if denom > 0.0 {
-                            t1 = t1.min(t);
-                        } else if t > t0 {
-                            t0 = t;
-                            n0 = *n;
-                        }
-                        if t0 > t1 {
-                            return None;
-                        }
+                    if clip_plane(n.dot(d), off - n.dot(o), &mut t0, &mut t1)? {
+                        n0 = *n;
                     }
                 }
                 Some((t0, n0))
@@ -102,21 +87,8 @@ impl FastRay {
                     // The planes (n, off_pos) and (-n, off_neg), in this order, as `Planes`
                     // takes them: (-n).d = -nd and off_neg - (-n).o = off_neg + no exactly.
                     for (denom, dist, sign) in [(nd, off_pos - no, 1.0f32), (-nd, off_neg + no, -1.0)] {
-                        if denom.abs() < 1e-12 {
-                            if dist < 0.0 {
-                                return None;
-                            }
-                        } else {
-                            let t = dist / denom;
-                            if denom > 0.0 {
-                                t1 = t1.min(t);
-                            } else if t > t0 {
-                                t0 = t;
-                                n0 = n * sign;
-                            }
-                            if t0 > t1 {
-                                return None;
-                            }
+                        if clip_plane(denom, dist, &mut t0, &mut t1)? {
+                            n0 = n * sign;
                         }
                     }
                 }
@@ -158,24 +130,35 @@ fn cast_cuboid(pairs: &[(Vector, f32, f32); 3], o: Vector, d: Vector, max_t: f32
         let nd = n.dot(d);
         let no = n.dot(o);
         for (denom, dist) in [(nd, off_pos - no), (-nd, off_neg + no)] {
-            if denom.abs() < 1e-12 {
-                if dist < 0.0 {
-                    return None;
-                }
-            } else {
-                let t = dist / denom;
-                if denom > 0.0 {
-                    t1 = t1.min(t);
-                } else if t > t0 {
-                    t0 = t;
-                }
-                if t0 > t1 {
-                    return None;
-                }
-            }
+            clip_plane(denom, dist, &mut t0, &mut t1)?;
         }
     }
     Some(t0)
+}
+
+/// One plane of a slab clip along the ray (`denom` = n.d, `dist` = offset - n.o): narrows
+/// [t0, t1]. `None` when the ray misses the convex shape; `Some(true)` when this plane became
+/// the entry plane.
+#[inline(always)]
+fn clip_plane(denom: f32, dist: f32, t0: &mut f32, t1: &mut f32) -> Option<bool> {
+    let mut entered = false;
+    if denom.abs() < 1e-12 {
+        if dist < 0.0 {
+            return None;
+        }
+    } else {
+        let t = dist / denom;
+        if denom > 0.0 {
+            *t1 = t1.min(t);
+        } else if t > *t0 {
+            *t0 = t;
+            entered = true;
+        }
+        if *t0 > *t1 {
+            return None;
+        }
+    }
+    Some(entered)
 }
 
 fn cast_cylinder(o: Vector, d: Vector, a: Vector, r: f32, h: f32, max_t: f32) -> Option<f32> {
