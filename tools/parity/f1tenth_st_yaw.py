@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """Steady-cornering yaw rates of f1tenth_gym's single-track model, the golden values of agvrl-sim's
-`f1tenth::steady_cornering_yaw_rate_against_f1tenth_gyms_single_track_model` test.
+`f1tenth::steady_cornering_yaw_rate_against_f1tenth_gyms_single_track_model` test, and its heading
+change braking to a stop with the wheels turned a little, the golden value of
+`f1tenth::braking_hard_the_f1tenth_car_turns_in_as_f1tenth_gyms_model_does`.
 
 Two independent routes, which must agree:
 1. Closed form (always): the steady state of the linear single-track model with f1tenth_gym's
@@ -26,7 +28,10 @@ P = dict(mu=1.0489, C_Sf=4.718, C_Sr=5.4562, lf=0.15875, lr=0.17145, h=0.074, m=
          s_min=-0.4189, s_max=0.4189, sv_min=-3.2, sv_max=3.2, v_switch=7.319, a_max=9.51,
          v_min=-5.0, v_max=20.0)
 G = 9.81
-CASES = [(3.0, 0.04), (6.0, 0.04)]  # (speed m/s, front wheel angle rad)
+CASES = [(3.0, 0.04), (6.0, 0.04), (5.0, 0.1)]  # (speed m/s, front wheel angle rad)
+# Braking from speed v0 at a constant deceleration with the wheels held at delta, from straight
+# running: (v0 m/s, deceleration m/s^2, front wheel angle rad).
+BRAKING = [(9.0, 6.0, 0.01)]
 
 
 def closed_form(v, delta):
@@ -67,6 +72,22 @@ def integrate(dm, v, delta, t_end=20.0, dt=1e-3):
     return x[5], x[6]
 
 
+def brake(dm, v0, decel, delta, dt=1e-3):
+    """Heading change (rad) and path length (m) of f1tenth_gym's model braking to a stop."""
+    import numpy as np
+    args = tuple(P[k] for k in ["mu", "C_Sf", "C_Sr", "lf", "lr", "h", "m", "I", "s_min", "s_max",
+                                "sv_min", "sv_max", "v_switch", "a_max", "v_min", "v_max"])
+    x = np.array([0.0, 0.0, delta, v0, 0.0, 0.0, 0.0])
+    u = np.array([0.0, -decel])
+    f = lambda s: dm.vehicle_dynamics_st(s, u, *args)
+    length = 0.0
+    while x[3] > 0.05:
+        k1 = f(x); k2 = f(x + dt / 2 * k1); k3 = f(x + dt / 2 * k2); k4 = f(x + dt * k3)
+        length += x[3] * dt
+        x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x[4], length
+
+
 def main():
     src = sys.argv[1] if len(sys.argv) > 1 else "/work/.mirror/f1tenth+f1tenth_gym/repo"
     L = P["lf"] + P["lr"]
@@ -84,6 +105,11 @@ def main():
             line += f" f1tenth_gym_st_yaw={ri:.4f} beta={beta:.4f}"
             assert abs(ri - r) / r < 1e-3, "integration and closed form disagree"
         print(line)
+    if dm is not None:
+        for v0, decel, delta in BRAKING:
+            turned, length = brake(dm, v0, decel, delta)
+            print(f"braking v0={v0} decel={decel} delta={delta}: f1tenth_gym_st_turned={turned:.4f} rad "
+                  f"({math.degrees(turned):.1f} deg) path={length:.3f} m (v0^2/2a {v0 * v0 / 2 / decel:.3f})")
 
 
 if __name__ == "__main__":

@@ -195,6 +195,10 @@ struct Car {
     imu: ImuState,
     wheel_speed: f64,
     control: Control,
+    /// The centre steering angle the wheels turn towards, and where they stand, rad (the two
+    /// differ only for a vehicle with a steering rate limit).
+    steer_target_rad: f64,
+    steer_rad: f64,
     wheel_angles: (f64, f64),
     vel_w: (Vector, Vector),
     /// The static colliders around the car, for its suspension rays.
@@ -332,6 +336,8 @@ impl Sim {
                 imu: ImuState::default(),
                 wheel_speed: 0.0,
                 control: Control::default(),
+                steer_target_rad: 0.0,
+                steer_rad: 0.0,
                 wheel_angles: (0.0, 0.0),
                 vel_w: (Vector::ZERO, Vector::ZERO),
                 near: NearStatics::new(&world.pw),
@@ -433,6 +439,8 @@ impl Sim {
                 .reset(&mut self.world, &self.model, p, body_params(&car.params))?;
             car.wheel_speed = 0.0;
             car.control = Control::default();
+            car.steer_target_rad = 0.0;
+            car.steer_rad = 0.0;
             car.wheel_angles = (0.0, 0.0);
             car.vel_w = (Vector::ZERO, Vector::ZERO);
             car.imu.reset();
@@ -487,6 +495,7 @@ impl Sim {
             .ackermann
             .unwrap_or(self.model.spec.steering.ackermann);
         let max = self.model.spec.steering.max_rad;
+        let rate = self.model.spec.steering.max_rate_radps;
         for (car, control) in self.cars.iter_mut().zip(controls) {
             if car.parked {
                 continue;
@@ -505,12 +514,16 @@ impl Sim {
             };
             let delta = (c.steering_rad + car.params.steering_offset_rad).clamp(-max, max);
             car.wheel_speed = car.params.drive.advance(car.wheel_speed, c.throttle, t);
-            car.wheel_angles = ackermann_split(
-                delta,
-                self.model.wheelbase_m as f64,
-                self.model.front_track_m as f64,
-                ack,
-            );
+            car.steer_target_rad = delta;
+            if rate.is_none() {
+                car.steer_rad = delta;
+                car.wheel_angles = ackermann_split(
+                    delta,
+                    self.model.wheelbase_m as f64,
+                    self.model.front_track_m as f64,
+                    ack,
+                );
+            }
             car.control = Control {
                 throttle: c.throttle,
                 steering_rad: delta,
@@ -525,6 +538,17 @@ impl Sim {
                 before[i] = *self.world.pw.bodies[car.body.base()].position();
                 if car.parked && car.body.is_raycast() {
                     continue;
+                }
+                if let Some(rate) = rate {
+                    let turn = rate * t / self.cfg.settings.substeps as f64;
+                    car.steer_rad += (car.steer_target_rad - car.steer_rad).clamp(-turn, turn);
+                    car.wheel_angles = ackermann_split(
+                        car.steer_rad,
+                        self.model.wheelbase_m as f64,
+                        self.model.front_track_m as f64,
+                        ack,
+                    );
+                    car.control.steering_rad = car.steer_rad;
                 }
                 let steer = (car.wheel_angles.0 as f32, car.wheel_angles.1 as f32);
                 car.body.drive(
@@ -610,7 +634,8 @@ impl Sim {
         self.cars[0].wheel_speed
     }
 
-    /// The control in force (throttle, centre steering angle after limits and offset).
+    /// The control in force (throttle, centre steering angle after limits and offset; with a
+    /// steering rate limit, the angle the wheels reached by the end of the period).
     pub fn control(&self) -> Control {
         self.control_of(0)
     }

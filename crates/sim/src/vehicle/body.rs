@@ -10,7 +10,7 @@
 //! Both follow the same command: a wheel speed `w` (rad/s) from the drive model and the two
 //! front-wheel steering angles.
 
-use super::spec::VehicleModel;
+use super::spec::{TyreSpec, VehicleModel};
 use crate::SimError;
 use crate::world::{NearStatics, World, groups};
 use rapier3d::control::{DynamicRayCastVehicleController, WheelTuning};
@@ -138,7 +138,8 @@ impl Body {
             suspension_compression: 2.0 * (SUSPENSION_STIFFNESS / n).sqrt(),
             suspension_damping: 2.0 * (SUSPENSION_STIFFNESS / n).sqrt(),
             max_suspension_travel: SUSPENSION_REST_M,
-            side_friction_stiffness: 1.0,
+            // Tyres with cornering stiffness take over the side force (`tyre_side_impulses`).
+            side_friction_stiffness: if model.spec.tyre.is_some() { 0.0 } else { 1.0 },
             friction_slip: p.tyre_friction,
             max_suspension_force: 1.0e4,
         };
@@ -364,8 +365,20 @@ impl Body {
                 let f_max = model.spec.drive.max_torque_nm as f32 / r;
                 let f_total = rb.mass() * (w_radps * r - v) / TRACK_TAU_S;
                 let f_wheel = (f_total / n_driven).clamp(-f_max, f_max);
-                for (wheel, geom) in controller.wheels_mut().iter_mut().zip(&model.wheels) {
-                    wheel.engine_force = if geom.driven { f_wheel } else { 0.0 };
+                let shares = model.spec.tyre.map(|_| {
+                    load_shares(
+                        controller,
+                        model,
+                        f_total.clamp(-f_max * n_driven, f_max * n_driven),
+                        p.tyre_friction,
+                    )
+                });
+                for (i, (wheel, geom)) in controller.wheels_mut().iter_mut().zip(&model.wheels).enumerate() {
+                    wheel.engine_force = match (&shares, geom.driven) {
+                        (_, false) => 0.0,
+                        (Some(f), true) => f[i],
+                        (None, true) => f_wheel,
+                    };
                     wheel.steering = match geom.steer_side {
                         1 => steer.0,
                         -1 => steer.1,
@@ -391,6 +404,9 @@ impl Body {
                     filter,
                 );
                 controller.update_vehicle(dt, q);
+                if let Some(tyre) = model.spec.tyre {
+                    tyre_side_impulses(&mut world.pw, *chassis, controller, model, tyre, p.tyre_friction, dt);
+                }
             }
             Body::Multibody(car) => {
                 let max_t = model.spec.drive.max_torque_nm as f32;
@@ -424,6 +440,99 @@ impl Body {
         if let Body::Raycast { chassis, .. } = self {
             free_flight(&mut world.pw, *chassis);
         }
+    }
+}
+
+/// The drive force `f_total` (within the motor's limit) shared among the driven wheels in
+/// proportion to their load at the last substep, each within its tyre's friction `mu F_z`, for
+/// tyres with cornering stiffness: braking and driving load the wheels alike, so none runs out
+/// of grip first and leaves its axle without side force (with an even share, hard braking
+/// unloads the rear wheels past their grip and the car spins on a straight). Without load yet
+/// (the first substep, or in the air) the share is even.
+fn load_shares(controller: &DynamicRayCastVehicleController, model: &VehicleModel, f_total: f32, mu: f32) -> Vec<f32> {
+    let wheels = controller.wheels();
+    let load = |i: usize| {
+        let w = &wheels[i];
+        if model.wheels[i].driven && w.raycast_info().is_in_contact {
+            w.wheel_suspension_force.min(w.max_suspension_force)
+        } else {
+            0.0
+        }
+    };
+    let total: f32 = (0..wheels.len()).map(load).sum();
+    let n_driven = model.wheels.iter().filter(|w| w.driven).count().max(1) as f32;
+    (0..wheels.len())
+        .map(|i| {
+            if total > 0.0 {
+                let fz = load(i);
+                (f_total * fz / total).clamp(-mu * fz, mu * fz)
+            } else {
+                f_total / n_driven
+            }
+        })
+        .collect()
+}
+
+/// Share of a side force's roll moment that reaches the chassis: rapier's default for its own
+/// side friction (`Wheel::roll_influence`), which applies the force this far from the centre of
+/// mass's height towards the ground.
+const ROLL_INFLUENCE: f32 = 0.1;
+
+/// Side impulses of tyres with cornering stiffness, after rapier's suspension and drive
+/// impulses of one substep: f1tenth_gym's linear tyre, `mu C_S F_z alpha` per wheel with the
+/// wheel's load `F_z` from its suspension, limited by the friction circle `mu F_z` less the drive
+/// force, and never more than stops the contact's side velocity (the wheels share that), which
+/// keeps the explicit step stable at a standstill, where `alpha` is large for any side velocity.
+fn tyre_side_impulses(
+    pw: &mut PhysicsWorld,
+    chassis: RigidBodyHandle,
+    controller: &DynamicRayCastVehicleController,
+    model: &VehicleModel,
+    tyre: TyreSpec,
+    mu: f32,
+    dt: f32,
+) {
+    let rb = &pw.bodies[chassis];
+    let wheels = controller.wheels();
+    let on_ground = wheels.iter().filter(|w| w.raycast_info().is_in_contact).count();
+    if on_ground == 0 {
+        return;
+    }
+    let up = rb.position().rotation * Vector::Z;
+    let com = rb.center_of_mass();
+    let inv_m = rb.mass_properties().local_mprops.inv_mass;
+    let inv_i = rb.mass_properties().effective_world_inv_inertia;
+    let mut impulses = Vec::with_capacity(wheels.len());
+    for (w, geom) in wheels.iter().zip(&model.wheels) {
+        let info = w.raycast_info();
+        if !info.is_in_contact {
+            continue;
+        }
+        let n = info.contact_normal_ws;
+        let axle = (w.axle() - n * w.axle().dot(n)).normalize_or_zero();
+        let fwd = n.cross(axle).normalize_or_zero();
+        let at = info.contact_point_ws;
+        let v = rb.velocity_at_point(at);
+        let (vx, vy) = (v.dot(fwd), v.dot(axle));
+        let fz = w.wheel_suspension_force.min(w.max_suspension_force);
+        let c = if geom.steer_side != 0 {
+            tyre.cornering_stiffness_front
+        } else {
+            tyre.cornering_stiffness_rear
+        } as f32;
+        let alpha = vy.atan2(vx.abs());
+        let fx = w.forward_impulse / dt;
+        let room = ((mu * fz).powi(2) - fx * fx).max(0.0).sqrt();
+        let r_axle = (at - com).cross(axle);
+        let k = inv_m + r_axle.dot(inv_i * r_axle);
+        let stop = vy.abs() / (k * on_ground as f32);
+        let j = ((mu * c * fz * alpha.abs()).min(room) * dt).min(stop);
+        let at = at - up * (up.dot(at - com) * (1.0 - ROLL_INFLUENCE));
+        impulses.push((axle * (-vy.signum() * j), at));
+    }
+    let rb = &mut pw.bodies[chassis];
+    for (j, at) in impulses {
+        rb.apply_impulse_at_point(j, at, false);
     }
 }
 

@@ -6,4 +6,4 @@ pub mod spec;
 
 pub use actuation::{Control, DriveModel, ackermann_split};
 pub use body::{BodyParams, DynamicsMode};
-pub use spec::{DriveSpec, SteeringSpec, VehicleModel, VehicleSpec, WheelGeom, WheelSpec};
+pub use spec::{DriveSpec, SteeringSpec, TyreSpec, VehicleModel, VehicleSpec, WheelGeom, WheelSpec};

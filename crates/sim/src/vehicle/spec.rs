@@ -25,6 +25,10 @@ pub struct VehicleSpec {
     pub drive: DriveSpec,
     /// Steering limits and geometry.
     pub steering: SteeringSpec,
+    /// Tyres with cornering stiffness (ray-cast mode). Without it the tyres follow rapier's
+    /// ray-cast side friction, which has no slip angle.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tyre: Option<TyreSpec>,
     /// The wheels.
     #[serde(rename = "wheel")]
     pub wheels: Vec<WheelSpec>,
@@ -56,6 +60,23 @@ pub struct SteeringSpec {
     pub max_rad: f64,
     /// Split the angle between the front wheels by Ackermann geometry (else both get it).
     pub ackermann: bool,
+    /// Fastest the virtual centre wheel turns, rad/s; unset, the wheels take each commanded
+    /// angle at once.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_rate_radps: Option<f64>,
+}
+
+/// The single-track model's linear tyre (f1tenth_gym's `vehicle_dynamics_st`): each wheel's side
+/// force is `mu * C_S * F_z * alpha` for a slip angle `alpha`, up to what the friction circle
+/// leaves beside the drive force.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TyreSpec {
+    /// Cornering stiffness coefficient of the steered wheels, 1/rad (side force per unit load
+    /// and friction, per radian of slip).
+    pub cornering_stiffness_front: f64,
+    /// The same for the fixed wheels, 1/rad.
+    pub cornering_stiffness_rear: f64,
 }
 
 /// One wheel: its spinning joint, optionally the hinge that steers it, and whether it is driven.
@@ -170,6 +191,21 @@ impl VehicleModel {
             return Err(invalid(format!(
                 "steering.max_rad must be in (0, 1.5), got {}",
                 spec.steering.max_rad
+            )));
+        }
+        if let Some(t) = spec.tyre
+            && !(t.cornering_stiffness_front > 0.0 && t.cornering_stiffness_rear > 0.0)
+        {
+            return Err(invalid(format!(
+                "tyre cornering stiffnesses must be > 0, got front {} and rear {}",
+                t.cornering_stiffness_front, t.cornering_stiffness_rear
+            )));
+        }
+        if let Some(r) = spec.steering.max_rate_radps
+            && !(r.is_finite() && r > 0.0)
+        {
+            return Err(invalid(format!(
+                "steering.max_rate_radps must be finite and > 0, got {r}"
             )));
         }
         let mut wheels = Vec::new();
