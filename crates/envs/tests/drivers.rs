@@ -1,6 +1,6 @@
 //! The classical drivers on the real simulator: pure pursuit and follow the gap lap the oval and
 //! the shipped map tracks without touching a wall, pure pursuit near the centre line at its
-//! profile's pace.
+//! profile's pace, and on the F1TENTH car at racing speed.
 
 use agvrl_envs::api::{MapInfo, SensorFrame, Track};
 use agvrl_envs::drivers::{
@@ -227,6 +227,37 @@ fn pure_pursuit_laps_the_map_tracks_without_contact() {
             assert_eq!(run.lap_s.len(), 2, "{track} seed {seed}");
             let off = run.max_offset_m(|s| s.lap == 1);
             assert!(off < 0.25, "{track} seed {seed}: {off} m off the centre line");
+        }
+    }
+}
+
+/// The F1TENTH car (`vehicle = "f1tenth"`, configs/f1tenth.toml's 40 Hz and 6 m/s^2 brake) on
+/// `track`, as [`config`].
+fn f1tenth_config(track: &str, spawn: SpawnMode) -> EnvConfig {
+    let mut cfg = config(Some(track), spawn);
+    cfg.sim.vehicle = "f1tenth".into();
+    cfg.sim.control_period_s = 0.025;
+    cfg.sim.substeps = 3;
+    cfg.sim.brake_mps2 = 6.0;
+    cfg
+}
+
+/// Pure pursuit laps the bean and the sweepers twice on the F1TENTH car at racing speed (above
+/// 7 m/s on their straights) without touching a wall, from their start and from seeded spawns:
+/// its speed profile corners within 0.7 of the slip-angle tyres' grip and brakes within what
+/// the cornering leaves, and it slows for the arc it steers when that is tighter than its path.
+#[test]
+fn pure_pursuit_laps_the_map_tracks_on_the_f1tenth_car_at_racing_speed_without_contact() {
+    for track in ["bean", "sweepers"] {
+        for (seed, spawn) in [(0, SpawnMode::Fixed), (1, SpawnMode::Random), (2, SpawnMode::Random)] {
+            let cfg = f1tenth_config(track, spawn);
+            let limits = CarLimits::of(&cfg.sim.vehicle_model().unwrap(), cfg.sim.brake_mps2);
+            let mut driver = PurePursuit::new(PurePursuitSettings::default(), limits, None).unwrap();
+            let run = drive(&mut driver, &cfg, seed, 2);
+            assert_eq!(run.contact_s, None, "{track} seed {seed}: {:?}", run.lap_s);
+            assert_eq!(run.lap_s.len(), 2, "{track} seed {seed}");
+            let top = run.samples.iter().map(|s| s.speed_mps).fold(0.0, f64::max);
+            assert!(top > 7.0, "{track} seed {seed}: top speed {top} m/s");
         }
     }
 }

@@ -12,6 +12,12 @@ const GRAVITY_MPS2: f64 = 9.81;
 /// to the outer wheels (which lowers the grip of a tyre pair) does not put the car at the edge.
 const LATERAL_GRIP_SHARE: f64 = 0.8;
 
+/// The same for a car with slip-angle tyres (`[tyre]` in its TOML, the F1TENTH car): at 10 m/s
+/// pure pursuit steers off its path by more than the path bends, and the load moving forward
+/// when it brakes takes grip from the rear wheels; at 0.8 two of the six validation circuits
+/// (BrandsHatch, Zandvoort) spun it into a wall, at 0.7 none.
+const TYRE_LATERAL_GRIP_SHARE: f64 = 0.7;
+
 /// The car as the drivers plan with it. Build it with [`CarLimits::of`]; the fields are public so
 /// a real car's measured figures can replace the model's.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -68,13 +74,18 @@ impl CarLimits {
             .iter()
             .map(|w| (w.center_b.y.abs() + 0.5 * w.width_m) as f64)
             .fold(0.0, f64::max);
+        let share = if model.spec.tyre.is_some() {
+            TYRE_LATERAL_GRIP_SHARE
+        } else {
+            LATERAL_GRIP_SHARE
+        };
         Self {
             top_speed_mps: drive.steady_state(1.0) * drive_radius_m,
             wheelbase_m: model.wheelbase_m as f64,
             max_steering_rad: model.spec.steering.max_rad,
             drive,
             drive_radius_m,
-            lateral_accel_mps2: LATERAL_GRIP_SHARE * model.spec.tyre_friction as f64 * GRAVITY_MPS2,
+            lateral_accel_mps2: share * model.spec.tyre_friction as f64 * GRAVITY_MPS2,
             brake_mps2: brake_mps2.max(0.0),
             half_width_m,
             rear_axle_x_m,
@@ -158,11 +169,20 @@ impl CarLimits {
     }
 
     /// Deceleration the car can count on at `speed_mps`, m/s^2: the ESC's brake, or the drive's
-    /// drag when that is stronger (coasting, `brake_mps2 = 0`, has only the drag).
+    /// drag when that is stronger (coasting, `brake_mps2 = 0`, has only the drag), within the
+    /// circle of radius [`Self::lateral_accel_mps2`] a speed profile keeps to: braking harder
+    /// spins a car whose load moves forward onto its front wheels.
     pub fn decel_mps2(&self, speed_mps: f64) -> f64 {
         let w = speed_mps.max(0.0) / self.drive_radius_m;
         let drag = self.drive_radius_m * w * (self.drive.c_d * w + self.drive.c_r);
-        drag.max(self.brake_mps2)
+        drag.max(self.brake_mps2).min(self.lateral_accel_mps2)
+    }
+
+    /// Acceleration along the path the tyres allow while cornering at `lateral_mps2`, m/s^2:
+    /// both share one circle of radius [`Self::lateral_accel_mps2`], so a car at the cornering
+    /// limit neither brakes nor drives harder.
+    pub fn along_while_cornering_mps2(&self, lateral_mps2: f64) -> f64 {
+        (self.lateral_accel_mps2.powi(2) - lateral_mps2.powi(2)).max(0.0).sqrt()
     }
 }
 
@@ -212,6 +232,33 @@ mod tests {
         assert!((l.decel_mps2(l.top_speed_mps) - 20.0 * 0.05).abs() < 1e-6);
         assert_eq!(l.decel_mps2(0.0), 0.0);
         assert_eq!(xtenth(3.0).decel_mps2(0.5), 3.0);
+    }
+
+    /// The F1TENTH car has slip-angle tyres: its profiles corner at 0.7 of its grip (XTENTH-CAR's
+    /// at 0.8) and brake no harder than that circle's radius, whatever its ESC can; cornering
+    /// leaves the rest of the circle along the path.
+    #[test]
+    fn the_f1tenth_car_corners_at_0_7_of_its_grip_and_brakes_within_that_circle() {
+        let model = agvrl_sim::SimSettings {
+            vehicle: "f1tenth".into(),
+            ..Default::default()
+        }
+        .vehicle_model()
+        .unwrap();
+        let l = CarLimits::of(&model, 9.51);
+        let grip = 1.0489 * GRAVITY_MPS2;
+        assert!(
+            (l.lateral_accel_mps2 - 0.7 * grip).abs() < 1e-5,
+            "{}",
+            l.lateral_accel_mps2
+        );
+        assert_eq!(l.decel_mps2(5.0), l.lateral_accel_mps2);
+        assert_eq!(CarLimits::of(&model, 6.0).decel_mps2(5.0), 6.0);
+        let r = l.lateral_accel_mps2;
+        assert_eq!(l.along_while_cornering_mps2(0.0), r);
+        assert_eq!(l.along_while_cornering_mps2(r), 0.0);
+        assert_eq!(l.along_while_cornering_mps2(2.0 * r), 0.0);
+        assert!((l.along_while_cornering_mps2(0.6 * r) - 0.8 * r).abs() < 1e-9);
     }
 
     #[test]

@@ -273,9 +273,12 @@ impl Driver for PurePursuit {
         let steering_rad = (self.limits.wheelbase_m * curvature).atan().clamp(-max, max);
         let n = path.len();
         let span = (j + n - i) % n;
+        // No faster than the grip allows on the arc it steers: off the path (out of one bend
+        // into the next) that arc is tighter than the path's.
+        let steered_curvature = steering_rad.tan().abs() / self.limits.wheelbase_m;
         let target = (0..=span)
             .map(|k| path.speeds_mps()[(i + k) % n])
-            .fold(f64::INFINITY, f64::min);
+            .fold((self.limits.lateral_accel_mps2 / steered_curvature).sqrt(), f64::min);
         let throttle = self.limits.throttle(target, measured, self.settings.speed_gain_per_mps);
         Control { throttle, steering_rad }
     }
@@ -389,6 +392,35 @@ mod tests {
             let v = last_10_s.last().unwrap().1;
             assert!((v - path.speeds_mps()[0]).abs() < 0.01, "v {v}");
         }
+    }
+
+    /// Off its path and steering back hard, it asks for no more speed than the grip allows on
+    /// the arc it steers, though the path's own profile allows the top speed there.
+    #[test]
+    fn off_the_path_it_slows_for_the_arc_it_steers() {
+        let mut limits = xtenth(0.0);
+        limits.lateral_accel_mps2 = 0.5;
+        let path = RacePath::new(&circle(50.0, 3142), &limits, 1.0).unwrap();
+        assert!(
+            path.speeds_mps()
+                .iter()
+                .all(|&v| (v - limits.top_speed_mps).abs() < 1e-9)
+        );
+        let mut driver = PurePursuit::new(PurePursuitSettings::default(), limits, Some(path)).unwrap();
+        // 0.3 m outside the circle, heading 0.5 rad away from it, at the top speed.
+        let v = limits.top_speed_mps;
+        let f = frame_at(&limits, 50.3, 0.0, std::f64::consts::FRAC_PI_2 - 0.5, v);
+        driver.reset(&f, None);
+        let u = driver.control(&f, None);
+        let kappa = u.steering_rad.tan().abs() / limits.wheelbase_m;
+        let cap = (limits.lateral_accel_mps2 / kappa).sqrt();
+        assert!(cap < 0.9 * v, "the arc {kappa} 1/m allows {cap} m/s: no test");
+        let want = limits.throttle(cap, Some(v), PurePursuitSettings::default().speed_gain_per_mps);
+        assert!(
+            (u.throttle - want).abs() < 1e-12,
+            "throttle {} for {cap} m/s: {want}",
+            u.throttle
+        );
     }
 
     #[test]

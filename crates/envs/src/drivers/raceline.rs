@@ -367,15 +367,21 @@ fn profile(kappa: &[f64], spacing_m: f64, limits: &CarLimits) -> Vec<f64> {
             v
         })
         .collect();
+    // What the tyres leave for the drive or the brake between points a and b at speed `v`,
+    // cornering on the tighter of their curvatures.
+    let along =
+        |a: usize, b: usize, v: f64| limits.along_while_cornering_mps2(v * v * kappa[a].abs().max(kappa[b].abs()));
     // Two laps each way: a limit anywhere reaches every point it constrains within one lap.
     for step in 1..=2 * n {
         let (prev, i) = ((step - 1) % n, step % n);
-        let reach = (v[prev].powi(2) + 2.0 * limits.accel_mps2(v[prev]) * spacing_m).sqrt();
+        let accel = limits.accel_mps2(v[prev]).min(along(prev, i, v[prev]));
+        let reach = (v[prev].powi(2) + 2.0 * accel * spacing_m).sqrt();
         v[i] = v[i].min(reach);
     }
     for step in (0..2 * n).rev() {
         let (i, next) = (step % n, (step + 1) % n);
-        let reach = (v[next].powi(2) + 2.0 * limits.decel_mps2(v[next]) * spacing_m).sqrt();
+        let decel = limits.decel_mps2(v[next]).min(along(i, next, v[next]));
+        let reach = (v[next].powi(2) + 2.0 * decel * spacing_m).sqrt();
         v[i] = v[i].min(reach);
     }
     v
@@ -594,7 +600,8 @@ mod tests {
 
     /// An 8 m square with corners of 1 m radius: the corners get the lateral limit (low grip, so
     /// it binds); the straights brake into them no harder than the drive's deceleration and
-    /// accelerate out no harder than its full throttle, and come close to the top speed between.
+    /// accelerate out no harder than its full throttle, braking and driving only with the grip
+    /// the cornering leaves, and come close to the top speed between.
     #[test]
     fn the_profile_brakes_into_corners_and_accelerates_out_within_the_drives_limits() {
         for (rc, a_lat, brake) in [(1.0, 1.0, 0.0), (1.0, 1.0, 2.0)] {
@@ -630,6 +637,14 @@ mod tests {
                 let accel = (b * b - a * a) / (2.0 * ds);
                 assert!(accel <= limits.accel_mps2(a) + 1e-9, "point {i}: +{accel} m/s^2");
                 assert!(-accel <= limits.decel_mps2(b) + 1e-9, "point {i}: -{accel} m/s^2");
+                // Braking or driving and cornering share one circle of grip (at the speed the
+                // change starts from: the entry's when driving, the exit's when braking).
+                let bend = k.max(path.curvatures_1pm()[(i + 1) % n].abs());
+                let left = limits.along_while_cornering_mps2(if accel > 0.0 { a } else { b }.powi(2) * bend);
+                assert!(
+                    accel.abs() <= left + 1e-9,
+                    "point {i}: {accel} m/s^2 where {left} is left"
+                );
             }
             // The slowest point is the corner's limit at its radius (the curvature at the arc's
             // middle is 1/rc within the smoothing); the fastest is short of the top speed, which
