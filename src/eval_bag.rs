@@ -46,8 +46,13 @@ impl EpisodeBags {
                 dir.display()
             );
         }
-        let mut drive = DriveMapping::default();
-        drive.for_trained_top_speed(env_cfg.sim.vehicle_model()?.top_speed_mps());
+        // The recorded drive commands carry the simulated car's own limits.
+        let model = env_cfg.sim.vehicle_model()?;
+        let mut drive = DriveMapping {
+            steering_limit_rad: model.spec.steering.max_rad,
+            ..DriveMapping::default()
+        };
+        drive.for_trained_top_speed(model.top_speed_mps());
         Ok(Self {
             dir: dir.to_path_buf(),
             policy: policy.map(Path::to_path_buf),
