@@ -134,3 +134,21 @@ impl EpisodeBags {
         Ok(self.written)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The recorded drive commands are clipped to the simulated car's steering limit, not
+    /// XTENTH-CAR's: the F1TENTH car steers to 0.4189 rad.
+    #[test]
+    fn bags_carry_the_simulated_cars_steering_limit() {
+        let dir = tempfile::tempdir().unwrap();
+        for (vehicle, limit) in [("xtenth_car", 0.36), ("f1tenth", 0.4189)] {
+            let mut cfg = EnvConfig::default();
+            cfg.sim.vehicle = vehicle.into();
+            let bags = EpisodeBags::new(&dir.path().join(vehicle), None, "racing-oval", &cfg).unwrap();
+            assert_eq!(bags.drive.steering_limit_rad, limit, "{vehicle}");
+        }
+    }
+}
