@@ -1,6 +1,7 @@
 //! `agvrl race`: policies race each other (or themselves) on one track, deterministic actions,
-//! held-out races; prints each car's wins, places, laps, lap times, passes and contacts as
-//! `key=value` lines, and can draw the first race's paths and record it for rerun.
+//! held-out races; prints each car's wins, places, laps, lap times, encounters, passes,
+//! at-fault incidents and contacts as `key=value` lines (docs/racing.md, "Race figures"), and
+//! can draw the first race's paths and record it for rerun.
 
 use crate::plots::{self, Path2};
 use crate::viz::{self, Recorder};
@@ -26,8 +27,17 @@ pub struct RaceArgs {
     #[arg(long)]
     pub cars: Option<usize>,
     /// Race on this map-file track (a map YAML) instead of the first policy's.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "circuits")]
     pub track: Option<PathBuf>,
+    /// Race on generated circuits, a new held-out one every race (the circuit generator's
+    /// settings from the first policy's `circuit`, or its defaults).
+    #[arg(long)]
+    pub circuits: bool,
+    /// Start every race in a passing situation: car 0 (the first policy's) 2 m behind car 1
+    /// on the centre line, at a place along the lap drawn per race
+    /// (`env_config.race.start_behind_share=1`; `start_behind_m` sets the gap).
+    #[arg(long)]
+    pub start_behind: bool,
     /// Races to run.
     #[arg(long, default_value_t = 10)]
     pub races: usize,
@@ -56,7 +66,11 @@ struct Tally {
     laps: u64,
     lap_times: Vec<f64>,
     best_lap_s: Option<f64>,
-    overtakes: u64,
+    encounters: u64,
+    passes: u64,
+    incidents: u64,
+    starts_behind: usize,
+    wins_from_behind: usize,
     contacts: u64,
     at_fault: u64,
     time_lost_s: f64,
@@ -98,10 +112,17 @@ pub fn race(a: RaceArgs) -> Result<()> {
         bail!("--policy is needed");
     };
     cfg.held_out = true;
+    let race = cfg.race.unwrap_or_default();
     cfg.race = Some(RaceSettings {
         cars,
-        ..cfg.race.unwrap_or_default()
+        start_behind_share: if a.start_behind { 1.0 } else { race.start_behind_share },
+        ..race
     });
+    if a.circuits {
+        cfg.track = None;
+        cfg.layout_seed = None;
+        cfg.circuit = Some(cfg.circuit.unwrap_or_default());
+    }
     if let Some(n) = a.max_steps {
         if n == 0 {
             bail!("--max-steps must be at least 1");
@@ -202,8 +223,11 @@ pub fn race(a: RaceArgs) -> Result<()> {
         };
         for (place, &i) in summary.order.iter().enumerate() {
             let t = &mut tally[i];
+            let behind = summary.start_place[i] > 1;
             t.wins += usize::from(place == 0);
             t.place_sum += place + 1;
+            t.starts_behind += usize::from(behind);
+            t.wins_from_behind += usize::from(behind && place == 0);
         }
         for (i, t) in tally.iter_mut().enumerate() {
             t.laps += summary.laps[i] as u64;
@@ -211,7 +235,9 @@ pub fn race(a: RaceArgs) -> Result<()> {
             if let Some(b) = summary.best_lap_s[i] {
                 t.best_lap_s = Some(t.best_lap_s.map_or(b, |x: f64| x.min(b)));
             }
-            t.overtakes += summary.overtakes[i] as u64;
+            t.encounters += summary.encounters[i] as u64;
+            t.passes += summary.passes[i] as u64;
+            t.incidents += summary.at_fault_incidents(i) as u64;
             t.contacts += summary.contacts[i] as u64;
             t.at_fault += summary.at_fault[i] as u64;
             t.time_lost_s += summary.time_lost_s[i];
@@ -220,6 +246,7 @@ pub fn race(a: RaceArgs) -> Result<()> {
     }
     let track = match &cfg.track {
         Some(t) => t.load()?.name,
+        None if cfg.circuit.is_some() || cfg.layout_seed.is_some() => "circuits".into(),
         None => "oval".into(),
     };
     let n = a.races as f64;
@@ -232,15 +259,26 @@ pub fn race(a: RaceArgs) -> Result<()> {
             true => "none".to_string(),
             false => format!("{:.2}", t.lap_times.iter().sum::<f64>() / t.lap_times.len() as f64),
         };
+        let share = |a: u64, b: u64| match b {
+            0 => "none".to_string(),
+            b => format!("{:.2}", a as f64 / b as f64),
+        };
         println!(
-            "car={i} policy={} wins={} win_rate={:.2} mean_place={:.2} laps_per_race={:.2} mean_lap_s={mean_lap} best_lap_s={} overtakes_per_race={:.2} contacts_per_race={:.2} at_fault_per_race={:.2} time_lost_s_per_race={:.2} crashes={}",
+            "car={i} policy={} wins={} win_rate={:.2} mean_place={:.2} laps_per_race={:.2} mean_lap_s={mean_lap} best_lap_s={} encounters={} passes={} pass_success={} at_fault_incidents={} at_fault_share={} starts_behind={} wins_from_behind={} win_rate_from_behind={} contacts_per_race={:.2} at_fault_per_race={:.2} time_lost_s_per_race={:.2} crashes={}",
             car_name(i),
             t.wins,
             t.wins as f64 / n,
             t.place_sum as f64 / n,
             t.laps as f64 / n,
             t.best_lap_s.map_or("none".into(), |b| format!("{b:.2}")),
-            t.overtakes as f64 / n,
+            t.encounters,
+            t.passes,
+            share(t.passes, t.encounters),
+            t.incidents,
+            share(t.incidents, t.passes + t.incidents),
+            t.starts_behind,
+            t.wins_from_behind,
+            share(t.wins_from_behind as u64, t.starts_behind as u64),
             t.contacts as f64 / n,
             t.at_fault as f64 / n,
             t.time_lost_s / n,

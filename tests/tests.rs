@@ -1417,7 +1417,12 @@ mod racing_against_others {
             for k in [
                 "mean_place",
                 "laps_per_race",
-                "overtakes_per_race",
+                "encounters",
+                "passes",
+                "pass_success",
+                "at_fault_incidents",
+                "at_fault_share",
+                "wins_from_behind",
                 "contacts_per_race",
                 "time_lost_s_per_race",
                 "crashes",
@@ -1431,6 +1436,29 @@ mod racing_against_others {
             &rrd,
             &["world/car_0", "world/car_1", "world/paths/car_1", "world/lidar/car_0"],
         );
+        // On generated circuits, a new one each race, from a start 2 m behind pure pursuit at
+        // 0.75 of its speed: every race begins with an encounter for car 0.
+        let o = agvrl(&[
+            "race",
+            "--policy",
+            "assets/policies/racing-any-track.agvrl",
+            "--racer",
+            "pure-pursuit@0.75",
+            "--circuits",
+            "--start-behind",
+            "--races",
+            "2",
+            "--max-steps",
+            "150",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let out = stdout(&o);
+        assert!(out.contains("track=circuits cars=2 races=2"), "{out}");
+        let car = |i: usize| out.lines().find(|l| l.starts_with(&format!("car={i} "))).unwrap();
+        assert_eq!(key(car(0), "starts_behind"), "2", "{out}");
+        assert_eq!(key(car(1), "starts_behind"), "0", "{out}");
+        assert_eq!(key(car(1), "policy"), "pure-pursuit@0.75", "{out}");
+        assert!(key(car(0), "encounters").parse::<u32>().unwrap() >= 2, "{out}");
         let o = agvrl(&["race", "--policy", "a.agvrl", "--policy", "b.agvrl", "--cars", "3"]);
         assert!(!o.status.success());
         assert_eq!(

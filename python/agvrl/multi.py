@@ -27,10 +27,11 @@ class AgvrlParallelEnv(ParallelEnv):
     observation and action spaces are its single-car racing env's. A car that crashes into a
     wall is terminated and leaves ``agents``; it stays on the track as an obstacle until the
     race ends. The time limit (``max_steps``) truncates every car at once. Each info carries
-    ``race`` (``position``, ``distance_m``, ``contacts``, ``at_fault``, ``overtakes``,
-    ``time_lost_s``, ``crashed``) besides the single-car keys; on the step the race ends every
-    info of that step carries ``race_summary`` (per-car lists: ``order``, ``laps``,
-    ``best_lap_s``, ``overtakes``, ``contacts``, ``at_fault``, ``time_lost_s``, ``crashed``).
+    ``race`` (``position``, ``distance_m``, ``contacts``, ``at_fault``, ``encounters``,
+    ``passes``, ``time_lost_s``, ``crashed``) besides the single-car keys; on the step the race
+    ends every info of that step carries ``race_summary`` (per-car lists: ``order``, ``laps``,
+    ``best_lap_s``, ``distance_m``, ``start_place``, ``encounters``, ``passes``, ``contacts``,
+    ``at_fault``, ``time_lost_s``, ``crashed``). docs/racing.md, "Race figures", defines them.
     """
 
     metadata = {"name": "agvrl_race_v0", "render_modes": []}

@@ -20,6 +20,7 @@ pub mod drivers;
 pub mod heldout;
 pub mod pendulum;
 pub mod race_env;
+pub mod race_figures;
 pub mod registry;
 pub mod sim_vehicle;
 pub mod task;

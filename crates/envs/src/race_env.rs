@@ -8,9 +8,10 @@ use crate::api::{
     BoxSpace, Control, EnvError, EpisodeSummary, Info, MapInfo, MultiEnv, MultiStep, RaceCarInfo, RaceSummary,
     RacingInfo, RewardTerms, SensorFrame, Step, Track, validate_action,
 };
+use crate::race_figures::{CarAt, PassBook};
 use crate::sim_vehicle::{Randomisation, map_of};
 use crate::task::Task;
-use agvrl_sim::{PlanarPose, Sim, SimConfig};
+use agvrl_sim::{PlanarPose, SceneSource, Sim, SimConfig};
 use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
@@ -33,6 +34,12 @@ pub struct RaceSettings {
     /// end limit from the walls, and at least [`GRID_MIN_CLEARANCE_M`]) the columns close in,
     /// down to single file.
     pub grid_offset_m: f32,
+    /// Share of races that start with car 0 (the learner) [`Self::start_behind_m`] behind
+    /// car 1 on the centre line, at a place along the lap drawn per race, the other cars a
+    /// grid row apart ahead of car 1; the rest start from the grid. 0 to 1.
+    pub start_behind_share: f64,
+    /// How far car 0 starts behind car 1 in those races, metres (centre to centre).
+    pub start_behind_m: f32,
 }
 
 impl Default for RaceSettings {
@@ -43,6 +50,8 @@ impl Default for RaceSettings {
             contact_penalty: -2.0,
             grid_gap_m: 0.8,
             grid_offset_m: 0.3,
+            start_behind_share: 0.0,
+            start_behind_m: 2.0,
         }
     }
 }
@@ -71,6 +80,21 @@ impl RaceSettings {
         if !(self.grid_offset_m >= 0.0 && self.grid_offset_m.is_finite()) {
             return bad(format!("grid_offset_m must be >= 0, got {}", self.grid_offset_m));
         }
+        if !(0.0..=1.0).contains(&self.start_behind_share) {
+            return bad(format!(
+                "start_behind_share must be in [0, 1], got {}",
+                self.start_behind_share
+            ));
+        }
+        if self.start_behind_share > 0.0 && self.cars < 2 {
+            return bad("start_behind_share needs a second car to start behind".into());
+        }
+        if !(self.start_behind_m >= 0.6 && self.start_behind_m.is_finite()) {
+            return bad(format!(
+                "start_behind_m must be at least 0.6 (a car's length), got {}",
+                self.start_behind_m
+            ));
+        }
         Ok(())
     }
 }
@@ -81,9 +105,6 @@ pub const GRID_MARGIN_M: f32 = 0.15;
 /// where only contact ends an episode.
 pub const GRID_MIN_CLEARANCE_M: f32 = 0.35;
 
-/// A pass counts once the passing car leads by this much along the centre line, metres (and a
-/// pass back once it trails by as much): cars side by side do not swap places every step.
-const PASS_MARGIN_M: f64 = 0.5;
 /// How long after a contact begins its time loss is counted, seconds.
 const LOSS_WINDOW_S: f64 = 2.0;
 
@@ -111,7 +132,8 @@ struct Racer {
     lap_times_s: Vec<f64>,
     contacts: u32,
     at_fault: u32,
-    overtakes: u32,
+    /// When its front last hit another car, seconds.
+    last_fault_s: Option<f64>,
     time_lost_s: f64,
     /// (speed before, steps left) of the contact whose loss is counted now.
     loss: Option<(f64, u32)>,
@@ -135,10 +157,16 @@ pub struct RaceEnv {
     rng: StdRng,
     frames: Vec<SensorFrame>,
     racers: Vec<Racer>,
-    /// `ahead[i][j]`: car i leads car j by the pass margin (as last decided).
-    ahead: Vec<Vec<bool>>,
+    /// Encounters and passes of this race.
+    book: PassBook,
+    /// Each car's place at the start, 1 first.
+    start_place: Vec<usize>,
     /// The grid, pole first.
     slots: Vec<PlanarPose>,
+    /// Draw a new generated circuit for every race (see [`RaceEnv::with_new_layout_each_race`]).
+    new_layout_each_race: bool,
+    /// The racing rules' end limit, metres: the grid keeps clear of it.
+    end_below_m: f32,
     /// Where the car's body ends behind and ahead of its base along x, metres: the contact
     /// point's place along the car says whose front hit.
     body_x_m: (f32, f32),
@@ -195,12 +223,50 @@ impl RaceEnv {
             rng: StdRng::seed_from_u64(0),
             frames: Vec::new(),
             racers: vec![Racer::default(); n],
-            ahead: vec![vec![false; n]; n],
+            book: PassBook::new(n),
+            start_place: (1..=n).collect(),
             slots,
+            new_layout_each_race: false,
+            end_below_m,
             body_x_m,
             steps: 0,
             ready: false,
         })
+    }
+
+    /// Draw a new circuit for every race from the race's seed, when the track is a generated
+    /// circuit (`layout_seed` on a racing env; in its half of the seed space, see
+    /// [`crate::heldout`]).
+    pub fn with_new_layout_each_race(mut self, on: bool) -> Self {
+        self.new_layout_each_race = on;
+        self
+    }
+
+    /// Rebuild the world on the circuit of `race_seed` when circuits change per race.
+    fn relayout(&mut self, race_seed: u64) -> Result<(), EnvError> {
+        let SceneSource::Circuit { settings, .. } = self.sim.config().scene.clone() else {
+            return Ok(());
+        };
+        if !self.new_layout_each_race {
+            return Ok(());
+        }
+        let cfg = SimConfig {
+            scene: SceneSource::Circuit {
+                seed: crate::heldout::layout_of_episode(race_seed),
+                settings,
+            },
+            ..self.sim.config().clone()
+        };
+        self.sim = Sim::with_cars(cfg, self.racers.len())?;
+        self.map = map_of(&self.sim);
+        self.track = self
+            .map
+            .track
+            .clone()
+            .ok_or(EnvError::Internal("a generated circuit has a track"))?;
+        let clearance_m = (self.end_below_m + GRID_MARGIN_M).max(GRID_MIN_CLEARANCE_M);
+        self.slots = grid(&self.sim, &self.track, &self.settings, clearance_m);
+        Ok(())
     }
 
     /// Car `i`'s last observation (after the last reset or step): opponents driven in-process
@@ -282,7 +348,9 @@ impl RaceEnv {
             best_lap_s: r.iter().map(|c| c.best_lap_s).collect(),
             lap_times_s: r.iter().map(|c| c.lap_times_s.clone()).collect(),
             distance_m: r.iter().map(|c| c.distance_m).collect(),
-            overtakes: r.iter().map(|c| c.overtakes).collect(),
+            start_place: self.start_place.clone(),
+            encounters: self.book.encounters().to_vec(),
+            passes: self.book.passes().to_vec(),
             contacts: r.iter().map(|c| c.contacts).collect(),
             at_fault: r.iter().map(|c| c.at_fault).collect(),
             time_lost_s: r.iter().map(|c| c.time_lost_s).collect(),
@@ -316,6 +384,29 @@ fn grid(sim: &Sim, track: &Track, settings: &RaceSettings, clearance_m: f32) -> 
     (0..settings.cars).map(|k| slot(k, offset)).collect()
 }
 
+impl RaceEnv {
+    /// A start in a passing situation: car 1 on the centre line at a place drawn along the lap,
+    /// car 0 [`RaceSettings::start_behind_m`] behind it, the other cars a grid row apart ahead
+    /// of car 1. Gives the poses and the cars in order from the front.
+    fn behind_start(&self, rng: &mut StdRng) -> (Vec<PlanarPose>, Vec<usize>) {
+        let n = self.racers.len();
+        let lap = self.track.lap_length_m();
+        let s1 = rng.random_range(0.0..lap);
+        let at = |s: f32| {
+            let ([x, y], [dx, dy]) = self.track.centreline_at(s.rem_euclid(lap));
+            PlanarPose {
+                x_m: x,
+                y_m: y,
+                yaw_rad: dy.atan2(dx),
+            }
+        };
+        let mut poses = vec![at(s1 - self.settings.start_behind_m), at(s1)];
+        poses.extend((2..n).map(|k| at(s1 + self.settings.grid_gap_m * (k - 1) as f32)));
+        let order = (0..n).rev().collect();
+        (poses, order)
+    }
+}
+
 /// `x` wrapped into (-lap/2, lap/2].
 fn wrap(x: f64, lap: f64) -> f64 {
     let y = x.rem_euclid(lap);
@@ -340,14 +431,24 @@ impl MultiEnv for RaceEnv {
             self.rng = StdRng::seed_from_u64(s);
         }
         let episode_seed = crate::heldout::split(self.rng.random(), self.held_out);
+        self.relayout(episode_seed)?;
         let mut rng = StdRng::seed_from_u64(episode_seed);
         let n = self.racers.len();
-        // The grid order is drawn per race: slot k holds car order[k].
-        let mut order: Vec<usize> = (0..n).collect();
-        order.shuffle(&mut rng);
-        let mut poses = vec![PlanarPose::default(); n];
+        let behind = self.settings.start_behind_share > 0.0 && rng.random_bool(self.settings.start_behind_share);
+        let (poses, order) = if behind {
+            self.behind_start(&mut rng)
+        } else {
+            // The grid order is drawn per race: slot k holds car order[k].
+            let mut order: Vec<usize> = (0..n).collect();
+            order.shuffle(&mut rng);
+            let mut poses = vec![PlanarPose::default(); n];
+            for (k, &car) in order.iter().enumerate() {
+                poses[car] = self.slots[k];
+            }
+            (poses, order)
+        };
         for (k, &car) in order.iter().enumerate() {
-            poses[car] = self.slots[k];
+            self.start_place[car] = k + 1;
         }
         let nominal = self.sim.nominal_params();
         for i in 0..n {
@@ -359,22 +460,21 @@ impl MultiEnv for RaceEnv {
         self.frames.clear();
         self.racers = vec![Racer::default(); n];
         let mut obs = Vec::with_capacity(n);
+        // Every car's place relative to car 0's, so gaps are right across the lap line.
+        let first = wrap(self.arc_s(0), lap);
+        let arc0 = self.arc_s(0);
         for i in 0..n {
             let frame = self.frame(i);
             self.tasks[i].needs().check(&frame)?;
             self.tasks[i].reset(&frame, Some(&self.map));
             obs.push(self.tasks[i].observe(&frame));
             self.frames.push(frame);
-            let offset = wrap(self.arc_s(i), lap);
+            let offset = first + wrap(self.arc_s(i) - arc0, lap);
             let r = &mut self.racers[i];
             r.offset_m = offset;
             r.distance_m = r.offset_m;
         }
-        for i in 0..n {
-            for j in 0..n {
-                self.ahead[i][j] = self.racers[i].distance_m > self.racers[j].distance_m;
-            }
-        }
+        self.book = PassBook::new(n);
         self.steps = 0;
         self.ready = true;
         Ok(obs)
@@ -481,6 +581,9 @@ impl RaceEnv {
                 }
                 r.lap_start_s = Some(now);
             }
+            if fault[i] && !touching[i].is_empty() {
+                r.last_fault_s = Some(now);
+            }
             for &j in &touching[i] {
                 if !r.touching.contains(&j) {
                     r.contacts += 1;
@@ -540,23 +643,16 @@ impl RaceEnv {
                 info,
             });
         }
-        // Passes between running cars.
-        for i in 0..n {
-            for j in 0..n {
-                let (a, b) = (&self.racers[i], &self.racers[j]);
-                if i == j || a.crashed || b.crashed {
-                    continue;
-                }
-                let lead = a.distance_m - b.distance_m;
-                if !self.ahead[i][j] && lead > PASS_MARGIN_M {
-                    self.ahead[i][j] = true;
-                    self.ahead[j][i] = false;
-                    self.racers[i].overtakes += 1;
-                } else if self.ahead[i][j] && lead < -PASS_MARGIN_M {
-                    self.ahead[i][j] = false;
-                }
-            }
-        }
+        let cars: Vec<CarAt> = self
+            .racers
+            .iter()
+            .map(|r| CarAt {
+                distance_m: r.distance_m,
+                running: !r.crashed,
+                last_fault_s: r.last_fault_s,
+            })
+            .collect();
+        self.book.update(self.sim.time_s(), &cars);
         let order = self.positions();
         for (place, &i) in order.iter().enumerate() {
             if let Some(st) = agents[i].as_mut() {
@@ -566,7 +662,8 @@ impl RaceEnv {
                     distance_m: r.distance_m,
                     contacts: r.contacts,
                     at_fault: r.at_fault,
-                    overtakes: r.overtakes,
+                    encounters: self.book.encounters()[i],
+                    passes: self.book.passes()[i],
                     time_lost_s: r.time_lost_s,
                     crashed: r.crashed,
                 });

@@ -473,14 +473,20 @@ pub fn racing_rules(spec: &EnvSpec, cfg: &EnvConfig) -> Result<RacingRules, EnvE
     RacingRules::resolve(defaults, &cfg.racing.unwrap_or_default())
 }
 
-/// The multi-agent envs [`make_multi`] builds: `racing-duel`, cars racing on the oval or on
-/// `track` (two unless `race.cars` says otherwise).
+/// The multi-agent envs [`make_multi`] builds: `racing-duel`, cars racing on the oval, on
+/// `track`, or on generated circuits (`layout_seed` or `circuit`; two cars unless `race.cars`
+/// says otherwise).
 pub const MULTI_ENV_IDS: &[&str] = &["racing-duel"];
 
-/// The single-car env a policy of env `id` drives alone: a race's is `racing-oval` (on the
-/// same track), any other env its own.
-pub fn lone_car_id(id: &str) -> &str {
-    if MULTI_ENV_IDS.contains(&id) { "racing-oval" } else { id }
+/// The single-car env a policy of env `id` with `cfg` drives alone: a race's is `racing-oval`
+/// (on the same track), or `racing-circuit` for races on generated circuits; any other env its
+/// own.
+pub fn lone_car_id<'a>(id: &'a str, cfg: &EnvConfig) -> &'a str {
+    match id {
+        _ if !MULTI_ENV_IDS.contains(&id) => id,
+        _ if cfg.layout_seed.is_some() || cfg.circuit.is_some() => CIRCUIT_ENV,
+        _ => "racing-oval",
+    }
 }
 
 /// Build the multi-agent env `id` with `cfg`: one racing task per car (the single-car task's
@@ -505,22 +511,22 @@ pub fn make_race(id: &str, cfg: &EnvConfig) -> Result<crate::race_env::RaceEnv, 
             "{id}: sensor noise and latency are single-car settings; leave noise off"
         )));
     }
-    if cfg.layout_seed.is_some() {
-        return Err(EnvError::Config(format!(
-            "{id} races on a track: leave layout_seed unset"
-        )));
-    }
     if cfg.max_steps == 0 {
         return Err(EnvError::Config("max_steps must be at least 1".into()));
     }
-    let racing = spec("racing-oval").ok_or(EnvError::Internal("racing-oval is registered"))?;
+    // `layout_seed` or `circuit` race on racing-circuit's generated circuits: the circuit of
+    // layout_seed, or a new one every race (unset, or with new_layout_each_episode).
+    let on_circuits = cfg.layout_seed.is_some() || cfg.circuit.is_some();
+    let racing_id = if on_circuits { CIRCUIT_ENV } else { "racing-oval" };
+    let racing = spec(racing_id).ok_or(EnvError::Internal("the racing envs are registered"))?;
     let sim = sim_config(racing, cfg)?;
     let limit = cfg.sim.vehicle_model()?.spec.steering.max_rad;
     let tasks = (0..settings.cars)
         .map(|_| make_task(racing.id, cfg, limit))
         .collect::<Result<Vec<_>, _>>()?;
     let end_below_m = racing_rules(racing, cfg)?.end_below_m;
-    crate::race_env::RaceEnv::new(
+    let redraw = on_circuits && (cfg.layout_seed.is_none() || cfg.new_layout_each_episode);
+    Ok(crate::race_env::RaceEnv::new(
         sim,
         tasks,
         settings,
@@ -528,7 +534,8 @@ pub fn make_race(id: &str, cfg: &EnvConfig) -> Result<crate::race_env::RaceEnv, 
         cfg.max_steps,
         cfg.held_out,
         end_below_m,
-    )
+    )?
+    .with_new_layout_each_race(redraw))
 }
 
 /// Build the env registered under `id` with `cfg` (`EnvConfig::default()` for the standard

@@ -1526,9 +1526,10 @@ mod racing_against_others {
     }
 
     /// On the wide sweepers track two cars start side by side; the one behind, faster on
-    /// its own line, passes the other without touching it: one overtake, and it leads.
+    /// its own line, passes the other without touching it: one encounter and one pass, and it
+    /// leads (the slower car's encounter, once passed, ends without a pass).
     #[test]
-    fn a_faster_car_on_its_own_line_overtakes() {
+    fn a_faster_car_on_its_own_line_passes() {
         let mut env = race(Some("sweepers"), 2, 600);
         env.reset(Some(2)).unwrap();
         let st = env.step(&vec![vec![-1.0, 0.0]; 2]).unwrap();
@@ -1558,10 +1559,128 @@ mod racing_against_others {
             summary = st.summary;
         }
         let s = summary.unwrap();
-        assert_eq!(s.overtakes[back], 1, "{s:?}");
-        assert_eq!(s.overtakes[front], 0, "{s:?}");
+        assert_eq!((s.passes[back], s.passes[front]), (1, 0), "{s:?}");
+        assert_eq!(s.encounters[back], 1, "{s:?}");
+        assert_eq!((s.start_place[front], s.start_place[back]), (1, 2), "{s:?}");
         assert_eq!(s.order[0], back);
         assert_eq!(s.contacts, vec![0, 0]);
+    }
+
+    /// A race on `track_name` whose every start puts car 0 two metres behind car 1.
+    fn race_behind(track_name: Option<&str>, max_steps: u64) -> RaceEnv {
+        let cfg = EnvConfig {
+            track: track_name.map(track),
+            race: Some(RaceSettings {
+                cars: 2,
+                start_behind_share: 1.0,
+                ..RaceSettings::default()
+            }),
+            max_steps,
+            ..EnvConfig::default()
+        };
+        make_race("racing-duel", &cfg).unwrap()
+    }
+
+    /// A start behind puts car 0 two metres behind car 1 along the centre line wherever the
+    /// lap draws it, across the start line too, and the gap stays continuous as both drive
+    /// over the line: distances count from one place, not from each car's wrapped arc.
+    #[test]
+    fn relative_progress_across_the_lap_line_is_continuous() {
+        let mut env = race_behind(None, 400);
+        let lap = env.track().lap_length_m() as f64;
+        let mut straddled = 0;
+        for seed in 0..200 {
+            env.reset(Some(seed)).unwrap();
+            let st = env.step(&[vec![-1.0, 0.0], vec![-1.0, 0.0]]).unwrap();
+            let d = distances(&st);
+            assert!((d[1] - d[0] - 2.0).abs() < 0.05, "seed {seed}: {d:?}");
+            let arc = |i: usize| {
+                let p = env.sim().pose2_of(i);
+                env.track().centreline_s(p.x_m, p.y_m) as f64
+            };
+            if arc(0) > lap - 2.0 && arc(1) < 2.0 {
+                straddled += 1;
+                let mut last = d[1] - d[0];
+                for _ in 0..60 {
+                    let a: Vec<Vec<f32>> = (0..2).map(|i| vec![0.6, steer_along(&env, i, 0.0)]).collect();
+                    let gap = {
+                        let d = distances(&env.step(&a).unwrap());
+                        d[1] - d[0]
+                    };
+                    assert!((gap - last).abs() < 0.3, "seed {seed}: gap {last} -> {gap}");
+                    last = gap;
+                }
+            }
+        }
+        assert!(straddled > 0, "no start across the line in 200 races: no test");
+    }
+
+    /// Car 0 starts behind car 1 on the wide sweepers and passes it on a line 0.5 m to its side:
+    /// one encounter, one pass. On a line 0.35 m to the side its front hits car 1's rear corner
+    /// and it scrapes by: ahead within two seconds of the contact its front caused, an at-fault
+    /// incident and no pass.
+    #[test]
+    fn a_pass_counts_but_not_one_made_right_after_ramming_the_car_ahead() {
+        for ram in [false, true] {
+            let mut env = race_behind(Some("sweepers"), 300);
+            env.reset(Some(4)).unwrap();
+            let mut summary = None;
+            // Rammed: a line that takes its front into car 1's rear corner and scrapes by.
+            let line = if ram { 0.35 } else { 0.5 };
+            for _ in 0..300 {
+                let a = vec![
+                    vec![1.0, steer_along(&env, 0, line)],
+                    vec![-0.2, steer_along(&env, 1, 0.0)],
+                ];
+                let st = env.step(&a).unwrap();
+                summary = st.summary;
+            }
+            let s = summary.unwrap();
+            assert_eq!(s.start_place, vec![2, 1], "ram {ram}: {s:?}");
+            assert_eq!(s.order[0], 0, "ram {ram}: car 0 ends ahead: {s:?}");
+            assert!(s.encounters[0] >= 1, "ram {ram}: {s:?}");
+            if ram {
+                assert!(s.at_fault[0] >= 1 && s.at_fault[1] == 0 && !s.crashed[1], "{s:?}");
+                assert_eq!(s.passes[0], 0, "a pass right after ramming: {s:?}");
+                assert!(s.at_fault_incidents(0) >= 1);
+            } else {
+                assert_eq!(s.contacts, vec![0, 0], "{s:?}");
+                assert_eq!(s.passes, vec![1, 0], "{s:?}");
+            }
+        }
+    }
+
+    /// `layout_seed` races on racing-circuit's generated circuit of that seed; `circuit`
+    /// without it draws a new circuit for every race.
+    #[test]
+    fn races_run_on_generated_circuits() {
+        let lap_of = |cfg: &EnvConfig| {
+            let mut car = make_sim_car("racing-circuit", cfg).unwrap();
+            car.reset(0).unwrap();
+            car.map().unwrap().track.as_ref().unwrap().lap_length_m()
+        };
+        let pinned = EnvConfig {
+            layout_seed: Some(5),
+            ..EnvConfig::default()
+        };
+        let mut env = make_race("racing-duel", &pinned).unwrap();
+        env.reset(Some(0)).unwrap();
+        let first = env.track().lap_length_m();
+        assert_eq!(first, lap_of(&pinned), "the circuit of layout_seed 5");
+        env.reset(Some(1)).unwrap();
+        assert_eq!(env.track().lap_length_m(), first, "pinned: the same circuit every race");
+        let drawn = EnvConfig {
+            circuit: Some(Default::default()),
+            ..EnvConfig::default()
+        };
+        let mut env = make_race("racing-duel", &drawn).unwrap();
+        let laps: std::collections::BTreeSet<u32> = (0..4)
+            .map(|seed| {
+                env.reset(Some(seed)).unwrap();
+                env.track().lap_length_m().to_bits()
+            })
+            .collect();
+        assert_eq!(laps.len(), 4, "a new circuit every race");
     }
 
     #[test]

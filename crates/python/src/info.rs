@@ -63,8 +63,8 @@ impl Kind {
 /// One env's info: `reward_terms` (a dict), `termination` (a cause name, on a terminating step),
 /// racing (`laps`, `progress_laps`, `last_lap_s`, `best_lap_s`) or search (`coverage`,
 /// `distance_m`, `subjects_found`, `subjects_total`, `find_times_s`, `filter_interventions`) metrics, a car's
-/// standing in a race (`race`: `position`, `distance_m`, `contacts`, `at_fault`, `overtakes`,
-/// `time_lost_s`, `crashed`), and `episode` (`r`, `l`) on the step that ends an episode.
+/// standing in a race (`race`: `position`, `distance_m`, `contacts`, `at_fault`, `encounters`,
+/// `passes`, `time_lost_s`, `crashed`), and `episode` (`r`, `l`) on the step that ends an episode.
 pub fn single<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let rt = PyDict::new(py);
@@ -99,7 +99,8 @@ pub fn single<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>>
         race.set_item("distance_m", r.distance_m)?;
         race.set_item("contacts", r.contacts)?;
         race.set_item("at_fault", r.at_fault)?;
-        race.set_item("overtakes", r.overtakes)?;
+        race.set_item("encounters", r.encounters)?;
+        race.set_item("passes", r.passes)?;
         race.set_item("time_lost_s", r.time_lost_s)?;
         race.set_item("crashed", r.crashed)?;
         d.set_item("race", race)?;
@@ -250,7 +251,9 @@ pub fn race_summary<'py>(py: Python<'py>, s: &agvrl_envs::RaceSummary) -> PyResu
     d.set_item("best_lap_s", s.best_lap_s.clone())?;
     d.set_item("lap_times_s", s.lap_times_s.clone())?;
     d.set_item("distance_m", s.distance_m.clone())?;
-    d.set_item("overtakes", s.overtakes.clone())?;
+    d.set_item("start_place", s.start_place.clone())?;
+    d.set_item("encounters", s.encounters.clone())?;
+    d.set_item("passes", s.passes.clone())?;
     d.set_item("contacts", s.contacts.clone())?;
     d.set_item("at_fault", s.at_fault.clone())?;
     d.set_item("time_lost_s", s.time_lost_s.clone())?;

@@ -358,7 +358,7 @@ impl RunConfig {
     /// The env the run's evaluation drives: a race's policy alone on the same track
     /// ([`agvrl_envs::lone_car_id`]).
     pub fn eval_env_id(&self) -> &str {
-        agvrl_envs::lone_car_id(&self.env)
+        agvrl_envs::lone_car_id(&self.env, &self.env_config)
     }
 
     /// Env settings for evaluation episodes: the built-in map, held-out seeds.

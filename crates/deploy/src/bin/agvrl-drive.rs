@@ -770,8 +770,8 @@ fn serve(a: &Args, mut robot: agvrl_deploy::hardware::SimRobot, race: bool) -> R
     let (s, w) = (h.stats(), robot.wire_stats());
     let race = match race {
         true => format!(
-            " races={} wins={} car_contacts={} at_fault={} overtakes={}",
-            s.races, s.wins, s.car_contacts, s.at_fault, s.overtakes
+            " races={} wins={} car_contacts={} at_fault={} passes={}",
+            s.races, s.wins, s.car_contacts, s.at_fault, s.passes
         ),
         false => String::new(),
     };

@@ -103,8 +103,8 @@ pub struct RobotStats {
     pub car_contacts: u32,
     /// See `car_contacts`.
     pub at_fault: u32,
-    /// Passes the served car made.
-    pub overtakes: u32,
+    /// Passes the served car made (docs/racing.md, "Race figures").
+    pub passes: u32,
 }
 
 /// A handle to stop a running robot and read its stats from another thread.
@@ -704,16 +704,16 @@ impl Race {
         if let Some(b) = racing.and_then(|r| r.best_lap_s) {
             s.best_lap_s = Some(s.best_lap_s.map_or(b, |x| x.min(b)));
         }
-        let (contacts, at_fault, overtakes) = race.map_or((0, 0, 0), |r| (r.contacts, r.at_fault, r.overtakes));
+        let (contacts, at_fault, passes) = race.map_or((0, 0, 0), |r| (r.contacts, r.at_fault, r.passes));
         s.car_contacts = self.before.0 + contacts;
         s.at_fault = self.before.1 + at_fault;
-        s.overtakes = self.before.2 + overtakes;
+        s.passes = self.before.2 + passes;
         let termination = me.info.termination;
         if me.terminated || me.truncated {
             s.races += 1;
             s.wins += u32::from(race.is_some_and(|r| r.position == 1));
             self.laps_before = s.laps;
-            self.before = (s.car_contacts, s.at_fault, s.overtakes);
+            self.before = (s.car_contacts, s.at_fault, s.passes);
             self.clock_s += self.env.sim().time_s() + self.env.dt_s();
             self.obs = self.env.reset(None)?;
         }

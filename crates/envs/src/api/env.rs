@@ -197,9 +197,10 @@ pub struct RaceCarInfo {
     pub contacts: u32,
     /// Of those, the ones this car's front caused.
     pub at_fault: u32,
-    /// Cars this car passed since the start (a pass counts once it leads by 0.5 m along the
-    /// centre line; crashed cars are not passed).
-    pub overtakes: u32,
+    /// Encounters begun since the start as the car behind (see [`crate::race_figures`]).
+    pub encounters: u32,
+    /// Passes made since the start (see [`crate::race_figures`]).
+    pub passes: u32,
     /// Time lost to contacts: the integral of 1 - v / v_before over the two seconds after
     /// each contact began, v_before the speed just before it, seconds.
     pub time_lost_s: f64,

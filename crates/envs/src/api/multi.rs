@@ -51,8 +51,12 @@ pub struct RaceSummary {
     pub lap_times_s: Vec<Vec<f64>>,
     /// Distance raced from the start line, metres.
     pub distance_m: Vec<f64>,
-    /// Cars passed.
-    pub overtakes: Vec<u32>,
+    /// Place on the grid, 1 = pole (or ahead of everyone at a start behind).
+    pub start_place: Vec<usize>,
+    /// Encounters begun as the car behind (see [`crate::race_figures`]).
+    pub encounters: Vec<u32>,
+    /// Passes made (see [`crate::race_figures`]).
+    pub passes: Vec<u32>,
     /// Contacts with other cars begun.
     pub contacts: Vec<u32>,
     /// Of those, caused by the car's front.
@@ -61,4 +65,11 @@ pub struct RaceSummary {
     pub time_lost_s: Vec<f64>,
     /// Whether the car crashed into a wall.
     pub crashed: Vec<bool>,
+}
+
+impl RaceSummary {
+    /// Car `i`'s at-fault incidents: contacts its front caused, and its own crash.
+    pub fn at_fault_incidents(&self, i: usize) -> u32 {
+        self.at_fault[i] + u32::from(self.crashed[i])
+    }
 }
