@@ -305,24 +305,17 @@ pub fn race(a: RaceArgs) -> Result<()> {
 
 /// `KIND[@SCALE]` of `--racer`.
 fn racer_spec(text: &str) -> Result<crate::racer::RacerSpec> {
-    use clap::ValueEnum;
-    let (kind, scale) = match text.split_once('@') {
-        Some((k, s)) => (
-            k,
-            s.parse::<f64>()
-                .map_err(|_| anyhow::anyhow!("--racer {text}: the scale after @ is not a number"))?,
-        ),
-        None => (text, 1.0),
-    };
-    let kind = crate::racer::RacerKind::from_str(kind, false)
-        .map_err(|_| anyhow::anyhow!("--racer {text}: the kind is pure-pursuit or follow-the-gap"))?;
-    if !(scale.is_finite() && scale > 0.0 && scale <= 1.0) {
-        bail!("--racer {text}: the speed scale must be in (0, 1]");
-    }
+    let (kind, speed_scale) = agvrl_envs::drivers::parse_racer(text).map_err(|e| match e {
+        agvrl_envs::EnvError::Config(m) => anyhow::anyhow!("--{m}"),
+        e => e.into(),
+    })?;
     Ok(crate::racer::RacerSpec {
-        kind,
+        kind: match kind {
+            agvrl_envs::drivers::RacerKind::PurePursuit => crate::racer::RacerKind::PurePursuit,
+            agvrl_envs::drivers::RacerKind::FollowTheGap => crate::racer::RacerKind::FollowTheGap,
+        },
         raceline: None,
-        speed_scale: scale,
+        speed_scale,
     })
 }
 

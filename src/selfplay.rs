@@ -1,11 +1,13 @@
 //! Self-play: a race seen from one car. `SelfPlayEnv` is a single-agent `Env` over a
 //! `RaceEnv` whose car 0 the learner drives; the other cars are driven in-process by
 //! opponents drawn per race from a pool of the learner's snapshots (the newest half the time,
-//! else any earlier one, so the policy keeps beating its past selves). The training loop adds
-//! a snapshot after every chunk, saved in the run directory's `pool/` for a resume; draws come
+//! else any earlier one, so the policy keeps beating its past selves), or, as the run's
+//! `opponents` say, classical racers at a share of their speed. The training loop adds a
+//! snapshot after every chunk, saved in the run directory's `pool/` for a resume; draws come
 //! from each env's own seeded stream, so a run replays bit for bit on the same CPU.
 
-use agvrl_envs::{BoxSpace, Env, EnvConfig, EnvError, Info, MultiEnv as _, RaceEnv, Step};
+use agvrl_envs::drivers::{Driver, RacerKind, make_racer};
+use agvrl_envs::{BoxSpace, CarInput, Env, EnvConfig, EnvError, Info, MultiEnv as _, RaceEnv, Step};
 use agvrl_rl::{Policy, PolicyData};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
@@ -95,44 +97,76 @@ impl Pool {
     }
 }
 
-/// A race seen from car 0; the other cars are opponents from the pool.
+/// What drives an opponent car for one race.
+enum Opponent {
+    /// A snapshot of the learner (None before the first snapshot: the car waits).
+    Snapshot(Option<Policy>),
+    /// A classical racer, controls applied as they are.
+    Racer(Box<dyn Driver>),
+}
+
+/// A race seen from car 0; the other cars are opponents: snapshots from the pool, or classical
+/// racers, as the run's `opponents` say.
 pub struct SelfPlayEnv {
     race: RaceEnv,
+    cfg: EnvConfig,
     pool: Pool,
-    opponents: Vec<Option<Policy>>,
+    /// The run's `opponents`, parsed: None for `self`.
+    choices: Vec<Option<(RacerKind, f64)>>,
+    opponents: Vec<Opponent>,
     rng: StdRng,
     device: agvrl_rl::Device,
 }
 
 impl SelfPlayEnv {
-    /// Self-play on env `id` (a race) with `cfg`, opponents from `pool`.
-    pub fn new(id: &str, cfg: &EnvConfig, pool: Pool) -> Result<Self, EnvError> {
+    /// Self-play on env `id` (a race) with `cfg`, opponents from `pool`, or drawn per race from
+    /// `opponents` (`self`, `pure-pursuit[@SCALE]`, `follow-the-gap[@SCALE]`; empty: `self`).
+    pub fn new(id: &str, cfg: &EnvConfig, pool: Pool, opponents: &[String]) -> Result<Self, EnvError> {
         let race = agvrl_envs::make_race(id, cfg)?;
         let n = race.n_agents();
+        let choices = opponents
+            .iter()
+            .map(|o| match o.as_str() {
+                "self" => Ok(None),
+                o => agvrl_envs::drivers::parse_racer(o).map(Some),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             race,
+            cfg: cfg.clone(),
             pool,
-            opponents: (1..n).map(|_| None).collect(),
+            choices,
+            opponents: (1..n).map(|_| Opponent::Snapshot(None)).collect(),
             rng: StdRng::seed_from_u64(0),
             device: agvrl_rl::default_device(),
         })
     }
 
-    fn opponent_actions(&mut self) -> Result<Vec<Vec<f32>>, EnvError> {
-        let mut actions = vec![vec![0.0, 0.0]];
-        for (k, p) in self.opponents.iter_mut().enumerate() {
+    fn inputs(&mut self, action: &[f32]) -> Result<Vec<Input>, EnvError> {
+        let mut inputs = vec![Input::Action(action.to_vec())];
+        for (k, o) in self.opponents.iter_mut().enumerate() {
             let car = k + 1;
-            let a = match p {
-                Some(p) if !self.race.done(car) => p
-                    .act(&self.race.observation_of(car), false)
-                    .map_err(|e| EnvError::Vehicle(format!("opponent {car}: {e}")))?,
+            let done = self.race.done(car);
+            inputs.push(match o {
+                Opponent::Snapshot(Some(p)) if !done => Input::Action(
+                    p.act(&self.race.observation_of(car), false)
+                        .map_err(|e| EnvError::Vehicle(format!("opponent {car}: {e}")))?,
+                ),
+                Opponent::Racer(d) if !done => {
+                    Input::Control(d.control(self.race.frame_of(car), Some(self.race.map())))
+                }
                 // Before the first snapshot, or once out of the race: the car waits.
-                _ => vec![-1.0, 0.0],
-            };
-            actions.push(a);
+                _ => Input::Action(vec![-1.0, 0.0]),
+            });
         }
-        Ok(actions)
+        Ok(inputs)
     }
+}
+
+/// One car's input, owned.
+enum Input {
+    Action(Vec<f32>),
+    Control(agvrl_envs::Control),
 }
 
 impl Env for SelfPlayEnv {
@@ -149,20 +183,37 @@ impl Env for SelfPlayEnv {
             self.rng = StdRng::seed_from_u64(s ^ 0x5e1f_91a7);
         }
         let obs = self.race.reset(seed)?;
-        for p in self.opponents.iter_mut() {
-            *p = self.pool.draw(&mut self.rng).map(|d| {
-                let mut policy = Policy::new((*d).clone(), &self.device);
-                policy.seed(self.rng.random());
-                policy
-            });
+        for k in 0..self.opponents.len() {
+            let choice = match self.choices.len() {
+                0 => None,
+                n => self.choices[self.rng.random_range(0..n)],
+            };
+            self.opponents[k] = match choice {
+                None => Opponent::Snapshot(self.pool.draw(&mut self.rng).map(|d| {
+                    let mut policy = Policy::new((*d).clone(), &self.device);
+                    policy.seed(self.rng.random());
+                    policy
+                })),
+                Some((kind, scale)) => {
+                    let mut d = make_racer(kind, &self.cfg, scale, None)?;
+                    d.reset(self.race.frame_of(k + 1), Some(self.race.map()));
+                    Opponent::Racer(d)
+                }
+            };
         }
         Ok((obs.into_iter().next().unwrap_or_default(), Info::default()))
     }
 
     fn step(&mut self, action: &[f32]) -> Result<Step, EnvError> {
-        let mut actions = self.opponent_actions()?;
-        actions[0] = action.to_vec();
-        let st = self.race.step(&actions)?;
+        let inputs = self.inputs(action)?;
+        let inputs: Vec<CarInput<'_>> = inputs
+            .iter()
+            .map(|i| match i {
+                Input::Action(a) => CarInput::Action(a),
+                Input::Control(c) => CarInput::Control(*c),
+            })
+            .collect();
+        let st = self.race.step_inputs(&inputs)?;
         // The learner's episode is its car's: once it crashes the race is over for it (the
         // next call is a reset).
         st.agents.into_iter().next().flatten().ok_or(EnvError::NeedsReset)
@@ -170,5 +221,50 @@ impl Env for SelfPlayEnv {
 
     fn dt_s(&self) -> f64 {
         self.race.dt_s()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use agvrl_envs::RaceSettings;
+
+    fn race_cfg() -> EnvConfig {
+        EnvConfig {
+            track: Some(agvrl_envs::TrackSetting::Path(
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/tracks/sweepers.yaml"),
+            )),
+            race: Some(RaceSettings {
+                cars: 2,
+                ..RaceSettings::default()
+            }),
+            max_steps: 200,
+            ..EnvConfig::default()
+        }
+    }
+
+    /// The distance car 1 races in 150 steps while the learner's car brakes.
+    fn opponent_distance(opponents: &[String]) -> f64 {
+        let mut env = SelfPlayEnv::new("racing-duel", &race_cfg(), Pool::default(), opponents).unwrap();
+        env.reset(Some(3)).unwrap();
+        let start = env.race.frame_of(1).gps.as_ref().unwrap().position_m;
+        for _ in 0..150 {
+            env.step(&[-1.0, 0.0]).unwrap();
+        }
+        let end = env.race.frame_of(1).gps.as_ref().unwrap().position_m;
+        ((end[0] - start[0]).powi(2) + (end[1] - start[1]).powi(2)).sqrt()
+    }
+
+    /// With a classical racer among the opponents, it drives car 1 round the track from the
+    /// first race; self-play with an empty pool leaves car 1 waiting on the grid.
+    #[test]
+    fn a_classical_opponent_races_where_an_empty_pool_waits() {
+        let waits = opponent_distance(&[]);
+        assert!(waits < 0.05, "self-play before a snapshot: car 1 moved {waits} m");
+        for o in ["pure-pursuit@0.75", "follow-the-gap@0.75"] {
+            let d = opponent_distance(&[o.to_string()]);
+            assert!(d > 2.0, "{o}: car 1 moved {d} m");
+        }
+        assert!(SelfPlayEnv::new("racing-duel", &race_cfg(), Pool::default(), &["stanley".into()]).is_err());
     }
 }

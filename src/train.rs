@@ -175,7 +175,7 @@ fn vec_env(cfg: &RunConfig, pool: &Pool) -> Result<VecEnv<Box<dyn Env>>> {
             let (id, env_cfg) = (cfg.train_env_id(i), cfg.train_env_config(i));
             Ok(match agvrl_envs::MULTI_ENV_IDS.contains(&id) {
                 true => Box::new(TimeLimit::new(
-                    SelfPlayEnv::new(id, &env_cfg, pool.clone())?,
+                    SelfPlayEnv::new(id, &env_cfg, pool.clone(), &cfg.opponents)?,
                     env_cfg.max_steps,
                 )),
                 false => make(id, &env_cfg)?,

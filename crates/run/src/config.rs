@@ -36,6 +36,12 @@ pub struct RunConfig {
     /// only a resume cuts them (bootstrapped, as a time limit).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub restart_episodes_at_checkpoints: bool,
+    /// The opponents of a race's training (`env` a race): each opponent car draws one per race,
+    /// uniformly: `self` (a snapshot of the learner from the self-play pool) or a classical
+    /// racer, `pure-pursuit[@SCALE]` or `follow-the-gap[@SCALE]` (SCALE of its speed, in
+    /// (0, 1]). Empty: self-play only.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub opponents: Vec<String>,
     /// How many of the `n_envs` training envs drive on seeded procedural layouts of the env's
     /// kind and size instead of its built-in map (layout randomisation; evaluation always uses
     /// the map of `env_config`).
@@ -133,6 +139,7 @@ impl Default for RunConfig {
             n_envs: 8,
             threads: 2,
             restart_episodes_at_checkpoints: false,
+            opponents: Vec::new(),
             procedural_layouts: 0,
             advisory_filter_envs: Vec::new(),
             recovery_spawn_envs: Vec::new(),
@@ -251,6 +258,17 @@ impl RunConfig {
                 "{} trains one PPO policy by self-play: algo = \"ppo\", no train_envs, no procedural_layouts",
                 self.env
             )));
+        }
+        if !multi && !self.opponents.is_empty() {
+            return Err(RunError::Config(format!(
+                "opponents are a race's ({}); {} drives alone",
+                agvrl_envs::MULTI_ENV_IDS.join(", "),
+                self.env
+            )));
+        }
+        for o in self.opponents.iter().filter(|o| o.as_str() != "self") {
+            agvrl_envs::drivers::parse_racer(o)
+                .map_err(|e| RunError::Config(format!("opponents: {e}; or \"self\"")))?;
         }
         for id in &self.train_envs {
             if !agvrl_envs::ENV_IDS.contains(&id.as_str()) {

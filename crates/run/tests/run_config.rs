@@ -197,3 +197,30 @@ fn a_config_starting_from_another_takes_its_keys_under_its_own() {
         .to_string();
     assert!(e.starts_with("x.toml: init_from = nowhere.toml: "), "{e}");
 }
+
+/// A race's `opponents` round-trip and are checked when the config is read: a racer that does
+/// not parse, or opponents on an env that drives alone, are refused by key.
+#[test]
+fn opponents_are_a_races_and_each_must_parse() {
+    let text = "env = \"racing-duel\"\nopponents = [\"self\", \"pure-pursuit@0.75\", \"follow-the-gap\"]\n";
+    let c = RunConfig::from_toml(text, "o.toml").unwrap();
+    assert_eq!(c.opponents.len(), 3);
+    assert_eq!(RunConfig::from_toml(&c.to_toml().unwrap(), "back").unwrap(), c);
+    for (bad, says) in [
+        ("[\"pure-pursuit@1.5\"]", "speed scale must be in (0, 1]"),
+        ("[\"stanley\"]", "the kind is pure-pursuit or follow-the-gap"),
+        ("[\"follow-the-gap@x\"]", "the scale after @ is not a number"),
+    ] {
+        let e = RunConfig::from_toml(&format!("env = \"racing-duel\"\nopponents = {bad}\n"), "o.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("o.toml: opponents: ") && e.contains(says), "{e}");
+    }
+    let e = RunConfig::from_toml("env = \"racing-oval\"\nopponents = [\"self\"]\n", "o.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("opponents are a race's"), "{e}");
+    // Without opponents the TOML has no such key: self-play run files stay as they were.
+    let c = RunConfig::from_toml("env = \"racing-duel\"\n", "d.toml").unwrap();
+    assert!(!c.to_toml().unwrap().contains("opponents"));
+}

@@ -70,6 +70,24 @@ impl RacerKind {
     }
 }
 
+/// A racer as `KIND[@SCALE]` names it (`pure-pursuit@0.75`: pure pursuit at 0.75 of its speed
+/// profile; no `@SCALE`: 1).
+pub fn parse_racer(text: &str) -> Result<(RacerKind, f64), crate::EnvError> {
+    let bad = |m: &str| crate::EnvError::Config(format!("racer '{text}': {m}"));
+    let (kind, scale) = match text.split_once('@') {
+        Some((k, s)) => (
+            k,
+            s.parse::<f64>().map_err(|_| bad("the scale after @ is not a number"))?,
+        ),
+        None => (text, 1.0),
+    };
+    let kind = RacerKind::of(kind).map_err(|_| bad("the kind is pure-pursuit or follow-the-gap"))?;
+    if !(scale.is_finite() && scale > 0.0 && scale <= 1.0) {
+        return Err(bad("the speed scale must be in (0, 1]"));
+    }
+    Ok((kind, scale))
+}
+
 /// The racer `kind` for the car of `cfg` at `speed_scale` (of pure pursuit's speed profile, of
 /// follow-the-gap's top speed); pure pursuit drives `raceline` (a raceline or centre-line CSV's
 /// text) when given, else the track's centre line.
