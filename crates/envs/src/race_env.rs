@@ -27,6 +27,17 @@ pub struct RaceSettings {
     pub progress_per_m: f64,
     /// Reward on every step a car touches another with its front (a negative number).
     pub contact_penalty: f64,
+    /// Reward per m/s of closing speed (along the track) when a contact the car caused begins
+    /// (a negative number: the rear-end charge).
+    pub rear_end_per_mps: f64,
+    /// Reward per metre gained on each other running car while the gap lies within
+    /// `position_behind_m` behind to `position_ahead_m` ahead (the gap clamped to that window,
+    /// so pulling away further, or following at a steady gap, earns nothing).
+    pub position_per_m: f64,
+    /// See `position_per_m`, metres.
+    pub position_behind_m: f64,
+    /// See `position_per_m`, metres.
+    pub position_ahead_m: f64,
     /// Distance between grid rows along the centre line, metres.
     pub grid_gap_m: f32,
     /// Lateral offset of the two grid columns from the centre line, metres, at most: where the
@@ -48,6 +59,10 @@ impl Default for RaceSettings {
             cars: 2,
             progress_per_m: 1.0,
             contact_penalty: -2.0,
+            rear_end_per_mps: 0.0,
+            position_per_m: 0.0,
+            position_behind_m: 5.0,
+            position_ahead_m: 10.0,
             grid_gap_m: 0.8,
             grid_offset_m: 0.3,
             start_behind_share: 0.0,
@@ -66,9 +81,19 @@ impl RaceSettings {
         for (k, v) in [
             ("progress_per_m", self.progress_per_m),
             ("contact_penalty", self.contact_penalty),
+            ("rear_end_per_mps", self.rear_end_per_mps),
+            ("position_per_m", self.position_per_m),
         ] {
             if !v.is_finite() {
                 return bad(format!("{k} must be finite, got {v}"));
+            }
+        }
+        for (k, v) in [
+            ("position_behind_m", self.position_behind_m),
+            ("position_ahead_m", self.position_ahead_m),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(format!("{k} must be >= 0, got {v}"));
             }
         }
         if !(self.grid_gap_m >= 0.6 && self.grid_gap_m.is_finite()) {
@@ -385,6 +410,34 @@ fn grid(sim: &Sim, track: &Track, settings: &RaceSettings, clearance_m: f32) -> 
 }
 
 impl RaceEnv {
+    /// Add each car's position term (see [`RaceSettings::position_per_m`]) to its step:
+    /// the ground gained this step on every other running car, the gap clamped to the window.
+    fn position_terms(&mut self, before: &[f64], agents: &mut [Option<Step>]) {
+        let (behind, ahead) = (self.settings.position_behind_m, self.settings.position_ahead_m);
+        let clamp = |g: f64| g.clamp(-behind, ahead);
+        let n = self.racers.len();
+        for i in 0..n {
+            let Some(st) = agents[i].as_mut() else {
+                continue;
+            };
+            let gained: f64 = (0..n)
+                .filter(|&j| j != i && !self.racers[j].crashed)
+                .map(|j| {
+                    let now = self.racers[i].distance_m - self.racers[j].distance_m;
+                    clamp(now) - clamp(before[i] - before[j])
+                })
+                .sum();
+            let p = self.settings.position_per_m * gained;
+            st.info.reward_terms.position = p;
+            st.reward += p;
+            let r = &mut self.racers[i];
+            r.ret += p;
+            if let Some(e) = st.info.episode.as_mut() {
+                e.ret = r.ret;
+            }
+        }
+    }
+
     /// A start in a passing situation: car 1 on the centre line at a place drawn along the lap,
     /// car 0 [`RaceSettings::start_behind_m`] behind it, the other cars a grid row apart ahead
     /// of car 1. Gives the poses and the cars in order from the front.
@@ -529,6 +582,7 @@ impl RaceEnv {
             corrected[i] = self.tasks[i].corrected_action();
         }
         let speed_before: Vec<f64> = (0..n).map(|i| self.sim.forward_speed_mps_of(i) as f64).collect();
+        let distance_before: Vec<f64> = self.racers.iter().map(|r| r.distance_m).collect();
         self.sim.step_cars(&controls)?;
         self.steps += 1;
         let dt = self.dt_s();
@@ -584,10 +638,14 @@ impl RaceEnv {
             if fault[i] && !touching[i].is_empty() {
                 r.last_fault_s = Some(now);
             }
+            let mut rear_end = 0.0;
             for &j in &touching[i] {
                 if !r.touching.contains(&j) {
                     r.contacts += 1;
                     r.at_fault += u32::from(fault[i]);
+                    if fault[i] {
+                        rear_end += self.settings.rear_end_per_mps * (speed_before[i] - speed_before[j]).max(0.0);
+                    }
                     let window = (LOSS_WINDOW_S / dt).round() as u32;
                     let v0 = speed_before[i].max(r.loss.map_or(0.0, |l| l.0));
                     r.loss = Some((v0, window));
@@ -604,11 +662,12 @@ impl RaceEnv {
             let terminated = out.termination.is_some();
             let terms = RewardTerms {
                 progress: self.settings.progress_per_m * (r.distance_m - before),
-                car_contact: if fault[i] && !r.touching.is_empty() {
-                    self.settings.contact_penalty
-                } else {
-                    0.0
-                },
+                car_contact: rear_end
+                    + if fault[i] && !r.touching.is_empty() {
+                        self.settings.contact_penalty
+                    } else {
+                        0.0
+                    },
                 ..out.terms
             };
             let reward = terms.total();
@@ -642,6 +701,9 @@ impl RaceEnv {
                 truncated,
                 info,
             });
+        }
+        if self.settings.position_per_m != 0.0 {
+            self.position_terms(&distance_before, &mut agents);
         }
         let cars: Vec<CarAt> = self
             .racers

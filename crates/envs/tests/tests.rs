@@ -1650,6 +1650,80 @@ mod racing_against_others {
         }
     }
 
+    /// Run the sweepers race of `a_pass_counts_but_not_one_made_right_after_ramming_the_car_ahead`
+    /// (car 0 on a line `line` m to the side, from 2 m behind) with `settings`; gives the
+    /// summary and each car's summed reward terms (position, car contact).
+    fn scripted_pass(line: f32, settings: RaceSettings) -> (RaceSummary, [(f64, f64); 2]) {
+        let cfg = EnvConfig {
+            track: Some(track("sweepers")),
+            race: Some(RaceSettings {
+                cars: 2,
+                start_behind_share: 1.0,
+                ..settings
+            }),
+            max_steps: 300,
+            ..EnvConfig::default()
+        };
+        let mut env = make_race("racing-duel", &cfg).unwrap();
+        env.reset(Some(4)).unwrap();
+        let mut sums = [(0.0, 0.0); 2];
+        loop {
+            let a = vec![
+                vec![1.0, steer_along(&env, 0, line)],
+                vec![-0.2, steer_along(&env, 1, 0.0)],
+            ];
+            let st = env.step(&a).unwrap();
+            for (i, a) in st.agents.iter().enumerate() {
+                if let Some(a) = a {
+                    sums[i].0 += a.info.reward_terms.position;
+                    sums[i].1 += a.info.reward_terms.car_contact;
+                }
+            }
+            if let Some(s) = st.summary {
+                return (s, sums);
+            }
+        }
+    }
+
+    /// The position term sums to the clamped gap's change over the race (window 5 m behind to
+    /// 10 m ahead): car 0, from 2 m behind to G ahead, gains min(G, 10) + 2; car 1, passed by
+    /// more than 5 m, loses 5 + 2.
+    #[test]
+    fn the_position_term_pays_the_ground_gained_within_its_window() {
+        let settings = RaceSettings {
+            position_per_m: 1.0,
+            ..RaceSettings::default()
+        };
+        let (s, sums) = scripted_pass(0.5, settings);
+        let gap = s.distance_m[0] - s.distance_m[1];
+        assert!(gap > 5.0 && !s.crashed[1], "{s:?}");
+        let gained = gap.min(10.0) + 2.0;
+        assert!(
+            (sums[0].0 - gained).abs() < 0.06,
+            "car 0 gained {} of {gained}",
+            sums[0].0
+        );
+        assert!((sums[1].0 + 7.0).abs() < 0.06, "car 1 lost {}", sums[1].0);
+        let (_, off) = scripted_pass(0.5, RaceSettings::default());
+        assert_eq!((off[0].0, off[1].0), (0.0, 0.0), "off by default");
+    }
+
+    /// The rear-end charge falls on the car whose front hit, once per contact, by its closing
+    /// speed: the rammed race costs car 0 more with it, and car 1 nothing.
+    #[test]
+    fn the_rear_end_charge_falls_on_the_car_that_hit() {
+        let charged = RaceSettings {
+            rear_end_per_mps: -1.0,
+            ..RaceSettings::default()
+        };
+        let (s, with) = scripted_pass(0.35, charged);
+        let (_, without) = scripted_pass(0.35, RaceSettings::default());
+        assert!(s.at_fault[0] >= 1 && s.at_fault[1] == 0, "{s:?}");
+        let charge = with[0].1 - without[0].1;
+        assert!(charge < -0.1, "car 0's rear-end charge {charge}");
+        assert_eq!(with[1].1, without[1].1, "car 1 caused nothing");
+    }
+
     /// `layout_seed` races on racing-circuit's generated circuit of that seed; `circuit`
     /// without it draws a new circuit for every race.
     #[test]

@@ -25,7 +25,7 @@ fn code(c: Option<TerminationCause>) -> i8 {
     })
 }
 
-fn terms(t: &RewardTerms) -> [(&'static str, f64); 12] {
+fn terms(t: &RewardTerms) -> [(&'static str, f64); 13] {
     [
         ("throttle", t.throttle),
         ("steering", t.steering),
@@ -39,6 +39,7 @@ fn terms(t: &RewardTerms) -> [(&'static str, f64); 12] {
         ("stale", t.stale),
         ("progress", t.progress),
         ("car_contact", t.car_contact),
+        ("position", t.position),
     ]
 }
 

@@ -92,8 +92,11 @@ pub struct RewardTerms {
     pub stale: f64,
     /// Progress along the centre line (racing against others).
     pub progress: f64,
-    /// Penalty for touching another car with one's front (racing against others).
+    /// Penalty for touching another car with one's front, and for the closing speed of a
+    /// rear-end contact one caused (racing against others).
     pub car_contact: f64,
+    /// Ground gained on the other cars within the position window (racing against others).
+    pub position: f64,
 }
 
 /// Racing progress, reported every step of a racing task.

@@ -238,6 +238,7 @@ impl RewardTerms {
             + self.stale
             + self.progress
             + self.car_contact
+            + self.position
     }
 }
 
