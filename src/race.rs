@@ -44,6 +44,11 @@ pub struct RaceArgs {
     /// Seed of the first race (held-out races: the grid order and any randomisation).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Race on the training half of the seed space instead of the held-out one (generated
+    /// circuits and starts a training run can meet): where a recipe is chosen, so the
+    /// held-out races stay a test.
+    #[arg(long)]
+    pub train_split: bool,
     /// Length of a race, control steps (default: the first policy's evaluation length).
     #[arg(long)]
     pub max_steps: Option<u64>,
@@ -111,7 +116,7 @@ pub fn race(a: RaceArgs) -> Result<()> {
     let Some(mut cfg) = cfg else {
         bail!("--policy is needed");
     };
-    cfg.held_out = true;
+    cfg.held_out = !a.train_split;
     let race = cfg.race.unwrap_or_default();
     cfg.race = Some(RaceSettings {
         cars,
