@@ -256,8 +256,11 @@ pub fn race(a: RaceArgs) -> Result<()> {
     };
     let n = a.races as f64;
     println!(
-        "env=racing-duel track={track} cars={cars} races={} seed={} max_steps={}",
-        a.races, a.seed, cfg.max_steps
+        "env=racing-duel track={track} cars={cars} races={} seed={} max_steps={} split={}",
+        a.races,
+        a.seed,
+        cfg.max_steps,
+        if cfg.held_out { "held_out" } else { "train" }
     );
     for (i, t) in tally.iter().enumerate() {
         let mean_lap = match t.lap_times.is_empty() {

@@ -1459,6 +1459,25 @@ mod racing_against_others {
         assert_eq!(key(car(1), "starts_behind"), "0", "{out}");
         assert_eq!(key(car(1), "policy"), "pure-pursuit@0.75", "{out}");
         assert!(key(car(0), "encounters").parse::<u32>().unwrap() >= 2, "{out}");
+        assert!(out.contains(" split=held_out"), "{out}");
+        // --train-split races the training half of the seed space.
+        let o = agvrl(&[
+            "race",
+            "--policy",
+            "assets/policies/racing-any-track.agvrl",
+            "--racer",
+            "pure-pursuit@0.75",
+            "--circuits",
+            "--start-behind",
+            "--races",
+            "2",
+            "--max-steps",
+            "150",
+            "--train-split",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let train = stdout(&o);
+        assert!(train.contains(" split=train"), "{train}");
         let o = agvrl(&["race", "--policy", "a.agvrl", "--policy", "b.agvrl", "--cars", "3"]);
         assert!(!o.status.success());
         assert_eq!(

@@ -1725,7 +1725,8 @@ mod racing_against_others {
     }
 
     /// `layout_seed` races on racing-circuit's generated circuit of that seed; `circuit`
-    /// without it draws a new circuit for every race.
+    /// without it draws a new circuit for every race, held-out races from the other half of
+    /// the seed space.
     #[test]
     fn races_run_on_generated_circuits() {
         let lap_of = |cfg: &EnvConfig| {
@@ -1743,18 +1744,23 @@ mod racing_against_others {
         assert_eq!(first, lap_of(&pinned), "the circuit of layout_seed 5");
         env.reset(Some(1)).unwrap();
         assert_eq!(env.track().lap_length_m(), first, "pinned: the same circuit every race");
-        let drawn = EnvConfig {
-            circuit: Some(Default::default()),
-            ..EnvConfig::default()
+        let laps = |held_out: bool| -> std::collections::BTreeSet<u32> {
+            let drawn = EnvConfig {
+                circuit: Some(Default::default()),
+                held_out,
+                ..EnvConfig::default()
+            };
+            let mut env = make_race("racing-duel", &drawn).unwrap();
+            (0..4)
+                .map(|seed| {
+                    env.reset(Some(seed)).unwrap();
+                    env.track().lap_length_m().to_bits()
+                })
+                .collect()
         };
-        let mut env = make_race("racing-duel", &drawn).unwrap();
-        let laps: std::collections::BTreeSet<u32> = (0..4)
-            .map(|seed| {
-                env.reset(Some(seed)).unwrap();
-                env.track().lap_length_m().to_bits()
-            })
-            .collect();
-        assert_eq!(laps.len(), 4, "a new circuit every race");
+        let (train, held_out) = (laps(false), laps(true));
+        assert_eq!(train.len(), 4, "a new circuit every race");
+        assert!(train.is_disjoint(&held_out), "held-out races meet other circuits");
     }
 
     #[test]
