@@ -1391,6 +1391,50 @@ fn a_racer_laps_the_bean_through_the_drive_loop() {
     assert!(e.contains("raceline") && e.contains("line 2"), "{e}");
 }
 
+/// `agvrl-drive --racer ... --record` records a racer's drive as a policy's: one command and one
+/// tick per step on the simulated car, the commands within that car's own steering limit
+/// (follow-the-gap on the F1TENTH car, chosen with `--set`, steers to its 0.4189 rad at the
+/// bean's hairpin, past XTENTH-CAR's 0.36).
+#[test]
+fn a_racers_drive_records_a_bag_within_its_cars_limits() {
+    use agvrl_deploy::bag;
+    use agvrl_deploy::hardware::msg;
+    let dir = scratch("racer-bag");
+    let bag_dir = dir.path().join("drive");
+    let yaml = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tracks/bean.yaml");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_agvrl-drive"))
+        .args(["--racer", "follow-the-gap", "--track"])
+        .arg(&yaml)
+        .args([
+            "--set",
+            "env_config.vehicle=\"f1tenth\"",
+            "--set",
+            "env_config.brake_mps2=6.0",
+        ])
+        .args(["--steps", "600", "--quiet", "--record"])
+        .arg(&bag_dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (msgs, damage) = bag::read_messages(&bag_dir).unwrap();
+    assert_eq!(damage, None);
+    let count = |t: &str| msgs.iter().filter(|m| m.topic == t).count();
+    assert_eq!([count("/drive"), count("/agvrl/tick")], [600, 600]);
+    let steer: Vec<f32> = msgs
+        .iter()
+        .filter(|m| m.topic == "/drive")
+        .map(|m| {
+            bag::decode::<msg::AckermannDriveStamped>(&m.data)
+                .unwrap()
+                .drive
+                .steering_angle
+                .abs()
+        })
+        .collect();
+    let widest = steer.iter().cloned().fold(0.0f32, f32::max);
+    assert!(widest > 0.36 && widest <= 0.4189 + 1e-6, "widest steering {widest}");
+}
+
 /// The shipped generalist drives a held-out generated circuit (a seed from the evaluation half,
 /// never trained on) in agvrl-drive: a full lap with no crash and no watchdog event.
 #[test]

@@ -67,8 +67,8 @@ struct Args {
     /// Pure pursuit's path: F1TENTH's raceline CSV or an x, y CSV, in the map frame of the pose.
     #[arg(long, value_name = "FILE.csv", requires = "racer")]
     raceline: Option<PathBuf>,
-    /// Override one of the policy's settings, KEY=VALUE as `agvrl train --set`
-    /// (`--set env_config.safety_filter.clearance_m=0.9`).
+    /// Override one of the policy's settings (a racer's: of the env's defaults), KEY=VALUE as
+    /// `agvrl train --set` (`--set env_config.safety_filter.clearance_m=0.9`).
     #[arg(long, value_name = "KEY=VALUE")]
     set: Vec<String>,
     /// Race on the track of a ROS map file (its YAML): `--set env_config.track=PATH`; with
@@ -182,18 +182,16 @@ fn main() {
 /// resolver), --set and --env. Without a policy (`--serve-sim` alone) the env is --env or
 /// racing-oval.
 fn policy_and_env(a: &Args) -> Result<(Option<PolicySettings>, String, EnvConfig)> {
+    let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
     if a.run.is_none() && a.policy.is_none() {
-        if let Some(s) = a.set.first() {
+        if let Some(s) = a.set.first().filter(|_| a.racer.is_none()) {
             bail!("--set {s}: there is no policy whose settings it could override");
         }
+        // A racer drives the env's defaults, with --track and --set env_config.KEY=VALUE.
         let env = a.env.clone().unwrap_or_else(|| "racing-oval".to_string());
-        let cfg = EnvConfig {
-            track: a.track.clone().map(agvrl_envs::TrackSetting::Path),
-            ..EnvConfig::default()
-        };
-        return Ok((None, env, cfg));
+        let run = agvrl_run::RunConfig::from_toml_with(&format!("env = \"{env}\"\n"), "--racer", &sets)?;
+        return Ok((None, env, run.env_config));
     }
-    let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
     let src = PolicySettings::resolve(a.run.as_deref(), a.policy.as_deref(), &sets)?;
     let (env, cfg) = (src.env_id(a.env.as_deref())?, src.drive_env_config());
     Ok((Some(src), env, cfg))
@@ -275,17 +273,7 @@ fn run() -> Result<()> {
             };
             // The sensors the bag holds: those of the first frame (the loop resets again, to
             // the same state).
-            let sensors = Subscribed::of_frame(&vehicle.reset(a.seed)?);
-            let mut mapping = DriveMapping::default();
-            mapping.for_trained_top_speed(env_cfg.sim.vehicle_model()?.top_speed_mps());
-            let topics = agvrl_deploy::hardware::config::Topics::default();
-            let car = BagCar {
-                topics: &topics,
-                sensors,
-                drive: mapping,
-                sim_time: true,
-            };
-            let bag = Arc::new(record::for_policy(dir, Some(&src.policy), &env, &env_cfg, car)?);
+            let bag = Arc::new(sim_bag(dir, Some(&src.policy), &env, &env_cfg, &mut vehicle, a.seed)?);
             let v = Recorded::new(vehicle, bag.clone(), true);
             drive_loop(&a, DriveLoop::new(v, task, policy, drive, a.seed)?, Some(bag))
         }
@@ -321,17 +309,47 @@ fn drive_racer(a: &Args, kind: &str, env: &str, env_cfg: &EnvConfig) -> Result<(
         realtime: a.realtime,
         ..DriveConfig::default()
     };
-    if a.record.is_some() {
-        bail!("--record records a policy's drive; drive the racer without it");
-    }
     match a.vehicle {
         VehicleKind::Sim => {
-            let vehicle = make_vehicle(env, env_cfg)?;
+            let mut vehicle = make_vehicle(env, env_cfg)?;
             let task = make_task(env, env_cfg, vehicle.steering_limit_rad())?;
-            drive_loop(a, DriveLoop::with_brain(vehicle, task, brain, drive, a.seed)?, None)
+            let Some(dir) = &a.record else {
+                return drive_loop(a, DriveLoop::with_brain(vehicle, task, brain, drive, a.seed)?, None);
+            };
+            let bag = Arc::new(sim_bag(dir, None, env, env_cfg, &mut vehicle, a.seed)?);
+            let v = Recorded::new(vehicle, bag.clone(), true);
+            drive_loop(a, DriveLoop::with_brain(v, task, brain, drive, a.seed)?, Some(bag))
         }
         VehicleKind::Ros2 => racer_ros2(a, env, env_cfg, brain, drive),
     }
+}
+
+/// The bag of a drive of the simulated car `vehicle` (`policy`: the policy file, None for a
+/// racer): the sensors of its first frame (the loop resets again, to the same state), the
+/// drive commands within the simulated car's own limits, in simulated time.
+fn sim_bag(
+    dir: &Path,
+    policy: Option<&Path>,
+    env: &str,
+    env_cfg: &EnvConfig,
+    vehicle: &mut Box<dyn Vehicle>,
+    seed: u64,
+) -> Result<DriveBag> {
+    let sensors = Subscribed::of_frame(&vehicle.reset(seed)?);
+    let model = env_cfg.sim.vehicle_model()?;
+    let mut mapping = DriveMapping {
+        steering_limit_rad: model.spec.steering.max_rad,
+        ..DriveMapping::default()
+    };
+    mapping.for_trained_top_speed(model.top_speed_mps());
+    let topics = agvrl_deploy::hardware::config::Topics::default();
+    let car = BagCar {
+        topics: &topics,
+        sensors,
+        drive: mapping,
+        sim_time: true,
+    };
+    Ok(record::for_policy(dir, policy, env, env_cfg, car)?)
 }
 
 #[cfg(feature = "ros2")]
@@ -347,8 +365,27 @@ fn racer_ros2(
     cfg.drive
         .for_trained_top_speed(env_cfg.sim.vehicle_model()?.top_speed_mps());
     let task = make_task(env, env_cfg, cfg.drive.steering_limit_rad)?;
-    let vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime, None)?;
-    drive_loop(a, DriveLoop::with_brain(vehicle, task, brain, drive, a.seed)?, None)
+    let bag = match &a.record {
+        Some(dir) => {
+            let car = BagCar {
+                topics: &cfg.topics,
+                sensors: Subscribed::of_topics(&cfg.topics, false),
+                drive: cfg.drive,
+                sim_time: false,
+            };
+            Some(Arc::new(record::for_policy(dir, None, env, env_cfg, car)?))
+        }
+        None => None,
+    };
+    let mut vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime, None)?;
+    match bag {
+        Some(bag) => {
+            vehicle.record_into(bag.clone());
+            let v = Recorded::new(vehicle, bag.clone(), false);
+            drive_loop(a, DriveLoop::with_brain(v, task, brain, drive, a.seed)?, Some(bag))
+        }
+        None => drive_loop(a, DriveLoop::with_brain(vehicle, task, brain, drive, a.seed)?, None),
+    }
 }
 
 #[cfg(not(feature = "ros2"))]
