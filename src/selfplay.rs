@@ -100,7 +100,7 @@ impl Pool {
 /// What drives an opponent car for one race.
 enum Opponent {
     /// A snapshot of the learner (None before the first snapshot: the car waits).
-    Snapshot(Option<Policy>),
+    Snapshot(Option<Box<Policy>>),
     /// A classical racer, controls applied as they are.
     Racer(Box<dyn Driver>),
 }
@@ -192,7 +192,7 @@ impl Env for SelfPlayEnv {
                 None => Opponent::Snapshot(self.pool.draw(&mut self.rng).map(|d| {
                     let mut policy = Policy::new((*d).clone(), &self.device);
                     policy.seed(self.rng.random());
-                    policy
+                    Box::new(policy)
                 })),
                 Some((kind, scale)) => {
                     let mut d = make_racer(kind, &self.cfg, scale, None)?;
