@@ -1438,21 +1438,29 @@ mod racing_against_others {
         );
         // On generated circuits, a new one each race, from a start 2 m behind pure pursuit at
         // 0.75 of its speed: every race begins with an encounter for car 0.
-        let o = agvrl(&[
-            "race",
-            "--policy",
-            "assets/policies/racing-any-track.agvrl",
-            "--racer",
-            "pure-pursuit@0.75",
-            "--circuits",
-            "--start-behind",
-            "--races",
-            "2",
-            "--max-steps",
-            "150",
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let out = stdout(&o);
+        let circuits = |extra: &[&str]| {
+            let args = [
+                &[
+                    "race",
+                    "--policy",
+                    "assets/policies/racing-any-track.agvrl",
+                    "--racer",
+                    "pure-pursuit@0.75",
+                    "--circuits",
+                    "--start-behind",
+                    "--races",
+                    "2",
+                    "--max-steps",
+                    "150",
+                ][..],
+                extra,
+            ]
+            .concat();
+            let o = agvrl(&args);
+            assert!(o.status.success(), "{}", stderr(&o));
+            stdout(&o)
+        };
+        let out = circuits(&[]);
         assert!(out.contains("track=circuits cars=2 races=2"), "{out}");
         let car = |i: usize| out.lines().find(|l| l.starts_with(&format!("car={i} "))).unwrap();
         assert_eq!(key(car(0), "starts_behind"), "2", "{out}");
@@ -1461,22 +1469,7 @@ mod racing_against_others {
         assert!(key(car(0), "encounters").parse::<u32>().unwrap() >= 2, "{out}");
         assert!(out.contains(" split=held_out"), "{out}");
         // --train-split races the training half of the seed space.
-        let o = agvrl(&[
-            "race",
-            "--policy",
-            "assets/policies/racing-any-track.agvrl",
-            "--racer",
-            "pure-pursuit@0.75",
-            "--circuits",
-            "--start-behind",
-            "--races",
-            "2",
-            "--max-steps",
-            "150",
-            "--train-split",
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let train = stdout(&o);
+        let train = circuits(&["--train-split"]);
         assert!(train.contains(" split=train"), "{train}");
         let o = agvrl(&["race", "--policy", "a.agvrl", "--policy", "b.agvrl", "--cars", "3"]);
         assert!(!o.status.success());

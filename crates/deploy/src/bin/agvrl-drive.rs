@@ -365,19 +365,34 @@ fn racer_ros2(
     cfg.drive
         .for_trained_top_speed(env_cfg.sim.vehicle_model()?.top_speed_mps());
     let task = make_task(env, env_cfg, cfg.drive.steering_limit_rad)?;
+    ros2_car(a, cfg, task, None, (None, env, env_cfg), brain, drive)
+}
+
+/// Drive the ROS 2 car of `cfg` (with `camera`) with `brain` through `task`, recording into
+/// `--record DIR` when given (the bag names `policy`, the file, or none for a racer).
+#[cfg(feature = "ros2")]
+fn ros2_car(
+    a: &Args,
+    cfg: agvrl_deploy::hardware::Ros2Config,
+    task: Box<dyn Task>,
+    camera: Option<agvrl_sim::sensors::CameraConfig>,
+    (policy, env, env_cfg): (Option<&Path>, &str, &EnvConfig),
+    brain: agvrl_deploy::run_loop::Brain,
+    drive: DriveConfig,
+) -> Result<()> {
     let bag = match &a.record {
         Some(dir) => {
             let car = BagCar {
                 topics: &cfg.topics,
-                sensors: Subscribed::of_topics(&cfg.topics, false),
+                sensors: Subscribed::of_topics(&cfg.topics, camera.is_some()),
                 drive: cfg.drive,
                 sim_time: false,
             };
-            Some(Arc::new(record::for_policy(dir, None, env, env_cfg, car)?))
+            Some(Arc::new(record::for_policy(dir, policy, env, env_cfg, car)?))
         }
         None => None,
     };
-    let mut vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime, None)?;
+    let mut vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime, camera)?;
     match bag {
         Some(bag) => {
             vehicle.record_into(bag.clone());
@@ -420,29 +435,12 @@ fn drive_ros2(
     } else {
         None
     };
-    let t = &cfg.topics;
-    let sensors = Subscribed::of_topics(t, camera.is_some());
-    let bag = match &a.record {
-        Some(dir) => {
-            let car = BagCar {
-                topics: t,
-                sensors,
-                drive: cfg.drive,
-                sim_time: false,
-            };
-            Some(Arc::new(record::for_policy(dir, Some(&src.policy), env, env_cfg, car)?))
-        }
-        None => None,
-    };
-    let mut vehicle = agvrl_deploy::hardware::Ros2Vehicle::new(cfg, !a.realtime, camera)?;
-    match bag {
-        Some(bag) => {
-            vehicle.record_into(bag.clone());
-            let v = Recorded::new(vehicle, bag.clone(), false);
-            drive_loop(a, DriveLoop::new(v, task, policy, drive, a.seed)?, Some(bag))
-        }
-        None => drive_loop(a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?, None),
-    }
+    // What DriveLoop::new checks for a policy.
+    policy
+        .check_spaces(&task.observation_space(), &agvrl_envs::BoxSpace::uniform(2, -1.0, 1.0))
+        .map_err(agvrl_deploy::DeployError::Mismatch)?;
+    let brain = agvrl_deploy::run_loop::Brain::Policy(Box::new(policy));
+    ros2_car(a, cfg, task, camera, (Some(&src.policy), env, env_cfg), brain, drive)
 }
 
 #[cfg(not(feature = "ros2"))]
