@@ -31,7 +31,7 @@ G = 9.81
 CASES = [(3.0, 0.04), (6.0, 0.04), (5.0, 0.1)]  # (speed m/s, front wheel angle rad)
 # Braking from speed v0 at a constant deceleration with the wheels held at delta, from straight
 # running: (v0 m/s, deceleration m/s^2, front wheel angle rad).
-BRAKING = [(9.0, 6.0, 0.01)]
+BRAKING = [(9.0, 6.0, 0.01), (9.0, 9.51, 0.01), (9.0, 4.0, 0.01)]
 
 
 def closed_form(v, delta):
