@@ -2269,6 +2269,11 @@ mod f1tenth {
 
     /// The F1TENTH car at 40 Hz (configs/f1tenth.toml's period and substeps) in a 60 m room.
     fn f1tenth_sim(name: &str, mode: DynamicsMode) -> (Sim, Room) {
+        f1tenth_sim_braking(name, mode, 0.0)
+    }
+
+    /// As [`f1tenth_sim`], with a drive that brakes at `brake_mps2`.
+    fn f1tenth_sim_braking(name: &str, mode: DynamicsMode, brake_mps2: f64) -> (Sim, Room) {
         let r = room(30.0, name);
         let s = Sim::new(SimConfig {
             scene: r.src(),
@@ -2277,6 +2282,7 @@ mod f1tenth {
                 dynamics: mode,
                 control_period_s: 0.025,
                 substeps: 3,
+                brake_mps2,
                 ..Default::default()
             },
         })
@@ -2456,18 +2462,7 @@ mod f1tenth {
     #[test]
     fn braking_hard_the_f1tenth_car_turns_in_as_f1tenth_gyms_model_does() {
         let (v0, a, delta) = (9.0f64, 6.0f64, 0.01f64);
-        let r = room(30.0, "f1t-brake");
-        let mut s = Sim::new(SimConfig {
-            scene: r.src(),
-            settings: SimSettings {
-                vehicle: "f1tenth".into(),
-                control_period_s: 0.025,
-                substeps: 3,
-                brake_mps2: a,
-                ..Default::default()
-            },
-        })
-        .unwrap();
+        let (mut s, _r) = f1tenth_sim_braking("f1t-brake", DynamicsMode::Raycast, a);
         s.reset(PlanarPose {
             x_m: -25.0,
             y_m: 0.0,
