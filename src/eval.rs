@@ -144,6 +144,10 @@ pub struct EvalArgs {
     /// table by track.
     #[arg(long, value_name = "FILE.csv")]
     pub episodes_csv: Option<PathBuf>,
+    /// Also write the evaluation as JSON into this file: the typed report a run directory keeps
+    /// as eval.json.
+    #[arg(long, value_name = "FILE.json")]
+    pub json: Option<PathBuf>,
 }
 
 /// Who drives an evaluation.
@@ -744,8 +748,13 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             (true, _) => "on",
         }
     );
-    for l in s.report().lines() {
+    let report = s.report();
+    for l in report.lines() {
         println!("{l}");
+    }
+    if let Some(p) = &a.json {
+        agvrl_run::write_atomic(p, report.to_json().as_bytes())?;
+        println!("json={}", p.display());
     }
     if let Some(p) = &a.episodes_csv {
         if s.episode_rows.is_empty() {

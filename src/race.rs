@@ -6,7 +6,7 @@
 use crate::plots::{self, Path2};
 use crate::viz::{self, Recorder};
 use agvrl_envs::{MultiEnv as _, RaceSettings};
-use agvrl_run::PolicySettings;
+use agvrl_run::{CarFigures, PolicySettings, RaceReport, WidthBand};
 use anyhow::{Result, bail};
 use clap::Args;
 use std::path::PathBuf;
@@ -61,26 +61,65 @@ pub struct RaceArgs {
     /// Override a setting of the first policy's env config (KEY=VALUE, repeatable).
     #[arg(long = "set")]
     pub set: Vec<String>,
+    /// Also write the figures as JSON (every car's, and per width band on generated circuits)
+    /// into this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
 }
 
-/// One car's tally over the races.
+/// One car's tally over a set of races.
 #[derive(Default)]
 struct Tally {
-    wins: usize,
+    races: usize,
     place_sum: usize,
     laps: u64,
     lap_times: Vec<f64>,
-    best_lap_s: Option<f64>,
-    encounters: u64,
-    passes: u64,
-    incidents: u64,
-    starts_behind: usize,
-    wins_from_behind: usize,
-    contacts: u64,
-    at_fault: u64,
-    time_lost_s: f64,
-    crashes: usize,
+    f: CarFigures,
 }
+
+impl Tally {
+    /// Add car `i`'s figures of one race.
+    fn add(&mut self, s: &agvrl_envs::RaceSummary, i: usize) {
+        let place = s.order.iter().position(|&c| c == i).unwrap_or(s.order.len());
+        let behind = s.start_place[i] > 1;
+        let f = &mut self.f;
+        self.races += 1;
+        self.place_sum += place + 1;
+        self.laps += s.laps[i] as u64;
+        self.lap_times.extend(&s.lap_times_s[i]);
+        f.wins += usize::from(place == 0);
+        f.starts_behind += usize::from(behind);
+        f.wins_from_behind += usize::from(behind && place == 0);
+        if let Some(b) = s.best_lap_s[i] {
+            f.best_lap_s = Some(f.best_lap_s.map_or(b, |x| x.min(b)));
+        }
+        f.encounters += s.encounters[i] as u64;
+        f.passes += s.passes[i] as u64;
+        f.at_fault_incidents += s.at_fault_incidents(i) as u64;
+        f.contacts += s.contacts[i] as u64;
+        f.at_fault_contacts += s.at_fault[i] as u64;
+        f.time_lost_s += s.time_lost_s[i];
+        f.crashes += usize::from(s.crashed[i]);
+        f.covered_km += s.covered_m[i].max(0.0) / 1000.0;
+    }
+
+    fn figures(&self, car: usize, policy: String) -> CarFigures {
+        let n = self.races.max(1) as f64;
+        CarFigures {
+            car,
+            policy,
+            races: self.races,
+            mean_place: self.place_sum as f64 / n,
+            laps_per_race: self.laps as f64 / n,
+            mean_lap_s: (!self.lap_times.is_empty())
+                .then(|| self.lap_times.iter().sum::<f64>() / self.lap_times.len() as f64),
+            ..self.f.clone()
+        }
+    }
+}
+
+/// The width bands `--circuits` reports, narrowest first.
+const BANDS: [&str; 3] = ["le2m", "2to3m", "ge3m"];
 
 pub fn race(a: RaceArgs) -> Result<()> {
     if a.races == 0 {
@@ -162,6 +201,10 @@ pub fn race(a: RaceArgs) -> Result<()> {
     };
     let mut paths: Vec<Path2> = Vec::new();
     let mut tally: Vec<Tally> = (0..cars).map(|_| Tally::default()).collect();
+    let mut bands: Vec<Vec<Tally>> = BANDS
+        .iter()
+        .map(|_| (0..cars).map(|_| Tally::default()).collect())
+        .collect();
     for r in 0..a.races {
         let mut obs = env.reset(if r == 0 { Some(a.seed) } else { None })?;
         let first = r == 0;
@@ -226,27 +269,17 @@ pub fn race(a: RaceArgs) -> Result<()> {
                 break s;
             }
         };
-        for (place, &i) in summary.order.iter().enumerate() {
-            let t = &mut tally[i];
-            let behind = summary.start_place[i] > 1;
-            t.wins += usize::from(place == 0);
-            t.place_sum += place + 1;
-            t.starts_behind += usize::from(behind);
-            t.wins_from_behind += usize::from(behind && place == 0);
-        }
-        for (i, t) in tally.iter_mut().enumerate() {
-            t.laps += summary.laps[i] as u64;
-            t.lap_times.extend(&summary.lap_times_s[i]);
-            if let Some(b) = summary.best_lap_s[i] {
-                t.best_lap_s = Some(t.best_lap_s.map_or(b, |x: f64| x.min(b)));
+        let band = env.sim().circuit().map(|c| {
+            BANDS
+                .iter()
+                .position(|&b| b == agvrl_run::width_band(c.width_m as f64))
+                .unwrap_or(0)
+        });
+        for i in 0..cars {
+            tally[i].add(&summary, i);
+            if let Some(b) = band {
+                bands[b][i].add(&summary, i);
             }
-            t.encounters += summary.encounters[i] as u64;
-            t.passes += summary.passes[i] as u64;
-            t.incidents += summary.at_fault_incidents(i) as u64;
-            t.contacts += summary.contacts[i] as u64;
-            t.at_fault += summary.at_fault[i] as u64;
-            t.time_lost_s += summary.time_lost_s[i];
-            t.crashes += usize::from(summary.crashed[i]);
         }
     }
     let track = match &cfg.track {
@@ -254,44 +287,33 @@ pub fn race(a: RaceArgs) -> Result<()> {
         None if cfg.circuit.is_some() || cfg.layout_seed.is_some() => "circuits".into(),
         None => "oval".into(),
     };
-    let n = a.races as f64;
-    println!(
-        "env=racing-duel track={track} cars={cars} races={} seed={} max_steps={} split={}",
-        a.races,
-        a.seed,
-        cfg.max_steps,
-        if cfg.held_out { "held_out" } else { "train" }
-    );
-    for (i, t) in tally.iter().enumerate() {
-        let mean_lap = match t.lap_times.is_empty() {
-            true => "none".to_string(),
-            false => format!("{:.2}", t.lap_times.iter().sum::<f64>() / t.lap_times.len() as f64),
-        };
-        let share = |a: u64, b: u64| match b {
-            0 => "none".to_string(),
-            b => format!("{:.2}", a as f64 / b as f64),
-        };
-        println!(
-            "car={i} policy={} wins={} win_rate={:.2} mean_place={:.2} laps_per_race={:.2} mean_lap_s={mean_lap} best_lap_s={} encounters={} passes={} pass_success={} at_fault_incidents={} at_fault_share={} starts_behind={} wins_from_behind={} win_rate_from_behind={} contacts_per_race={:.2} at_fault_per_race={:.2} time_lost_s_per_race={:.2} crashes={}",
-            car_name(i),
-            t.wins,
-            t.wins as f64 / n,
-            t.place_sum as f64 / n,
-            t.laps as f64 / n,
-            t.best_lap_s.map_or("none".into(), |b| format!("{b:.2}")),
-            t.encounters,
-            t.passes,
-            share(t.passes, t.encounters),
-            t.incidents,
-            share(t.incidents, t.passes + t.incidents),
-            t.starts_behind,
-            t.wins_from_behind,
-            share(t.wins_from_behind as u64, t.starts_behind as u64),
-            t.contacts as f64 / n,
-            t.at_fault as f64 / n,
-            t.time_lost_s / n,
-            t.crashes
-        );
+    let report = RaceReport {
+        env: "racing-duel".into(),
+        track: track.clone(),
+        cars,
+        races: a.races,
+        seed: a.seed,
+        max_steps: cfg.max_steps,
+        split: if cfg.held_out { "held_out" } else { "train" }.into(),
+        figures: tally
+            .iter()
+            .enumerate()
+            .map(|(i, t)| t.figures(i, car_name(i)))
+            .collect(),
+        by_width: BANDS
+            .iter()
+            .zip(&bands)
+            .filter(|(_, b)| b[0].races > 0)
+            .map(|(band, b)| WidthBand {
+                band: band.to_string(),
+                figures: b.iter().enumerate().map(|(i, t)| t.figures(i, car_name(i))).collect(),
+            })
+            .collect(),
+    };
+    print!("{}", report.text());
+    if let Some(p) = &a.json {
+        agvrl_run::write_atomic(p, report.to_json().as_bytes())?;
+        println!("json={}", p.display());
     }
     if let Some(out) = &a.plot {
         let scene = env.sim().scene().clone();

@@ -1460,8 +1460,30 @@ mod racing_against_others {
             assert!(o.status.success(), "{}", stderr(&o));
             stdout(&o)
         };
-        let out = circuits(&[]);
+        let json = d.path().join("race.json");
+        let out = circuits(&["--json", json.to_str().unwrap()]);
         assert!(out.contains("track=circuits cars=2 races=2"), "{out}");
+        // --json holds the printed figures, and every race falls in one width band.
+        let report = agvrl_run::RaceReport::load(&json).unwrap();
+        assert_eq!(
+            report.text(),
+            out.lines()
+                .filter(|l| !l.starts_with("json="))
+                .map(|l| format!("{l}\n"))
+                .collect::<String>()
+        );
+        for (i, all) in report.figures.iter().enumerate() {
+            let bands: Vec<&agvrl_run::CarFigures> = report.by_width.iter().map(|b| &b.figures[i]).collect();
+            assert_eq!(bands.iter().map(|f| f.races).sum::<usize>(), 2, "{out}");
+            assert_eq!(bands.iter().map(|f| f.encounters).sum::<u64>(), all.encounters, "{out}");
+            assert_eq!(
+                bands.iter().map(|f| f.at_fault_incidents).sum::<u64>(),
+                all.at_fault_incidents,
+                "{out}"
+            );
+            let km: f64 = bands.iter().map(|f| f.covered_km).sum();
+            assert!((km - all.covered_km).abs() < 1e-9 && all.covered_km > 0.0, "{out}");
+        }
         let car = |i: usize| out.lines().find(|l| l.starts_with(&format!("car={i} "))).unwrap();
         assert_eq!(key(car(0), "starts_behind"), "2", "{out}");
         assert_eq!(key(car(1), "starts_behind"), "0", "{out}");

@@ -373,6 +373,7 @@ impl RaceEnv {
             best_lap_s: r.iter().map(|c| c.best_lap_s).collect(),
             lap_times_s: r.iter().map(|c| c.lap_times_s.clone()).collect(),
             distance_m: r.iter().map(|c| c.distance_m).collect(),
+            covered_m: r.iter().map(|c| c.distance_m - c.offset_m).collect(),
             start_place: self.start_place.clone(),
             encounters: self.book.encounters().to_vec(),
             passes: self.book.passes().to_vec(),

@@ -1,7 +1,7 @@
 //! agvrl-run: what the `agvrl` command line, `agvrl-drive` and the Python wheel share above the
 //! learners: the run TOML ([`RunConfig`]), run directories ([`Run`], [`RunDir`], [`files`]),
-//! what a `--policy` or `--run` argument means ([`PolicySettings`]), what an evaluation found
-//! ([`RunReport`], [`EvalReport`]), and how an error reads ([`error_line`]).
+//! what a `--policy` or `--run` argument means ([`PolicySettings`]), what an evaluation or a race found
+//! ([`RunReport`], [`EvalReport`], [`RaceReport`]), and how an error reads ([`error_line`]).
 
 #![warn(missing_docs)]
 
@@ -11,6 +11,7 @@ mod error;
 mod error_line;
 #[doc(hidden)]
 pub mod fuzz;
+mod race_report;
 mod report;
 mod seeds;
 mod settings;
@@ -20,6 +21,7 @@ pub use config::RunConfig;
 pub use dir::{Run, RunDir, files, stamp, write_atomic};
 pub use error::{Result, RunError};
 pub use error_line::error_line;
+pub use race_report::{CarFigures, RaceReport, WidthBand, width_band};
 pub use report::{EvalReport, FilterReport, RacingReport, RunReport, SearchReport, SubjectsReport};
 pub use seeds::Seeds;
 pub use settings::{PolicySettings, SettingsSource};

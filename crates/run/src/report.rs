@@ -123,6 +123,12 @@ fn opt(v: Option<f64>, decimals: usize, none: &str) -> String {
 }
 
 impl EvalReport {
+    /// `agvrl eval --json`: eval.json's keys less the run's timings, at full precision.
+    pub fn to_json(&self) -> String {
+        // Every field is a number, a string, a bool or a list of them: serialising cannot fail.
+        serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+
     /// The `key=value` lines `agvrl eval` prints, numbers rounded for reading.
     pub fn lines(&self) -> Vec<String> {
         let mut v = vec![

@@ -129,3 +129,97 @@ fn eval_txt_prints_the_json_figures_rounded() {
         }
     }
 }
+
+fn race() -> agvrl_run::RaceReport {
+    use agvrl_run::{CarFigures, RaceReport, WidthBand};
+    let learner = CarFigures {
+        car: 0,
+        policy: "runs/a/policy.agvrl".into(),
+        races: 4,
+        wins: 3,
+        mean_place: 1.25,
+        laps_per_race: 0.5,
+        mean_lap_s: Some(40.125),
+        best_lap_s: Some(39.5),
+        encounters: 4,
+        passes: 3,
+        at_fault_incidents: 1,
+        starts_behind: 4,
+        wins_from_behind: 3,
+        contacts: 2,
+        at_fault_contacts: 1,
+        time_lost_s: 0.4,
+        crashes: 0,
+        covered_km: 0.5,
+    };
+    let opponent = CarFigures {
+        car: 1,
+        policy: "pure-pursuit@0.75".into(),
+        encounters: 0,
+        passes: 0,
+        at_fault_incidents: 0,
+        starts_behind: 0,
+        crashes: 1,
+        covered_km: 0.25,
+        ..learner.clone()
+    };
+    RaceReport {
+        env: "racing-duel".into(),
+        track: "circuits".into(),
+        cars: 2,
+        races: 4,
+        seed: 7,
+        max_steps: 3600,
+        split: "held_out".into(),
+        figures: vec![learner.clone(), opponent.clone()],
+        by_width: vec![WidthBand {
+            band: "2to3m".into(),
+            figures: vec![learner, opponent],
+        }],
+    }
+}
+
+/// `agvrl race --json` round-trips; the printed lines carry the shares computed from the counts,
+/// and `none` where a share has nothing to divide by.
+#[test]
+fn race_report_round_trips_and_prints_its_shares() {
+    let r = race();
+    let back: agvrl_run::RaceReport = serde_json::from_str(&r.to_json()).unwrap();
+    assert_eq!(back, r);
+    let text = r.text();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 5, "{text}");
+    assert!(
+        lines[0].starts_with("env=racing-duel track=circuits cars=2 races=4 seed=7"),
+        "{text}"
+    );
+    let l = lines[1];
+    for kv in [
+        "pass_success=0.75",
+        "at_fault_share=0.25",
+        "win_rate_from_behind=0.75",
+        "contacts_per_race=0.50",
+        "crashes_per_km=0.000",
+        "mean_lap_s=40.12",
+    ] {
+        assert!(l.split(' ').any(|w| w == kv), "{kv} in {l}");
+    }
+    let o = lines[2];
+    for kv in [
+        "pass_success=none",
+        "at_fault_share=none",
+        "win_rate_from_behind=none",
+        "crashes_per_km=4.000",
+    ] {
+        assert!(o.split(' ').any(|w| w == kv), "{kv} in {o}");
+    }
+    assert!(lines[3].starts_with("width=2to3m car=0 "), "{text}");
+}
+
+/// The width bands: at most 2 m, under 3 m, 3 m and more.
+#[test]
+fn width_bands_split_at_two_and_three_metres() {
+    use agvrl_run::width_band;
+    let got: Vec<&str> = [1.5, 2.0, 2.01, 2.99, 3.0, 3.5].into_iter().map(width_band).collect();
+    assert_eq!(got, ["le2m", "le2m", "2to3m", "2to3m", "ge3m", "ge3m"]);
+}

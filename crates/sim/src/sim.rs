@@ -221,6 +221,8 @@ pub struct Sim {
     cfg: SimConfig,
     world: World,
     scene: Scene,
+    /// What the generator drew, when the scene is a generated circuit.
+    circuit: Option<crate::CircuitInfo>,
     model: VehicleModel,
     nominal: VehicleParams,
     cars: Vec<Car>,
@@ -275,6 +277,7 @@ impl Sim {
             c.validate().map_err(|e| invalid(e.message))?;
         }
         let assets = AssetSource::builtin();
+        let mut circuit = None;
         let mut scene = match &cfg.scene {
             SceneSource::Builtin(id) => Scene::builtin(&assets, id)?,
             SceneSource::File(path) => {
@@ -283,7 +286,11 @@ impl Sim {
             }
             SceneSource::Procedural { kind, seed, half_m } => Scene::procedural(*kind, *seed, *half_m, 2.0)?,
             SceneSource::Map(t) => Scene::from_map(t)?,
-            SceneSource::Circuit { seed, settings } => Scene::from_map(&MapTrack::generated(*seed, settings)?.0)?,
+            SceneSource::Circuit { seed, settings } => {
+                let (track, info) = MapTrack::generated(*seed, settings)?;
+                circuit = Some(info);
+                Scene::from_map(&track)?
+            }
         };
         if set.subjects > 0 && scene.centreline.is_some() {
             return Err(invalid(
@@ -353,6 +360,7 @@ impl Sim {
             cfg,
             world,
             scene,
+            circuit,
             model,
             nominal,
             cars,
@@ -381,6 +389,11 @@ impl Sim {
     /// The scene.
     pub fn scene(&self) -> &Scene {
         &self.scene
+    }
+
+    /// The generated circuit's figures (length, width, tightest radius), when the scene is one.
+    pub fn circuit(&self) -> Option<&crate::CircuitInfo> {
+        self.circuit.as_ref()
     }
 
     /// The vehicle model.

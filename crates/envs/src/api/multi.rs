@@ -51,6 +51,9 @@ pub struct RaceSummary {
     pub lap_times_s: Vec<Vec<f64>>,
     /// Distance raced from the start line, metres.
     pub distance_m: Vec<f64>,
+    /// Ground covered along the centre line from the car's own start, metres (what crashes per
+    /// kilometre divide by).
+    pub covered_m: Vec<f64>,
     /// Place on the grid, 1 = pole (or ahead of everyone at a start behind).
     pub start_place: Vec<usize>,
     /// Encounters begun as the car behind (see [`crate::race_figures`]).
