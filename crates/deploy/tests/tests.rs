@@ -540,7 +540,8 @@ mod ros2_loopback {
         let scan1 = listen::<msg::LaserScan>(&mut node, "/car1/scan", ("sensor_msgs", "LaserScan"), false);
         let tf = listen::<msg::TFMessage>(&mut node, "/tf", ("tf2_msgs", "TFMessage"), false);
         let tf_static = listen::<msg::TFMessage>(&mut node, "/tf_static", ("tf2_msgs", "TFMessage"), true);
-        let mut robot = SimRobot::race(&env_cfg, cfg.clone(), 0, Faults::default(), vec![policy()]).unwrap();
+        let opponents = vec![agvrl_deploy::hardware::Opponent::Policy(Box::new(policy()))];
+        let mut robot = SimRobot::race(&env_cfg, cfg.clone(), 0, Faults::default(), opponents).unwrap();
         let h = robot.handle();
         let th = std::thread::spawn(move || {
             robot.run(Pace::Lockstep, 0).unwrap();
@@ -637,6 +638,100 @@ mod ros2_loopback {
             assert!(
                 mounts.contains(&pair(format!("car{i}/base_link"), format!("car{i}/laser"))),
                 "{mounts:?}"
+            );
+        }
+    }
+
+    /// A served race against classical racers: car 0 driven over DDS by the shipped policy,
+    /// pure pursuit and follow-the-gap (each at 0.75 of its speed) drive cars 1 and 2
+    /// in-process, and each racer's own odometry on `/carN/odom` shows it driving.
+    #[test]
+    fn a_served_race_runs_classical_racers_as_opponents() {
+        use agvrl_deploy::hardware::{Opponent, msg};
+        use agvrl_envs::drivers::{RacerKind, make_racer};
+        let ticks = 300; // 10 s: a racer at 0.75 of 1.79 m/s covers up to 13 m
+        let mut cfg = ros_cfg(InvalidRay::Stop);
+        cfg.qos.sensors.depth = 4096;
+        let env_cfg = EnvConfig {
+            race: Some(agvrl_envs::RaceSettings {
+                cars: 3,
+                // Rows 3 m apart: closer, follow-the-gap meets pure pursuit in the first turn.
+                grid_gap_m: 3.0,
+                ..Default::default()
+            }),
+            max_steps: 1000,
+            ..EnvConfig::default()
+        };
+        let ctx =
+            ros2_client::Context::with_options(ros2_client::ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
+        let mut node = ctx
+            .new_node(
+                ros2_client::NodeName::new("/", "racers_listener").unwrap(),
+                ros2_client::NodeOptions::new().enable_rosout(false),
+            )
+            .unwrap();
+        let odom: Vec<_> = (1..3)
+            .map(|i| listen::<msg::Odometry>(&mut node, &format!("/car{i}/odom"), ("nav_msgs", "Odometry"), false))
+            .collect();
+        let opponents = [RacerKind::PurePursuit, RacerKind::FollowTheGap]
+            .into_iter()
+            .map(|k| Opponent::Racer(make_racer(k, &env_cfg, 0.75, None).unwrap()))
+            .collect();
+        let mut robot = SimRobot::race(&env_cfg, cfg.clone(), 0, Faults::default(), opponents).unwrap();
+        let h = robot.handle();
+        let th = std::thread::spawn(move || robot.run(Pace::Lockstep, 0).unwrap());
+        let listening = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+        let on = listening.clone();
+        let listener = std::thread::spawn(move || {
+            let mut seen: Vec<Vec<msg::Odometry>> = vec![vec![], vec![]];
+            let mut quiet = std::time::Instant::now();
+            while on.load(Ordering::Relaxed) || quiet.elapsed().as_secs() < 1 {
+                let n: usize = seen.iter().map(Vec::len).sum();
+                for (s, o) in seen.iter_mut().zip(&odom) {
+                    s.extend(take_all(o));
+                }
+                if seen.iter().map(Vec::len).sum::<usize>() > n {
+                    quiet = std::time::Instant::now();
+                }
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
+            seen
+        });
+        let car0 = Ros2Config {
+            topics: cfg.topics.namespaced("car0"),
+            ..cfg.clone()
+        };
+        let v = Ros2Vehicle::new(car0, true, None).unwrap();
+        let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
+        let policy = Policy::load(&shipped_policy("racing-oval-ppo")).unwrap();
+        let mut lp = DriveLoop::new(v, task, policy, DriveConfig::default(), 0).unwrap();
+        for k in 0..ticks {
+            let t = lp.tick().unwrap();
+            assert!(t.event.is_none(), "tick {k}: {:?}", t.event);
+        }
+        drop(lp);
+        let t0 = std::time::Instant::now();
+        while h.stats().commands < ticks && t0.elapsed().as_secs() < 10 {
+            std::thread::yield_now();
+        }
+        h.stop();
+        th.join().unwrap();
+        listening.store(false, Ordering::Relaxed);
+        let seen = listener.join().unwrap();
+        let stats = h.stats();
+        assert_eq!(stats.commands, ticks, "{stats:?}");
+        assert_eq!((stats.terminations, stats.car_contacts), (0, 0), "{stats:?}");
+        for (k, s) in seen.iter().enumerate() {
+            let p = |m: &msg::Odometry| (m.pose.pose.position.x, m.pose.pose.position.y);
+            let path: f64 = s
+                .windows(2)
+                .map(|w| (p(&w[1]).0 - p(&w[0]).0).hypot(p(&w[1]).1 - p(&w[0]).1))
+                .sum();
+            assert!(
+                s.len() > 200 && path > 6.0,
+                "car {}: {} odometry messages, {path:.1} m driven",
+                k + 1,
+                s.len()
             );
         }
     }
@@ -1336,7 +1431,7 @@ fn a_served_race_refuses_bad_opponents_and_car_counts() {
         err
     };
     let e = run(&["--serve-sim", "racing-duel"], &[]);
-    assert!(e.contains("--opponent FILE"), "{e}");
+    assert!(e.contains("--opponent FILE or --opponent KIND[@SCALE]"), "{e}");
     let e = run(&["--serve-sim", "racing-oval", "--opponent"], &[p]);
     assert!(e.contains("--serve-sim racing-duel"), "{e}");
     let e = run(&["--serve-sim", "racing-duel", "--cars", "9", "--opponent"], &[p]);
@@ -1345,7 +1440,12 @@ fn a_served_race_refuses_bad_opponents_and_car_counts() {
         &["--serve-sim", "racing-duel", "--cars", "4", "--opponent"],
         &[p, "--opponent".as_ref(), p],
     );
-    assert!(e.contains("2 opponent policies for 3 opponents"), "{e}");
+    assert!(e.contains("2 opponents for 3 opponent cars"), "{e}");
+    let e = run(&["--serve-sim", "racing-duel", "--opponent", "pure-pursuit@1.5"], &[]);
+    assert!(
+        e.contains("--opponent racer 'pure-pursuit@1.5': the speed scale must be in (0, 1]"),
+        "{e}"
+    );
     let e = run(&["--serve-sim", "racing-duel", "--opponent", "no-such.agvrl"], &[]);
     assert!(e.contains("no-such.agvrl"), "{e}");
     let e = run(

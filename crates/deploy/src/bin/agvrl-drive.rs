@@ -91,13 +91,15 @@ struct Args {
     domain_id: Option<u16>,
     /// Serve the simulated car of env ENV over ROS 2 instead of driving. `racing-duel`: a race
     /// whose car 0 is served under namespace car0 (`/car0/scan`, `/car0/drive`; every car's
-    /// sensors under its own) while --opponent policies drive the others in-process.
+    /// sensors under its own) while --opponent policies or racers drive the others in-process.
     #[arg(long, value_name = "ENV", conflicts_with = "vehicle")]
     serve_sim: Option<String>,
-    /// --serve-sim racing-duel: the policy file driving the opponents (repeat for one per
-    /// opponent); the race runs on the first one's env settings (its track unless --track).
-    #[arg(long = "opponent", value_name = "FILE", requires = "serve_sim")]
-    opponents: Vec<PathBuf>,
+    /// --serve-sim racing-duel: what drives the opponents (repeat for one per opponent): a
+    /// policy file, or a classical racer `pure-pursuit` or `follow-the-gap`, optionally
+    /// `@SCALE` of its speed (`pure-pursuit@0.75`). The race runs on --policy's env settings,
+    /// else the first policy opponent's, else racing-duel's defaults (its track unless --track).
+    #[arg(long = "opponent", value_name = "FILE|KIND[@SCALE]", requires = "serve_sim")]
+    opponents: Vec<String>,
     /// --serve-sim racing-duel: cars on the grid, the served one included (default: one per
     /// opponent policy plus the served car).
     #[arg(long, requires = "serve_sim")]
@@ -756,13 +758,16 @@ fn serve_sim(a: &Args, env: &str, env_cfg: &EnvConfig) -> Result<()> {
     serve(a, robot, false)
 }
 
-/// `--serve-sim racing-duel --opponent FILE ...`: car 0 served, the opponents in-process.
+/// `--serve-sim racing-duel --opponent FILE|KIND ...`: car 0 served, the opponents in-process.
 #[cfg(feature = "ros2")]
 fn serve_race(a: &Args, id: &str) -> Result<()> {
-    use agvrl_deploy::hardware::SimRobot;
-    let Some(first) = a.opponents.first() else {
-        bail!("--serve-sim {id}: give the opponents' policy with --opponent FILE (repeat for one each)");
-    };
+    use agvrl_deploy::hardware::{Opponent, SimRobot};
+    use agvrl_envs::drivers::{RacerKind, make_racer, parse_racer};
+    if a.opponents.is_empty() {
+        bail!(
+            "--serve-sim {id}: give the opponents with --opponent FILE or --opponent KIND[@SCALE] (repeat for one each)"
+        );
+    }
     let cars = a.cars.unwrap_or(a.opponents.len() + 1);
     if !(2..=agvrl_sim::MAX_CARS).contains(&cars) {
         bail!(
@@ -770,17 +775,54 @@ fn serve_race(a: &Args, id: &str) -> Result<()> {
             agvrl_sim::MAX_CARS
         );
     }
-    // The race's settings: --policy's if given (the served stack's), else the first opponent's.
+    if a.opponents.len() > 1 && a.opponents.len() != cars - 1 {
+        bail!(
+            "{} opponents for {} opponent cars: give one for all, or one each",
+            a.opponents.len(),
+            cars - 1
+        );
+    }
+    // A racer's name (a bad scale included) is a racer; anything else a policy file.
+    let racer = |o: &str| -> Result<Option<(RacerKind, f64)>> {
+        let kind = o.split_once('@').map_or(o, |(k, _)| k);
+        match RacerKind::of(kind) {
+            Ok(_) => Ok(Some(parse_racer(o).map_err(|e| match e {
+                agvrl_envs::EnvError::Config(m) => anyhow::anyhow!("--opponent {m}"),
+                e => e.into(),
+            })?)),
+            Err(_) => Ok(None),
+        }
+    };
+    let racers = a.opponents.iter().map(|o| racer(o)).collect::<Result<Vec<_>>>()?;
+    // The race's settings: --policy's if given (the served stack's), else the first policy
+    // opponent's, else racing-duel's own.
     let sets = [a.set.clone(), a.track.iter().map(|p| agvrl_run::track_set(p)).collect()].concat();
-    let settings = a.policy.as_deref().unwrap_or(first);
-    let mut env_cfg = PolicySettings::resolve(None, Some(settings), &sets)?.eval_env_config();
+    let first_policy = a
+        .opponents
+        .iter()
+        .zip(&racers)
+        .find(|(_, r)| r.is_none())
+        .map(|(o, _)| Path::new(o));
+    let mut env_cfg = match a.policy.as_deref().or(first_policy) {
+        Some(p) => PolicySettings::resolve(None, Some(p), &sets)?.eval_env_config(),
+        None => agvrl_run::RunConfig::from_toml_with(&format!("env = \"{id}\"\n"), "--opponent", &sets)?.env_config,
+    };
     env_cfg.race = Some(agvrl_envs::RaceSettings {
         cars,
         ..env_cfg.race.unwrap_or_default()
     });
     let mut opponents = Vec::new();
-    for p in &a.opponents {
-        opponents.push(PolicySettings::resolve(None, Some(p), &[])?.load_policy()?);
+    for k in 0..cars - 1 {
+        let o = if a.opponents.len() == 1 { 0 } else { k };
+        opponents.push(match racers[o] {
+            Some((kind, scale)) => Opponent::Racer(
+                make_racer(kind, &env_cfg, scale, None)
+                    .map_err(|e| anyhow::anyhow!("--opponent {}: {e}", a.opponents[o]))?,
+            ),
+            None => Opponent::Policy(Box::new(
+                PolicySettings::resolve(None, Some(Path::new(&a.opponents[o])), &[])?.load_policy()?,
+            )),
+        });
     }
     let robot = SimRobot::race(&env_cfg, ros2_config(a)?, a.seed, faults(a), opponents)?;
     eprintln!("serving car 0 of a {cars}-car race over ROS 2 under /car0; Ctrl-C stops");

@@ -15,5 +15,5 @@ pub use config::Ros2Config;
 #[cfg(feature = "ros2")]
 pub use ros2::Ros2Vehicle;
 #[cfg(feature = "ros2")]
-pub use sim_robot::{Faults, Pace, RobotHandle, RobotStats, SimRobot};
+pub use sim_robot::{Faults, Opponent, Pace, RobotHandle, RobotStats, SimRobot};
 pub use wire::WireFaults;

@@ -7,7 +7,7 @@
 //! the LiDAR's and camera's mounts.
 //!
 //! In a race ([`SimRobot::race`], `--serve-sim racing-duel`) car 0 is the served car and the
-//! others are driven in-process by policies; every car's topics and frames are under its own
+//! others are driven in-process by policies or classical racers; every car's topics and frames are under its own
 //! namespace (`/car0/scan`, `/car1/scan`, `car1/base_link`), each car's odom frame hangs off
 //! `map`, and a new race starts on the tick after the served car's race ends.
 
@@ -137,15 +137,29 @@ enum World {
         vehicle: agvrl_envs::SimCar,
         task: Box<dyn Task>,
     },
-    /// A race: car 0 served, the others driven by policies.
+    /// A race: car 0 served, the others driven in-process.
     Race(Box<Race>),
+}
+
+/// What drives an opponent car of a served race.
+pub enum Opponent {
+    /// A policy, deterministic actions through the car's own task.
+    Policy(Box<Policy>),
+    /// A classical racer (`agvrl_envs::drivers`), its controls applied as they are.
+    Racer(Box<dyn agvrl_envs::drivers::Driver>),
+}
+
+/// An opponent's input for one period, owned.
+enum Given {
+    Action(Vec<f32>),
+    Control(Control),
 }
 
 /// A race behind the robot.
 struct Race {
     env: RaceEnv,
-    /// One policy for every opponent, or one per car from car 1 on.
-    opponents: Vec<Policy>,
+    /// One per car from car 1 on.
+    opponents: Vec<Opponent>,
     obs: Vec<Vec<f32>>,
     /// Simulated time of the races before this one, seconds: stamps keep rising over restarts.
     clock_s: f64,
@@ -244,7 +258,7 @@ impl SimRobot {
 
     /// A race of `env_cfg.race.cars` cars (`racing-duel`'s settings) whose car 0 is served
     /// behind `cfg`'s topics under namespace `car0` while `opponents` drive the others
-    /// in-process (one policy for all, or one per opponent), deterministic actions. Races are
+    /// in-process, one per car from car 1 on. Races are
     /// held out and seeded from `seed`; a race ends when the served car's episode does (a
     /// crash, or `env_cfg.max_steps`), and the next starts on the grid at the next tick.
     pub fn race(
@@ -252,7 +266,7 @@ impl SimRobot {
         cfg: Ros2Config,
         seed: u64,
         faults: Faults,
-        opponents: Vec<Policy>,
+        opponents: Vec<Opponent>,
     ) -> Result<Self, DeployError> {
         cfg.validate().map_err(|e| DeployError::Config(e.message))?;
         let env_cfg = EnvConfig {
@@ -266,20 +280,22 @@ impl SimRobot {
                 "a served race needs at least 2 cars (the served car and an opponent)".into(),
             ));
         }
-        if opponents.is_empty() || (opponents.len() > 1 && opponents.len() != n - 1) {
+        if opponents.len() != n - 1 {
             return Err(DeployError::Config(format!(
-                "{} opponent policies for {} opponents: give one for all, or one each",
+                "{} opponents for {} opponent cars: give one each",
                 opponents.len(),
                 n - 1
             )));
         }
-        for p in &opponents {
-            p.check_spaces(&env.observation_space(), &env.action_space())
-                .map_err(DeployError::Mismatch)?;
+        for o in &opponents {
+            if let Opponent::Policy(p) = o {
+                p.check_spaces(&env.observation_space(), &env.action_space())
+                    .map_err(DeployError::Mismatch)?;
+            }
         }
         let obs = env.reset(Some(seed))?;
         let frames = (0..n).map(|i| env.frame_of(i).clone()).collect();
-        let race = Race {
+        let mut race = Race {
             env,
             opponents,
             obs,
@@ -287,6 +303,7 @@ impl SimRobot {
             laps_before: 0,
             before: (0, 0, 0),
         };
+        race.reset_racers();
         Self::serve(World::Race(Box::new(race)), frames, cfg, faults)
     }
 
@@ -664,6 +681,15 @@ fn odom_tf(o: &msg::Odometry, stamp_s: f64) -> msg::TransformStamped {
 }
 
 impl Race {
+    /// Start the classical racers on the race just reset.
+    fn reset_racers(&mut self) {
+        for (k, o) in self.opponents.iter_mut().enumerate() {
+            if let Opponent::Racer(d) = o {
+                d.reset(self.env.frame_of(k + 1), Some(self.env.map()));
+            }
+        }
+    }
+
     /// One period: the served car with `c`, the others by their policies; the frames and the
     /// served car's stats follow, and a new race starts when the served car's ends. The served
     /// car's termination, if any.
@@ -674,20 +700,25 @@ impl Race {
         s: &mut RobotStats,
     ) -> Result<Option<TerminationCause>, DeployError> {
         let n = frames.len();
-        let mut actions = Vec::with_capacity(n);
+        // Each opponent's action (a policy's) or control (a racer's); a car out of the race waits.
+        let mut given: Vec<Given> = Vec::with_capacity(n);
         for i in 1..n {
-            actions.push(match self.env.done(i) {
-                true => vec![0.0; 2],
-                false => {
-                    let k = if self.opponents.len() == 1 { 0 } else { i - 1 };
-                    self.opponents[k]
-                        .act(&self.obs[i], true)
-                        .map_err(|e| DeployError::Vehicle(format!("car {i}'s policy: {e}")))?
-                }
+            let done = self.env.done(i);
+            given.push(match &mut self.opponents[i - 1] {
+                Opponent::Policy(_) if done => Given::Action(vec![0.0; 2]),
+                Opponent::Policy(p) => Given::Action(
+                    p.act(&self.obs[i], true)
+                        .map_err(|e| DeployError::Vehicle(format!("car {i}'s policy: {e}")))?,
+                ),
+                Opponent::Racer(_) if done => Given::Control(Control::default()),
+                Opponent::Racer(d) => Given::Control(d.control(self.env.frame_of(i), Some(self.env.map()))),
             });
         }
         let inputs: Vec<CarInput> = std::iter::once(CarInput::Control(c))
-            .chain(actions.iter().map(|a| CarInput::Action(a)))
+            .chain(given.iter().map(|g| match g {
+                Given::Action(a) => CarInput::Action(a),
+                Given::Control(c) => CarInput::Control(*c),
+            }))
             .collect();
         let st = self.env.step_inputs(&inputs)?;
         for (i, a) in st.agents.iter().enumerate() {
@@ -716,6 +747,7 @@ impl Race {
             self.before = (s.car_contacts, s.at_fault, s.passes);
             self.clock_s += self.env.sim().time_s() + self.env.dt_s();
             self.obs = self.env.reset(None)?;
+            self.reset_racers();
         }
         for (i, f) in frames.iter_mut().enumerate() {
             if i == 0 || !self.env.done(i) {
