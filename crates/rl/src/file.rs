@@ -10,7 +10,6 @@
 use crate::error::{Result, RlError};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
-use std::io::Write;
 use std::path::Path;
 
 /// CRC-32 (IEEE 802.3, as zlib's `crc32`).
@@ -53,24 +52,9 @@ pub fn encode(magic: &[u8; 8], version: u32, header: &impl Serialize, arrays: &[
     Ok(buf)
 }
 
-/// Write `bytes` to `path` through a temporary file in the same directory, fsync and a rename,
-/// so a crash never leaves a half-written file under the final name.
+/// [`agvrl_sim::write_atomic`], its error naming `path`.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).map_err(io(dir))?;
-    // 0o666 before the umask, as `File::create` would; tempfile's default is 0o600.
-    let mut tmp = tempfile::Builder::new()
-        .permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666))
-        .tempfile_in(dir)
-        .map_err(io(dir))?;
-    // Through the plain file: NamedTempFile's own writes name the temporary path in errors.
-    tmp.as_file_mut().write_all(bytes).map_err(io(path))?;
-    tmp.as_file().sync_all().map_err(io(path))?;
-    tmp.persist(path).map_err(|e| io(path)(e.error))?;
-    Ok(())
+    agvrl_sim::write_atomic(path, bytes).map_err(io(path))
 }
 
 struct Reader<'a> {

@@ -86,28 +86,10 @@ impl Run {
     }
 }
 
-/// Write `bytes` to `path` through a temporary file in the same directory, fsync and a rename,
-/// so a crash never leaves a half-written file under the final name.
+/// [`agvrl_sim::write_atomic`] (a temporary file in the same directory, fsync and a rename),
+/// its error naming `path`.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    use std::io::Write;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    std::fs::create_dir_all(dir).map_err(io(dir))?;
-    // Created 0o666 less the umask, as `File::create` does (tempfile's own default is 0o600).
-    let mode = <std::fs::Permissions as std::os::unix::fs::PermissionsExt>::from_mode(0o666);
-    let mut file = tempfile::Builder::new()
-        .permissions(mode)
-        .tempfile_in(dir)
-        .map_err(io(dir))?;
-    // Through the plain file: NamedTempFile's own writes name the temporary path in errors.
-    file.as_file_mut()
-        .write_all(bytes)
-        .and_then(|()| file.as_file().sync_all())
-        .map_err(io(path))?;
-    file.persist(path).map_err(|e| io(path)(e.error))?;
-    Ok(())
+    agvrl_sim::write_atomic(path, bytes).map_err(io(path))
 }
 
 /// A run directory being filled.

@@ -16,6 +16,7 @@
 
 pub mod assets;
 mod error;
+pub mod fs;
 #[doc(hidden)]
 pub mod fuzz;
 pub mod msg;
@@ -27,6 +28,7 @@ pub mod vehicle;
 pub mod world;
 
 pub use error::{InvalidSetting, SimError};
+pub use fs::write_atomic;
 pub use scene::{CircuitInfo, CircuitSettings, MapTrack, SCENE_IDS, Scene, SceneKind};
 pub use sim::{
     CarContact, MAX_CARS, PlanarPose, SceneSource, Sim, SimConfig, SimSettings, VehicleParams, VehicleSource,

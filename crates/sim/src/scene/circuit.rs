@@ -818,17 +818,12 @@ pub fn write_map(track: &MapTrack, info: &CircuitInfo, dir: &Path) -> Result<Pat
     Ok(path("yaml"))
 }
 
-/// Write `bytes` to `path` through a temporary file in the same directory and a rename.
+/// [`crate::write_atomic`], its error naming `path`.
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SimError> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".partial");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, bytes)
-        .and_then(|()| std::fs::rename(&tmp, path))
-        .map_err(|source| SimError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
+    crate::write_atomic(path, bytes).map_err(|source| SimError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 #[cfg(test)]
