@@ -159,7 +159,12 @@ pub fn race(a: RaceArgs) -> Result<()> {
     let race = cfg.race.unwrap_or_default();
     cfg.race = Some(RaceSettings {
         cars,
-        start_behind_share: if a.start_behind { 1.0 } else { race.start_behind_share },
+        // A lone car (--cars 1) has nobody to start behind, whatever its training raced.
+        start_behind_share: match (a.start_behind, cars) {
+            (true, _) => 1.0,
+            (false, 1) => 0.0,
+            (false, _) => race.start_behind_share,
+        },
         ..race
     });
     if a.circuits {
