@@ -136,7 +136,7 @@ def f1tenth():
                # Roll inertia: f1tenth_gym publishes none. 0.03 kg m^2 (the battery and electronics
                # stacked above the chassis plate) rather than the flat box's 0.011, with which the
                # car on agvrl's ray-cast wheels rolls on its suspension and its yaw rate wanders
-               # (at 0.05 it oversteers): tests/tests.rs `f1tenth` checks the cornering.
+               # (at 0.05 it oversteers): crates/sim/tests/f1tenth.rs checks the cornering.
                chassis_I=(0.03, bI[1], c_izz))
 open("assets/vehicles/xtenth_car.urdf", "w").write(x)
 open("assets/vehicles/racecar.urdf", "w").write(rc)

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """PyBullet's own view and projection matrices for the cameras of agvrl's test
-`view_and_projection_matrices_match_pybullet` (crates/sim/tests/tests.rs), which keeps this
+`view_and_projection_matrices_match_pybullet` (crates/sim/tests/camera_images.rs), which keeps this
 output as its golden values. Prints all 16 entries of each matrix in PyBullet's order: a flat
 column-major OpenGL matrix, entry [c * 4 + r] is row r, column c.
 
