@@ -3,6 +3,7 @@
 
 use super::explored::ExploredMemory;
 use super::reward::{self, SafeShaping, SearchReward};
+use super::safety::ObstacleMemory;
 use super::{CommonConfig, Intervention, Outcome, SafetyFilter, Task, min_range_ahead_m, terminate};
 use crate::api::{BoxSpace, Control, MapInfo, SearchInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
@@ -71,9 +72,10 @@ pub struct Search {
     by_kind: [u64; 4],
     clearance_m: f64,
     explored: Option<ExploredMemory>,
-    /// With `observation.rear`: a filter kept for its memory and reverse check (it filters
-    /// nothing), and the reverse lengths of the last frame.
-    rear: Option<(SafetyFilter, Vec<f32>)>,
+    /// With `observation.rear`: the obstacle memory the reverse lengths are checked against
+    /// (kept as the safety filter keeps its own, under `safety_filter`'s geometry), and the
+    /// reverse lengths of the last frame.
+    rear: Option<(ObstacleMemory, Vec<f32>)>,
 }
 
 /// The free cells of a map that coverage counts, indexed by position.
@@ -175,17 +177,7 @@ impl Search {
             clearance_m: f64::INFINITY,
             explored: (!cfg.common.observation.explored.is_empty())
                 .then(|| ExploredMemory::new(cfg.common.observation.explored)),
-            rear: (!cfg.common.observation.rear.is_empty()).then(|| {
-                let memory = super::SafetyFilterConfig {
-                    enabled: true,
-                    advisory: false,
-                    // Reach for points as far as the longest reverse arc.
-                    backout_m: cfg.common.observation.rear.max_m,
-                    backout_parked: false,
-                    ..cfg.common.safety_filter
-                };
-                (SafetyFilter::new(memory, true), vec![])
-            }),
+            rear: (!cfg.common.observation.rear.is_empty()).then(|| (ObstacleMemory::new(true), vec![])),
         }
     }
 
@@ -193,10 +185,11 @@ impl Search {
     fn look_behind(&mut self, frame: &SensorFrame) {
         let rear_cfg = self.cfg.common.observation.rear;
         let fan = (self.cfg.clearance_fov_deg > 0.0).then(|| 0.5 * self.cfg.clearance_fov_deg.to_radians());
+        let filter_cfg = &self.cfg.common.safety_filter;
         if let Some((memory, lengths)) = &mut self.rear {
             lengths.clear();
             let deltas = rear_cfg.steerings(self.steering_limit);
-            memory.reverse_free_fractions(frame, &deltas, rear_cfg.max_m, fan, lengths);
+            memory.reverse_free_fractions(filter_cfg, frame, &deltas, rear_cfg.max_m, fan, lengths);
         }
     }
 
