@@ -389,8 +389,7 @@ fn a_served_race_drives_car0_over_dds_and_names_every_car_apart() {
         max_steps: 1000,
         ..EnvConfig::default()
     };
-    let ctx =
-        ros2_client::Context::with_options(ros2_client::ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
+    let ctx = ros2_client::Context::with_options(ros2_client::ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
     let mut node = ctx
         .new_node(
             ros2_client::NodeName::new("/", "race_listener").unwrap(),
@@ -522,8 +521,7 @@ fn a_served_race_runs_classical_racers_as_opponents() {
         max_steps: 1000,
         ..EnvConfig::default()
     };
-    let ctx =
-        ros2_client::Context::with_options(ros2_client::ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
+    let ctx = ros2_client::Context::with_options(ros2_client::ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
     let mut node = ctx
         .new_node(
             ros2_client::NodeName::new("/", "racers_listener").unwrap(),

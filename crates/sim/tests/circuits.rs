@@ -48,8 +48,7 @@ fn sharpest_bend_deg(p: &[[f64; 2]], r_max: f64) -> f64 {
     for i in 0..2 * n {
         let k = i % n;
         let t = turn(k);
-        if circumradius(p[(k + n - 1) % n], p[k], p[(k + 1) % n]) <= r_max
-            && (run == 0.0 || run.signum() == t.signum())
+        if circumradius(p[(k + n - 1) % n], p[k], p[(k + 1) % n]) <= r_max && (run == 0.0 || run.signum() == t.signum())
         {
             run += t;
         } else {
@@ -105,8 +104,7 @@ fn to_line(p: [f64; 2], line: &[[f64; 2]]) -> f64 {
         .map(|i| {
             let (a, b) = (line[i], line[(i + 1) % line.len()]);
             let ab = [b[0] - a[0], b[1] - a[1]];
-            let u =
-                (((p[0] - a[0]) * ab[0] + (p[1] - a[1]) * ab[1]) / (ab[0] * ab[0] + ab[1] * ab[1])).clamp(0.0, 1.0);
+            let u = (((p[0] - a[0]) * ab[0] + (p[1] - a[1]) * ab[1]) / (ab[0] * ab[0] + ab[1] * ab[1])).clamp(0.0, 1.0);
             dist(p, [a[0] + u * ab[0], a[1] + u * ab[1]])
         })
         .fold(f64::INFINITY, f64::min)

@@ -116,8 +116,7 @@ fn the_f1tenth_cars_steering_turns_at_3_2_rad_per_s() {
                 "to {target}, period {k}: {got} vs {expect}"
             );
             let m = s.vehicle();
-            let split =
-                agvrl_sim::vehicle::ackermann_split(got, m.wheelbase_m as f64, m.front_track_m as f64, true);
+            let split = agvrl_sim::vehicle::ackermann_split(got, m.wheelbase_m as f64, m.front_track_m as f64, true);
             assert_eq!(
                 s.wheel_angles_rad(),
                 split,

@@ -84,9 +84,8 @@ fn to_box(wall: &[f32; 5], p: [f64; 2]) -> (f64, f64) {
 fn a_map_file_round_trips_to_walls_at_its_pixels_for_any_origin() {
     let px = ring();
     let (w, h) = (px[0].len(), px.len());
-    let free = |c: i64, r: i64| {
-        c >= 0 && r >= 0 && (c as usize) < w && (r as usize) < h && px[r as usize][c as usize] == 254
-    };
+    let free =
+        |c: i64, r: i64| c >= 0 && r >= 0 && (c as usize) < w && (r as usize) < h && px[r as usize][c as usize] == 254;
     for origin in [[0.0, 0.0, 0.0], [-3.5, 2.25, 0.0], [1.5, -4.0, 0.7], [-2.0, -1.0, -2.5]] {
         let d = tmpdir("map-round-trip");
         let yaml = write_map(d.path(), &px, origin, "", Some(&ring_csv(origin)));

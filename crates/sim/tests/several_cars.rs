@@ -51,8 +51,7 @@ fn two_cars_driven_into_each_other_exchange_momentum_and_never_pass_through() {
         let m = [s.vehicle().mass_kg, 2.0 * s.vehicle().mass_kg];
         let top = s.vehicle().top_speed_mps();
         let model = s.vehicle().clone();
-        let drive_n = model.wheels.iter().filter(|w| w.driven).count() as f32
-            * model.spec.drive.max_torque_nm as f32
+        let drive_n = model.wheels.iter().filter(|w| w.driven).count() as f32 * model.spec.drive.max_torque_nm as f32
             / model.drive_radius_m();
         // Car 1 faces car 0 from 16 m: both reach top speed before they meet.
         s.reset_cars(&[at(-8.0, 0.0, 0.0), at(8.0, 0.0, std::f32::consts::PI)])

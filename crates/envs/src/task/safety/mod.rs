@@ -325,7 +325,9 @@ impl SafetyFilter {
         let fan_half_rad = fan_half_rad.unwrap_or_else(|| whole_scan_half_rad(frame));
         let speed = self.memory.observe(&self.cfg, frame);
         self.memory.collect_near(&self.cfg, self.cfg.reach(speed), true);
-        let Self { cfg, memory, backout, .. } = self;
+        let Self {
+            cfg, memory, backout, ..
+        } = self;
         if let Some(c) = backout.keep_backing_out(cfg, memory, speed, fan_half_rad) {
             self.last = Intervention::Reversed;
             return c;
@@ -350,7 +352,9 @@ impl SafetyFilter {
         let delta = proposed.steering_rad.clamp(-steering_limit_rad, steering_limit_rad);
         let drives = proposed.throttle > 0.0;
         if self.cfg.backout_parked {
-            let Self { cfg, memory, backout, .. } = self;
+            let Self {
+                cfg, memory, backout, ..
+            } = self;
             if let Some(c) = backout.back_out_if_parked(cfg, memory, speed, delta, steering_limit_rad, fan_half_rad) {
                 self.last = Intervention::Reversed;
                 return c;
@@ -381,7 +385,9 @@ impl SafetyFilter {
                 best = (d, f);
             }
         }
-        let Self { cfg, memory, backout, .. } = self;
+        let Self {
+            cfg, memory, backout, ..
+        } = self;
         if let Some(c) = backout.back_out_if_stuck(cfg, memory, speed, steering_limit_rad, fan_half_rad) {
             self.last = Intervention::Reversed;
             return c;
