@@ -185,6 +185,87 @@ pub fn coverage_over_time(path: &Path, series: &[(String, String)], title: &str)
     })
 }
 
+/// One car's gap to car 0 over a race, and the moments its figures changed.
+pub struct GapSeries {
+    /// The legend's name.
+    pub label: String,
+    /// (time s, car 0's distance ahead of this car along the centre line, m).
+    pub gap: Vec<(f64, f64)>,
+    /// Times car 0 passed this car (drawn as circles on the line).
+    pub passes_s: Vec<f64>,
+    /// Times car 0 began a contact it caused (drawn as crosses on the line).
+    pub at_fault_s: Vec<f64>,
+}
+
+/// Car 0's gap to every other car over one race (`agvrl race --gap-plot`): above zero it is
+/// ahead. Passes are circles, contacts car 0 caused crosses; the band of an encounter (0-3 m
+/// behind) is shaded.
+pub fn race_gaps(path: &Path, series: &[GapSeries], title: &str) -> Result<()> {
+    let t1 = series
+        .iter()
+        .flat_map(|s| s.gap.last())
+        .map(|p| p.0)
+        .fold(1.0f64, f64::max);
+    let (lo, hi) = series
+        .iter()
+        .flat_map(|s| s.gap.iter())
+        .fold((-5.0f64, 5.0f64), |(lo, hi), p| (lo.min(p.1), hi.max(p.1)));
+    render_png(path, (900, 560), |root| {
+        let e = |e: DrawingAreaErrorKind<_>| anyhow!("plot: {e}");
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 22))
+            .margin(16)
+            .x_label_area_size(44)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..t1, (lo - 1.0)..(hi + 1.0))
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("time, s")
+            .y_desc("car 0 ahead by, m")
+            .label_style(("sans-serif", 15))
+            .draw()
+            .map_err(e)?;
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(0.0, -3.0), (t1, 0.0)],
+                RGBColor(230, 230, 230).filled(),
+            )))
+            .map_err(e)?;
+        for (k, s) in series.iter().enumerate() {
+            let color = Palette99::pick(k).to_rgba();
+            let at = |t: f64| {
+                s.gap
+                    .iter()
+                    .find(|p| p.0 >= t)
+                    .or(s.gap.last())
+                    .copied()
+                    .unwrap_or((t, 0.0))
+            };
+            chart
+                .draw_series(LineSeries::new(s.gap.iter().copied(), color.stroke_width(2)))
+                .map_err(e)?
+                .label(s.label.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            chart
+                .draw_series(s.passes_s.iter().map(|&t| Circle::new(at(t), 7, BLACK.stroke_width(2))))
+                .map_err(e)?;
+            chart
+                .draw_series(s.at_fault_s.iter().map(|&t| Cross::new(at(t), 7, RED.stroke_width(2))))
+                .map_err(e)?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 15))
+            .draw()
+            .map_err(e)?;
+        Ok(())
+    })
+}
+
 /// An evaluated path: world (x, y) points and whether it ended in a collision.
 pub struct Path2 {
     pub xy: Vec<(f32, f32)>,

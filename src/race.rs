@@ -55,6 +55,10 @@ pub struct RaceArgs {
     /// Draw the first race's paths, every car's, into this PNG.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Draw car 0's gap to every other car over the first race into this PNG: its passes
+    /// (circles) and the contacts it caused (crosses) on the line.
+    #[arg(long)]
+    pub gap_plot: Option<PathBuf>,
     /// Record the first race for the rerun viewer into this .rrd file.
     #[arg(long)]
     pub rerun: Option<PathBuf>,
@@ -205,6 +209,7 @@ pub fn race(a: RaceArgs) -> Result<()> {
         None => None,
     };
     let mut paths: Vec<Path2> = Vec::new();
+    let mut gaps: Vec<plots::GapSeries> = Vec::new();
     let mut tally: Vec<Tally> = (0..cars).map(|_| Tally::default()).collect();
     let mut bands: Vec<Vec<Tally>> = BANDS
         .iter()
@@ -224,8 +229,19 @@ pub fn race(a: RaceArgs) -> Result<()> {
                     }),
                 })
                 .collect();
+            gaps = (1..cars)
+                .map(|i| plots::GapSeries {
+                    label: format!("car 0 against car {i}: {}", car_name(i)),
+                    gap: vec![],
+                    passes_s: vec![],
+                    at_fault_s: vec![],
+                })
+                .collect();
         }
         let mut step = 0u64;
+        // Car 0's distance, passes and contacts it caused so far, and every car's distance.
+        let (mut passes0, mut fault0) = (0u32, 0u32);
+        let mut distance: Vec<f64> = vec![0.0; cars];
         let summary = loop {
             if first {
                 for (i, p) in paths.iter_mut().enumerate() {
@@ -267,6 +283,33 @@ pub fn race(a: RaceArgs) -> Result<()> {
                     obs[i] = s.obs.clone();
                     if first && s.terminated {
                         paths[i].collided = true;
+                    }
+                    if let Some(r) = &s.info.race {
+                        distance[i] = r.distance_m;
+                    }
+                }
+            }
+            if first && a.gap_plot.is_some() {
+                let t = step as f64 * env.dt_s();
+                let me = st.agents[0].as_ref().and_then(|s| s.info.race.as_ref());
+                let (passed, hit) = me.map_or((false, false), |r| (r.passes > passes0, r.at_fault > fault0));
+                if let Some(r) = me {
+                    (passes0, fault0) = (r.passes, r.at_fault);
+                }
+                for (k, g) in gaps.iter_mut().enumerate() {
+                    let gap = distance[0] - distance[k + 1];
+                    g.gap.push((t, gap));
+                    // The pass and the contact are with the car car 0 is nearest to.
+                    let nearest = (1..cars).min_by(|&x, &y| {
+                        (distance[0] - distance[x])
+                            .abs()
+                            .total_cmp(&(distance[0] - distance[y]).abs())
+                    }) == Some(k + 1);
+                    if passed && nearest {
+                        g.passes_s.push(t);
+                    }
+                    if hit && nearest {
+                        g.at_fault_s.push(t);
                     }
                 }
             }
@@ -329,6 +372,10 @@ pub fn race(a: RaceArgs) -> Result<()> {
             &format!("race of {cars} on {track}, seed {}", a.seed),
         )?;
         println!("plot={}", out.display());
+    }
+    if let Some(out) = &a.gap_plot {
+        plots::race_gaps(out, &gaps, &format!("race 1 of {cars} on {track}, seed {}", a.seed))?;
+        println!("gap_plot={}", out.display());
     }
     if let Some(rec) = rec
         && let Some(p) = rec.finish()?

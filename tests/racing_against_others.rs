@@ -129,14 +129,17 @@ fn self_play_trains_a_duel_policy_that_races_the_single_car_one() {
         stdout(&o)
     };
     let json = d.path().join("race.json");
-    let out = circuits(&["--json", json.to_str().unwrap()]);
+    let gap = d.path().join("gap.png");
+    let out = circuits(&["--json", json.to_str().unwrap(), "--gap-plot", gap.to_str().unwrap()]);
+    let (w, h, colours) = png_summary(&gap);
+    assert!(w > 400 && h > 300 && colours > 5, "gap plot {w}x{h}, {colours} colours");
     assert!(out.contains("track=circuits cars=2 races=2"), "{out}");
     // --json holds the printed figures, and every race falls in one width band.
     let report = agvrl_run::RaceReport::load(&json).unwrap();
     assert_eq!(
         report.text(),
         out.lines()
-            .filter(|l| !l.starts_with("json="))
+            .filter(|l| !l.starts_with("json=") && !l.starts_with("gap_plot="))
             .map(|l| format!("{l}\n"))
             .collect::<String>()
     );
@@ -158,6 +161,21 @@ fn self_play_trains_a_duel_policy_that_races_the_single_car_one() {
     assert_eq!(key(car(1), "policy"), "pure-pursuit@0.75", "{out}");
     assert!(key(car(0), "encounters").parse::<u32>().unwrap() >= 2, "{out}");
     assert!(out.contains(" split=held_out"), "{out}");
+    // A lone car starts on the grid though the shipped passing policy trained from behind.
+    let o = agvrl(&[
+        "race",
+        "--policy",
+        "assets/policies/racing-overtake.agvrl",
+        "--cars",
+        "1",
+        "--circuits",
+        "--races",
+        "1",
+        "--max-steps",
+        "60",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("cars=1 races=1"), "{}", stdout(&o));
     // --train-split races the training half of the seed space.
     let train = circuits(&["--train-split"]);
     assert!(train.contains(" split=train"), "{train}");
