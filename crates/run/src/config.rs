@@ -92,6 +92,18 @@ fn is_config_file(p: &Path) -> bool {
     p.extension().is_some_and(|e| e == "toml")
 }
 
+/// A map-file track set over a run table: generated circuits give way to it (see
+/// [`RunConfig::from_toml_with`]).
+fn on_track(table: &mut toml::Table) {
+    if let Some(env_config) = table.get_mut("env_config").and_then(|v| v.as_table_mut()) {
+        env_config.remove("circuit");
+        env_config.remove("layout_seed");
+    }
+    if table.get("env").and_then(|v| v.as_str()) == Some(agvrl_envs::registry::CIRCUIT_ENV) {
+        table.insert("env".into(), toml::Value::String("racing-oval".into()));
+    }
+}
+
 /// The keys of the run config that `table`'s `init_from` names, when it names one (a `.toml`
 /// file, read from the working directory as run directories are).
 fn first_stage_table(table: &toml::Table, origin: &str) -> Result<Option<toml::Table>> {
@@ -187,7 +199,9 @@ impl RunConfig {
     }
 
     /// Parse a run TOML with `sets` (`KEY=VALUE`, dotted keys, TOML values; a value that is
-    /// not TOML is taken as a string) applied on top.
+    /// not TOML is taken as a string) applied on top. A set `env_config.track` races on that
+    /// map over settings of generated circuits: their `circuit` and `layout_seed` go, and
+    /// `racing-circuit` becomes `racing-oval` (the env of a map-file track).
     pub fn from_toml_with(text: &str, origin: &str, sets: &[String]) -> Result<Self> {
         let mut table: toml::Table =
             toml::from_str(text).map_err(|e| RunError::Config(format!("{origin}: {}", e.message().trim())))?;
@@ -219,6 +233,9 @@ impl RunConfig {
                     .ok_or_else(|| RunError::Config(format!("--set {s}: '{part}' is not a table")))?;
             }
             t.insert(path[path.len() - 1].to_string(), value);
+            if key.trim() == "env_config.track" {
+                on_track(&mut table);
+            }
         }
         let shown = match sets.is_empty() {
             true => origin.to_string(),

@@ -224,3 +224,23 @@ fn opponents_are_a_races_and_each_must_parse() {
     let c = RunConfig::from_toml("env = \"racing-duel\"\n", "d.toml").unwrap();
     assert!(!c.to_toml().unwrap().contains("opponents"));
 }
+
+/// `--track` over settings of generated circuits (the generalist's, the passing policy's) races
+/// on that map: the circuits give way, and `racing-circuit` becomes `racing-oval`; a race keeps
+/// its env. Without the track the settings are as written.
+#[test]
+fn a_track_set_over_generated_circuits_races_on_the_map() {
+    let bean = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tracks/bean.yaml");
+    let set = [agvrl_run::track_set(&bean)];
+    for (env, eval_env) in [("racing-circuit", "racing-oval"), ("racing-duel", "racing-oval")] {
+        let text = format!("env = \"{env}\"\n[env_config]\nlayout_seed = 4\ncircuit = {{ width_m = [2.5, 3.0] }}\n");
+        let c = RunConfig::from_toml_with(&text, "x.toml", &set).unwrap();
+        assert_eq!(c.env, if env == "racing-circuit" { "racing-oval" } else { env });
+        assert_eq!(c.eval_env_id(), eval_env);
+        assert!(c.env_config.circuit.is_none() && c.env_config.layout_seed.is_none());
+        assert!(c.env_config.track.is_some());
+        let plain = RunConfig::from_toml(&text, "x.toml").unwrap();
+        assert_eq!((plain.env.as_str(), plain.env_config.layout_seed), (env, Some(4)));
+        assert!(plain.env_config.circuit.is_some());
+    }
+}
