@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """One PPO minibatch through Stable-Baselines3's policy, against agvrl's: load the weights and
-the minibatch agvrl dumped (`cargo run --release -p agvrl-rl --example parity -- --dump-grads
-FILE [sde|gaussian] [seed]`), compute SB3's loss (PPO.train's lines: clipped surrogate +
+the minibatch agvrl dumped (`cargo run --release -p agvrl-rl --features parity --example parity --
+--dump-grads FILE [sde|gaussian] [seed]`), compute SB3's loss (PPO.train's lines: clipped surrogate +
 vf_coef * MSE) with autograd at the weights after agvrl's first update (ratios away from 1, some
 clipped), and print the relative difference of every gradient tensor.
 

@@ -13,6 +13,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // minibatch's loss and gradients at the weights after its update, and what that update
     // reported (tools/parity/sb3_gradient_check.py replays it in SB3); `--after` trains that
     // many env steps first, so the probe sees late training (small std, saturated latents).
+    #[cfg(not(feature = "parity"))]
+    if args.iter().any(|a| a == "--dump-grads") {
+        return Err("--dump-grads needs the parity hooks: add --features parity".into());
+    }
+    #[cfg(feature = "parity")]
     if let Some(i) = args.iter().position(|a| a == "--dump-grads") {
         let path = args.get(i + 1).ok_or("--dump-grads FILE")?;
         let sde = args.get(i + 2).is_none_or(|s| s != "gaussian");

@@ -6,5 +6,4 @@ mod image_encoder;
 mod learning;
 mod reach;
 mod resume;
-mod sb3_numerics;
 mod seeding;

@@ -12,10 +12,13 @@
 //! `update.rs`: `n_epochs` passes of shuffled minibatches.
 
 mod host;
+#[cfg(test)]
+mod sb3_numerics;
 mod update;
 
 pub use crate::config::PpoConfig;
 #[doc(hidden)]
+#[cfg(any(test, feature = "parity"))]
 pub use update::GradientProbe;
 
 use crate::adam::Adam;
@@ -303,7 +306,7 @@ impl<E: Env> Ppo<E> {
 
     /// Visit minibatches in rollout order instead of shuffled (to replay an update step for
     /// step in another implementation; see `tools/parity/`).
-    #[doc(hidden)]
+    #[cfg(any(test, feature = "parity"))]
     pub fn set_minibatch_shuffle(&mut self, on: bool) {
         self.shuffle = on;
     }

@@ -16,6 +16,7 @@ use crate::gaussian::{self, HALF_LN_2PI};
 use agvrl_envs::Env;
 
 /// What [`Ppo::gradient_probe`] returns (weights in agvrl's layout: `[members, in, out]`).
+#[cfg(any(test, feature = "parity"))]
 #[doc(hidden)]
 #[derive(serde::Serialize)]
 pub struct GradientProbe {
@@ -309,7 +310,7 @@ impl<E: Env> Ppo<E> {
     /// (advantages normalised as the update does) with their loss and gradients before clipping
     /// at the updated weights (ratios away from 1, some clipped), and the weights before and
     /// after: for checking the loss and the update against another implementation.
-    #[doc(hidden)]
+    #[cfg(any(test, feature = "parity"))]
     pub fn gradient_probe(&mut self) -> Result<GradientProbe> {
         let r = self.collect_rollout()?;
         let params_before = self.params.data.clone();
@@ -357,7 +358,7 @@ impl<E: Env> Ppo<E> {
     /// Loss and gradients (before clipping) of one minibatch at `params` (agvrl's layout; `adv`
     /// already normalised): `(pg_loss, vf_loss, clip_fraction, grads)`. For checking against
     /// another implementation's numbers (tests against Stable-Baselines3's).
-    #[doc(hidden)]
+    #[cfg(any(test, feature = "parity"))]
     pub fn gradients_at(
         &mut self,
         params: Vec<Vec<f32>>,

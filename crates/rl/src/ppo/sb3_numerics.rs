@@ -4,8 +4,8 @@
 //! (`tools/parity/sb3_gradient_check.py --write-golden`; `sb3_clip_fraction` was added to the
 //! two files later, by SB3 2.9.2 at their stored weights, where it reproduced their losses).
 
-use agvrl_rl::learning::{pendulum_envs, zoo_pendulum_ppo_config};
-use agvrl_rl::{Ppo, default_device};
+use crate::learning::{pendulum_envs, zoo_pendulum_ppo_config};
+use crate::{Ppo, default_device};
 use serde::Deserialize;
 
 #[derive(Deserialize)]
