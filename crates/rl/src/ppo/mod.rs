@@ -11,6 +11,7 @@
 //! (a truncated episode adds `gamma * V(final_obs)` to its last reward, as SB3) -> GAE ->
 //! `update.rs`: `n_epochs` passes of shuffled minibatches.
 
+mod distribution;
 mod host;
 #[cfg(test)]
 mod sb3_numerics;
@@ -24,7 +25,6 @@ pub use update::GradientProbe;
 use crate::adam::Adam;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter, Common};
 use crate::error::{Result, RlError};
-use crate::gaussian::{self, HALF_LN_2PI_F32};
 use crate::nets::{HostParams, Init, MlpSpec, init_layer};
 use crate::normalize::ObsNormalizer;
 use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData};
@@ -32,6 +32,7 @@ use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
 use agvrl_envs::{BoxSpace, Env, VecEnv};
 use burn::tensor::Device;
+use distribution::ActionDist;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -100,18 +101,6 @@ pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (T
     let mean = latent.clone().matmul(params[l.pi_w].clone()) + params[l.pi_b].clone();
     let value = h.narrow(0, 1, 1).matmul(params[l.vf_w].clone()) + params[l.vf_b].clone();
     (mean, value, latent)
-}
-
-/// gSDE's per-element variance `sum_k latent_k^2 exp(log_std_kj)^2 + 1e-6` (SB3's
-/// `StateDependentNoiseDistribution` with `full_std`), for one sample's `latent`.
-pub(crate) fn sde_variance(latent: &[f32], sigma_sq: &[f64], a: usize, out: &mut [f64]) {
-    out.iter_mut().for_each(|v| *v = 1e-6);
-    for (k, h) in latent.iter().enumerate() {
-        let h2 = (*h as f64) * (*h as f64);
-        for j in 0..a {
-            out[j] += h2 * sigma_sq[k * a + j];
-        }
-    }
 }
 
 /// A PPO learner bound to a vector env.
@@ -399,12 +388,9 @@ impl<E: Env> Ppo<E> {
     fn collect_rollout(&mut self) -> Result<Rollout> {
         let (n_envs, o, a, n_steps) = (self.env.n_envs(), self.obs_dim, self.act_dim, self.cfg.n_steps);
         let total = n_steps * n_envs;
-        let log_std = self.params.data[Layout::of(&self.cfg).log_std].clone();
-        let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
-        // log N(x; m, s) summed over elements = sum(-z^2/2) - sum(log s) - a ln(2 pi)/2
-        let lp_const = gaussian::log_prob_const(&log_std);
+        let log_std = &self.params.data[Layout::of(&self.cfg).log_std];
         let latent_dim = *self.cfg.net_arch.last().unwrap_or(&o);
-        let sigma_sq: Vec<f64> = log_std.iter().map(|l| (2.0 * *l as f64).exp()).collect();
+        let dist = ActionDist::new(log_std, a, self.cfg.use_sde.then_some(latent_dim));
         let mut expl = vec![0.0f32; n_envs * latent_dim * a];
         let mut var = vec![0.0f64; a];
         let (mut obs, mut starts) = match self.last.take() {
@@ -447,38 +433,22 @@ impl<E: Env> Ppo<E> {
         for step in 0..n_steps {
             let freq = self.cfg.sde_sample_freq;
             if sde && (step == 0 || (freq > 0 && step as i64 % freq == 0)) {
-                // One exploration matrix per env, E ~ N(0, exp(log_std)^2).
-                for (k, e) in expl.iter_mut().enumerate() {
-                    *e = std[k % (latent_dim * a)] * self.rng.normal() as f32;
-                }
+                dist.draw_exploration(&mut self.rng, &mut expl);
             }
             let x = self.normalized(&obs);
             let (mean, value, latent) = value_of(x.clone(), n_envs, &self.cfg)?;
             let mut actions = Vec::with_capacity(n_envs * a);
             let mut clipped = Vec::with_capacity(n_envs * a);
             for e in 0..n_envs {
-                let mut lp = lp_const;
-                if sde {
-                    let h = &latent[e * latent_dim..(e + 1) * latent_dim];
-                    sde_variance(h, &sigma_sq, a, &mut var);
-                    lp = -(a as f32) * HALF_LN_2PI_F32;
-                    for j in 0..a {
-                        let m = &expl[e * latent_dim * a..(e + 1) * latent_dim * a];
-                        let noise: f32 = h.iter().enumerate().map(|(k, hk)| hk * m[k * a + j]).sum();
-                        let act = mean[e * a + j] + noise;
-                        lp -= gaussian::neg_log_density(noise as f64, var[j]) as f32;
-                        actions.push(act);
-                        clipped.push(act.clamp(space.low[j], space.high[j]));
-                    }
-                } else {
-                    for i in 0..a {
-                        let z = self.rng.normal() as f32;
-                        let act = mean[e * a + i] + std[i] * z;
-                        lp -= 0.5 * z * z;
-                        actions.push(act);
-                        clipped.push(act.clamp(space.low[i], space.high[i]));
-                    }
-                }
+                let sde = sde.then(|| {
+                    (
+                        &latent[e * latent_dim..(e + 1) * latent_dim],
+                        &expl[e * latent_dim * a..(e + 1) * latent_dim * a],
+                    )
+                });
+                let lp = dist.sample(&mean[e * a..(e + 1) * a], sde, &mut self.rng, &mut var, &mut actions);
+                let act = &actions[e * a..];
+                clipped.extend((0..a).map(|j| act[j].clamp(space.low[j], space.high[j])));
                 r.log_probs.push(lp);
             }
             let st = self.env.step(&clipped)?;

@@ -9,10 +9,10 @@
 //! head against the plain autodiff formulation, `tests::host_gradients_match_autodiff` the
 //! networks.
 
+use super::distribution::ActionDist;
 use super::{Layout, Ppo, Rollout, host};
 use crate::adam::Adam;
 use crate::error::{Result, RlError};
-use crate::gaussian::{self, HALF_LN_2PI};
 use agvrl_envs::Env;
 
 /// What [`Ppo::gradient_probe`] returns (weights in agvrl's layout: `[members, in, out]`).
@@ -108,7 +108,7 @@ pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f6
     let a = x.mean.len() / n.max(1);
     let latent_dim = x.latent.map_or(0, |l| l.len() / n.max(1));
     let inv_n = 1.0 / n as f64;
-    let sigma_sq: Vec<f64> = x.log_std.iter().map(|l| (2.0 * *l as f64).exp()).collect();
+    let dist = ActionDist::new(x.log_std, a, x.latent.map(|_| latent_dim));
     let mut h = Head {
         pg_loss: 0.0,
         vf_loss: 0.0,
@@ -123,16 +123,10 @@ pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f6
     let mut d_log_std = vec![0.0f64; x.log_std.len()];
     let (mut var, mut diff) = (vec![0.0f64; a], vec![0.0f64; a]);
     for i in 0..n {
-        match x.latent {
-            Some(l) => super::sde_variance(&l[i * latent_dim..(i + 1) * latent_dim], &sigma_sq, a, &mut var),
-            None => var.copy_from_slice(&sigma_sq),
-        }
-        let mut lp = -(a as f64) * HALF_LN_2PI;
-        for j in 0..a {
-            diff[j] = (x.actions[i * a + j] - x.mean[i * a + j]) as f64;
-            lp -= gaussian::neg_log_density(diff[j], var[j]);
-            h.entropy += gaussian::entropy(var[j]) * inv_n;
-        }
+        let latent = x.latent.map(|l| &l[i * latent_dim..(i + 1) * latent_dim]);
+        dist.variance(latent, &mut var);
+        let (actions, mean) = (&x.actions[i * a..(i + 1) * a], &x.mean[i * a..(i + 1) * a]);
+        let lp = dist.log_prob(actions, mean, &var, &mut diff, &mut h.entropy, inv_n);
         let log_ratio = lp - x.old_log_prob[i] as f64;
         let ratio = log_ratio.exp();
         let adv = x.advantages[i] as f64;
@@ -146,22 +140,10 @@ pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f6
         } else {
             0.0
         };
+        // The entropy bonus enters the loss as -ent_coef mean(H).
         for j in 0..a {
-            h.d_mean[i * a + j] = (d_lp * diff[j] / var[j]) as f32;
-            // dL/dvar from the log-prob and from the entropy bonus.
-            let d_var =
-                d_lp * (0.5 * diff[j] * diff[j] / (var[j] * var[j]) - 0.5 / var[j]) - ent_coef * inv_n * 0.5 / var[j];
-            match x.latent {
-                // var_ij = sum_k latent_ik^2 sigma_kj^2 + eps: d var / d log_std_kj = 2 latent_ik^2 sigma_kj^2
-                Some(l) => {
-                    for k in 0..latent_dim {
-                        let hk = l[i * latent_dim + k] as f64;
-                        d_log_std[k * a + j] += d_var * 2.0 * hk * hk * sigma_sq[k * a + j];
-                    }
-                }
-                // var_j = sigma_j^2: d var / d log_std_j = 2 var_j
-                None => d_log_std[j] += d_var * 2.0 * var[j],
-            }
+            let d_mean = dist.backward(latent, j, diff[j], var[j], d_lp, ent_coef * inv_n, &mut d_log_std);
+            h.d_mean[i * a + j] = d_mean as f32;
         }
         if let Some(c) = &x.correction
             && c.mask[i] != 0.0
@@ -464,6 +446,7 @@ impl<E: Env> Ppo<E> {
 mod tests {
     use super::super::forward;
     use super::*;
+    use crate::gaussian;
     use crate::nets::{grads_of, to_vec};
     use crate::rng::Rng;
     use agvrl_envs::VecEnv;
