@@ -57,8 +57,9 @@ impl ActionDist {
         out.iter_mut().for_each(|v| *v = 1e-6);
         for (k, h) in latent.iter().enumerate() {
             let h2 = (*h as f64) * (*h as f64);
-            for j in 0..self.a {
-                out[j] += h2 * self.sigma_sq[k * self.a + j];
+            let row = &self.sigma_sq[k * self.a..(k + 1) * self.a];
+            for (o, s) in out.iter_mut().zip(row) {
+                *o += h2 * s;
             }
         }
     }
@@ -88,9 +89,9 @@ impl ActionDist {
             }
             None => {
                 let mut lp = self.lp_const;
-                for i in 0..a {
+                for (m, s) in mean.iter().zip(&self.std) {
                     let z = rng.normal() as f32;
-                    out.push(mean[i] + self.std[i] * z);
+                    out.push(m + s * z);
                     lp -= 0.5 * z * z;
                 }
                 lp
@@ -118,18 +119,16 @@ impl ActionDist {
         lp
     }
 
-    /// The gradient of `d_lp * log_prob - d_ent * entropy` through element `j` (difference
-    /// `diff`, variance `var`; `latent` the sample's with gSDE): returns d/d mean_j and adds
-    /// d/d log_std into `d_log_std`.
-    #[allow(clippy::too_many_arguments)]
+    /// The gradient of `d_lp * log_prob - d_ent * entropy` (`weights = (d_lp, d_ent)`) through
+    /// element `j` (difference `diff`, variance `var`; `latent` the sample's with gSDE): returns
+    /// d/d mean_j and adds d/d log_std into `d_log_std`.
     pub(crate) fn backward(
         &self,
         latent: Option<&[f32]>,
         j: usize,
         diff: f64,
         var: f64,
-        d_lp: f64,
-        d_ent: f64,
+        (d_lp, d_ent): (f64, f64),
         d_log_std: &mut [f64],
     ) -> f64 {
         let a = self.a;

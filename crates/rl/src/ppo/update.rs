@@ -142,7 +142,7 @@ pub(crate) fn loss_head(x: &HeadInput<'_>, clip: f64, vf_coef: f64, ent_coef: f6
         };
         // The entropy bonus enters the loss as -ent_coef mean(H).
         for j in 0..a {
-            let d_mean = dist.backward(latent, j, diff[j], var[j], d_lp, ent_coef * inv_n, &mut d_log_std);
+            let d_mean = dist.backward(latent, j, diff[j], var[j], (d_lp, ent_coef * inv_n), &mut d_log_std);
             h.d_mean[i * a + j] = d_mean as f32;
         }
         if let Some(c) = &x.correction
