@@ -10,16 +10,14 @@ pub use settings::{PlanarPose, SceneSource, SimConfig, SimSettings, VehicleParam
 use crate::SimError;
 use crate::assets::AssetSource;
 use crate::msg::{GpsReading, ImuReading, LaserScan};
-use crate::scene::{CircuitSettings, MapTrack, Scene, SceneKind};
+use crate::scene::{MapTrack, Scene};
 use crate::sensors::fast_ray::FastRay;
 use crate::sensors::imu::ImuState;
-use crate::sensors::{GpsConfig, Lidar, LidarConfig, gps};
+use crate::sensors::{Lidar, gps};
 use crate::vehicle::body::Body;
-use crate::vehicle::{BodyParams, Control, DriveModel, DynamicsMode, VehicleModel, ackermann_split};
+use crate::vehicle::{BodyParams, Control, DriveModel, VehicleModel};
 use crate::world::{Movers, NearStatics, StaticEntry, World};
 use rapier3d::prelude::*;
-use serde::{Deserialize, Serialize};
-use std::path::PathBuf;
 
 /// One vehicle of the world: its body and the state its actuation and sensors keep.
 #[derive(Clone)]

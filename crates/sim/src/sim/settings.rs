@@ -2,6 +2,7 @@
 //! sensors, drive), and the per-episode vehicle parameters.
 
 use crate::SimError;
+use crate::assets::AssetSource;
 use crate::scene::{CircuitSettings, MapTrack, SceneKind};
 use crate::sensors::{GpsConfig, LidarConfig};
 use crate::vehicle::{DriveModel, DynamicsMode, VehicleModel};
