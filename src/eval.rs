@@ -580,8 +580,8 @@ impl Watch {
         if v.episode < self.plot_episodes
             && let Some(p) = self.paths.last_mut()
         {
-            let t = v.sim.base_pose().translation;
-            p.xy.push((t.x, t.y));
+            let t = v.sim.car(0).pose().position_m;
+            p.xy.push((t[0], t[1]));
             p.collided |= v.terminated;
         }
         if v.episode < self.rec_episodes

@@ -291,7 +291,7 @@ impl CoveragePlanner {
         let car = env.inner().vehicle();
         let map = car.map().context("the planner needs a map: a search env")?;
         let sim = car.sim();
-        let p = sim.pose2();
+        let p = sim.car(0).pose2();
         Ok(Self {
             grid: Planner::new(sim, map, knowledge),
             wheelbase_m: sim.vehicle().wheelbase_m,
@@ -305,19 +305,19 @@ impl CoveragePlanner {
     /// The action for the state `env` is in.
     pub fn act(&mut self, env: &SimEnv) -> Vec<f32> {
         let sim = env.inner().vehicle().sim();
-        let p = sim.pose2();
+        let p = sim.car(0).pose2();
         self.grid.visit(p.x_m, p.y_m);
         if self.grid.knowledge == Knowledge::Frontier
             && let Some(scan) = env.inner().last_frame().and_then(|f| f.scan.as_ref())
         {
-            let l = sim.lidar_pose();
-            let fwd = l.rotation * rapier3d::prelude::Vector::X;
+            let l = sim.car(0).lidar_pose();
+            let fwd = rapier3d::prelude::Rotation::from_array(l.orientation_xyzw) * rapier3d::prelude::Vector::X;
             let yaw = fwd.y.atan2(fwd.x);
             for (i, (r, hit)) in scan.ranges.iter().zip(&scan.hit).enumerate() {
                 if *hit && r.is_finite() {
                     let b = yaw + scan.angle_min + i as f32 * scan.angle_increment;
                     self.grid
-                        .hit(l.translation.x + r * b.cos(), l.translation.y + r * b.sin());
+                        .hit(l.position_m[0] + r * b.cos(), l.position_m[1] + r * b.sin());
                 }
             }
         }

@@ -439,7 +439,7 @@ pub fn top_view(
                     .map_err(e)?;
             }
         }
-        let pose = sim.pose2();
+        let pose = sim.car(0).pose2();
         let v = sim.vehicle();
         let r = v.wheels.iter().map(|w| w.radius_m).fold(0.0, f32::max);
         let (hl, hw) = (v.wheelbase_m / 2.0 + r, v.front_track_m / 2.0 + r / 2.0);

@@ -91,17 +91,17 @@ pub fn probe(a: ProbeArgs) -> Result<()> {
         y_m: y,
         yaw_rad: yaw,
     })?;
-    let scan = sim.lidar_scan();
+    let scan = sim.lidar_scan(0);
     let out = serde_json::json!({
         "env": a.env,
         "pose": {"x_m": x, "y_m": y, "yaw_rad": yaw},
         "free": sim.free_at(x, y, 0.3),
         "scan": scan,
-        "gps": sim.gps(),
-        "imu": sim.imu(),
+        "gps": sim.car(0).gps(),
+        "imu": sim.car(0).imu(),
     });
     println!("{}", serde_json::to_string_pretty(&out)?);
-    if let (Some(path), Some(f)) = (&a.image, sim.camera_frame()) {
+    if let (Some(path), Some(f)) = (&a.image, sim.car(0).camera_frame()) {
         write_png(path, f.frame.width, f.frame.height, &f.frame.rgb)?;
         eprintln!("wrote {}", path.display());
     }

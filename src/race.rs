@@ -245,7 +245,7 @@ pub fn race(a: RaceArgs) -> Result<()> {
         let summary = loop {
             if first {
                 for (i, p) in paths.iter_mut().enumerate() {
-                    let q = env.sim().pose2_of(i);
+                    let q = env.sim().car(i).pose2();
                     p.xy.push((q.x_m, q.y_m));
                 }
                 if let Some(rec) = rec.as_mut() {

@@ -295,16 +295,16 @@ impl Recorder {
         rec.set_time_sequence("step", self.step);
         rec.set_time_sequence("episode", v.episode as i64);
         self.step += 1;
-        let pose = v.sim.base_pose();
-        let t = pose.translation;
+        let pose = v.sim.car(0).pose();
+        let t = pose.position_m;
         rec.log(
             "world/vehicle",
-            &rerun::Transform3D::from_translation_rotation([t.x, t.y, t.z], q_of(pose.rotation)),
+            &rerun::Transform3D::from_translation_rotation(t, rerun::Quaternion::from_xyzw(pose.orientation_xyzw)),
         )?;
         if v.step == 0 {
             self.trail.clear();
         }
-        self.trail.push([t.x, t.y, 0.02]);
+        self.trail.push([t[0], t[1], 0.02]);
         // The whole trail every half second keeps the file linear in the episode length.
         if v.step.is_multiple_of(15) || v.done {
             log_trail(rec, &self.trail)?;
@@ -425,14 +425,14 @@ impl Recorder {
         rec.set_time_sequence("race", race as i64);
         self.step += 1;
         for i in 0..n {
-            let pose = sim.base_pose_of(i);
-            let t = pose.translation;
+            let pose = sim.car(i).pose();
+            let t = pose.position_m;
             rec.log(
                 format!("world/car_{i}"),
-                &rerun::Transform3D::from_translation_rotation([t.x, t.y, t.z], q_of(pose.rotation)),
+                &rerun::Transform3D::from_translation_rotation(t, rerun::Quaternion::from_xyzw(pose.orientation_xyzw)),
             )?;
             if let Some(trail) = self.trails.get_mut(i) {
-                trail.push([t.x, t.y, t.z + 0.02]);
+                trail.push([t[0], t[1], t[2] + 0.02]);
                 rec.log(
                     format!("world/paths/car_{i}"),
                     &rerun::LineStrips3D::new([trail.clone()]).with_colors([color(palette[i % palette.len()])]),
@@ -449,7 +449,7 @@ impl Recorder {
             }
             rec.log(
                 format!("plots/speed_mps/car_{i}"),
-                &rerun::Scalars::single(sim.forward_speed_mps_of(i) as f64),
+                &rerun::Scalars::single(sim.car(i).forward_speed_mps() as f64),
             )?;
         }
         Ok(())

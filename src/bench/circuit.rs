@@ -108,8 +108,8 @@ impl Race {
             let _ = self.sim.step_cars(&self.controls);
             let mut hit = false;
             for i in 0..self.cars {
-                black_box(self.sim.lidar_scan_of(i));
-                hit |= !self.sim.contacts_of(i).is_empty() || self.sim.flipped_of(i);
+                black_box(self.sim.lidar_scan(i));
+                hit |= !self.sim.car(i).contacts().is_empty() || self.sim.car(i).flipped();
             }
             if hit {
                 self.resets += 1;
@@ -189,7 +189,7 @@ pub(super) fn run(quick: bool) -> Vec<String> {
         let _ = r.sim.reset_cars(&r.poses);
         let scan_s = median_s(reps, || {
             for _ in 0..50 {
-                black_box(r.sim.lidar_scan_of(0));
+                black_box(r.sim.lidar_scan(0));
             }
         }) / 50.0;
         let c = r.cars;

@@ -63,11 +63,11 @@ pub(super) fn run(quick: bool) -> Vec<String> {
                 let spawn = sim.default_spawn();
                 sim_s.push(timed_s(|| {
                     for _ in 0..steps {
-                        if sim.steps() > 150 || !sim.contacts().is_empty() {
+                        if sim.steps() > 150 || !sim.car(0).contacts().is_empty() {
                             let _ = sim.reset(spawn);
                         }
                         let _ = sim.step(wander(&mut x));
-                        black_box(sim.lidar_scan());
+                        black_box(sim.lidar_scan(0));
                     }
                 }));
             }

@@ -65,12 +65,12 @@ pub(super) fn run(quick: bool) -> Vec<String> {
             let mut drive = |sim: &mut Sim, n: usize, scan: bool| {
                 stepped += n as u64;
                 for _ in 0..n {
-                    if sim.steps() > 150 || !sim.contacts().is_empty() {
+                    if sim.steps() > 150 || !sim.car(0).contacts().is_empty() {
                         let _ = sim.reset(spawn);
                     }
                     let _ = sim.step(wander(&mut x));
                     if scan {
-                        black_box(sim.lidar_scan());
+                        black_box(sim.lidar_scan(0));
                     }
                 }
             };
@@ -80,7 +80,7 @@ pub(super) fn run(quick: bool) -> Vec<String> {
                 median_s(reps, || drive(&mut sim, steps, false)) / steps as f64 / sim.config().settings.substeps as f64;
             let scan_s = median_s(reps, || {
                 for _ in 0..steps {
-                    black_box(sim.lidar_scan());
+                    black_box(sim.lidar_scan(0));
                 }
             }) / steps as f64;
             let reset_s = median_s(reps, || {
@@ -123,9 +123,9 @@ pub(super) fn camera(quick: bool) -> Vec<String> {
                 },
             };
             let Ok(sim) = Sim::new(cfg) else { continue };
-            black_box(sim.camera_frame());
+            black_box(sim.car(0).camera_frame());
             let s = median_s(reps, || {
-                black_box(sim.camera_frame());
+                black_box(sim.car(0).camera_frame());
             });
             out.push(format!(
                 "scene={id} camera_ms={:.2} res={w}x{h} threads={} reps={reps}",

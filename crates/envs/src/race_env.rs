@@ -329,24 +329,24 @@ impl RaceEnv {
         let sim = &mut self.sim;
         SensorFrame {
             stamp_s: sim.time_s(),
-            scan: Some(sim.lidar_scan_of(i)),
-            imu: Some(sim.imu_of(i)),
-            gps: Some(sim.gps_of(i)),
-            image: sim.camera_frame_of(i).map(|f| f.frame),
-            contact: Some(!sim.contacts_of(i).is_empty()),
-            applied: sim.control_of(i),
+            scan: Some(sim.lidar_scan(i)),
+            imu: Some(sim.car(i).imu()),
+            gps: Some(sim.car(i).gps()),
+            image: sim.car(i).camera_frame().map(|f| f.frame),
+            contact: Some(!sim.car(i).contacts().is_empty()),
+            applied: sim.car(i).control(),
         }
     }
 
     /// Arc length of car `i`, metres.
     fn arc_s(&self, i: usize) -> f64 {
-        let p = self.sim.pose2_of(i);
+        let p = self.sim.car(i).pose2();
         self.track.centreline_s(p.x_m, p.y_m) as f64
     }
 
     /// Where along the car (0 rear, 1 front) a world point lies.
     fn along(&self, i: usize, p: [f32; 3]) -> f32 {
-        let pose = self.sim.pose2_of(i);
+        let pose = self.sim.car(i).pose2();
         let (s, c) = pose.yaw_rad.sin_cos();
         let x = (p[0] - pose.x_m) * c + (p[1] - pose.y_m) * s;
         let (rear, front) = self.body_x_m;
@@ -582,7 +582,7 @@ impl RaceEnv {
             controls[i] = self.tasks[i].control(&a, limit, &self.frames[i]);
             corrected[i] = self.tasks[i].corrected_action();
         }
-        let speed_before: Vec<f64> = (0..n).map(|i| self.sim.forward_speed_mps_of(i) as f64).collect();
+        let speed_before: Vec<f64> = (0..n).map(|i| self.sim.car(i).forward_speed_mps() as f64).collect();
         let distance_before: Vec<f64> = self.racers.iter().map(|r| r.distance_m).collect();
         self.sim.step_cars(&controls)?;
         self.steps += 1;
@@ -592,7 +592,7 @@ impl RaceEnv {
         let mut fault = vec![false; n];
         let mut touching = vec![Vec::new(); n];
         for i in 0..n {
-            for c in self.sim.car_contacts_of(i) {
+            for c in self.sim.car(i).car_contacts() {
                 touching[i].push(c.other);
                 if c.other > i {
                     let (fi, fj) = (self.along(i, c.point_w), self.along(c.other, c.point_w));
@@ -655,7 +655,7 @@ impl RaceEnv {
             r.touching = std::mem::take(&mut touching[i]);
             if let Some((v0, left)) = r.loss {
                 if v0 > 0.1 {
-                    let v = self.sim.forward_speed_mps_of(i) as f64;
+                    let v = self.sim.car(i).forward_speed_mps() as f64;
                     r.time_lost_s += dt * (1.0 - v / v0).max(0.0);
                 }
                 r.loss = (left > 1).then_some((v0, left - 1));

@@ -279,12 +279,12 @@ impl SimVehicle {
     fn frame(&mut self) -> SensorFrame {
         SensorFrame {
             stamp_s: self.sim.time_s(),
-            scan: Some(self.sim.lidar_scan()),
-            imu: Some(self.sim.imu()),
-            gps: Some(self.sim.gps()),
-            image: self.sim.camera_frame().map(|f| f.frame),
-            contact: Some(!self.sim.contacts().is_empty()),
-            applied: self.sim.control(),
+            scan: Some(self.sim.lidar_scan(0)),
+            imu: Some(self.sim.car(0).imu()),
+            gps: Some(self.sim.car(0).gps()),
+            image: self.sim.car(0).camera_frame().map(|f| f.frame),
+            contact: Some(!self.sim.car(0).contacts().is_empty()),
+            applied: self.sim.car(0).control(),
         }
     }
 }
@@ -304,7 +304,7 @@ impl Vehicle for SimVehicle {
                     self.sim.reset(pose)?;
                     if self.map.track.is_some()
                         || attempt == 100
-                        || self.sim.lidar_scan().min_range_within(SPAWN_VIEW_HALF_RAD) >= SPAWN_VIEW_M
+                        || self.sim.lidar_scan(0).min_range_within(SPAWN_VIEW_HALF_RAD) >= SPAWN_VIEW_M
                     {
                         break;
                     }
@@ -316,7 +316,7 @@ impl Vehicle for SimVehicle {
                 for _ in 0..1000 {
                     let pose = self.random_pose();
                     self.sim.reset(pose)?;
-                    let near = self.sim.lidar_scan().min_range_within(SPAWN_VIEW_HALF_RAD);
+                    let near = self.sim.lidar_scan(0).min_range_within(SPAWN_VIEW_HALF_RAD);
                     if RECOVERY_SPAWN_M.contains(&near) {
                         return Ok(self.frame());
                     }

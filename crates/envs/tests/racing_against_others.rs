@@ -27,7 +27,7 @@ fn race(track_name: Option<&str>, cars: usize, max_steps: u64) -> RaceEnv {
 /// the steering action.
 fn steer_along(env: &RaceEnv, i: usize, offset_m: f32) -> f32 {
     let t: &Track = env.track();
-    let p = env.sim().pose2_of(i);
+    let p = env.sim().car(i).pose2();
     let s = t.centreline_s(p.x_m, p.y_m);
     let ([cx, cy], [dx, dy]) = t.centreline_at(s + 1.2);
     let (tx, ty) = (cx - offset_m * dy, cy + offset_m * dx);
@@ -136,12 +136,12 @@ fn a_crashed_car_stays_where_it_stopped_until_the_race_ends() {
                     let rules = agvrl_envs::task::RacingRules::map_track();
                     assert_eq!(s0.info.reward_terms.collision, rules.crash_penalty);
                     assert!(s0.info.race.as_ref().unwrap().crashed);
-                    crashed_at = Some((k, env.sim().base_pose_of(0)));
+                    crashed_at = Some((k, env.sim().car(0).pose()));
                 }
             }
             Some((_, pose)) => {
                 assert!(st.agents[0].is_none(), "a crashed car drops out");
-                assert_eq!(env.sim().base_pose_of(0), pose, "and stays put");
+                assert_eq!(env.sim().car(0).pose(), pose, "and stays put");
             }
         }
         if let Some(s) = st.summary {
@@ -167,7 +167,7 @@ fn a_faster_car_on_its_own_line_passes() {
     // Each car keeps to its grid column's side.
     let side = |env: &RaceEnv, i: usize| {
         let t = env.track();
-        let p = env.sim().pose2_of(i);
+        let p = env.sim().car(i).pose2();
         let s = t.centreline_s(p.x_m, p.y_m);
         let ([cx, cy], [dx, dy]) = t.centreline_at(s);
         if (p.x_m - cx) * -dy + (p.y_m - cy) * dx > 0.0 {
@@ -224,7 +224,7 @@ fn relative_progress_across_the_lap_line_is_continuous() {
         let d = distances(&st);
         assert!((d[1] - d[0] - 2.0).abs() < 0.05, "seed {seed}: {d:?}");
         let arc = |i: usize| {
-            let p = env.sim().pose2_of(i);
+            let p = env.sim().car(i).pose2();
             env.track().centreline_s(p.x_m, p.y_m) as f64
         };
         if arc(0) > lap - 2.0 && arc(1) < 2.0 {
@@ -439,13 +439,13 @@ fn a_car_driven_by_controls_races_as_it_does_by_actions() {
             .collect();
         let a = by_action.step(&actions).unwrap();
         let inputs = vec![
-            CarInput::Control(by_action.sim().control_of(0)),
+            CarInput::Control(by_action.sim().car(0).control()),
             CarInput::Action(&actions[1]),
         ];
         let c = by_control.step_inputs(&inputs).unwrap();
         assert_eq!(a, c, "step {k}");
         if k == 0 {
-            assert!(by_action.sim().control_of(0).throttle > 0.0);
+            assert!(by_action.sim().car(0).control().throttle > 0.0);
         }
     }
     by_control.reset(Some(3)).unwrap();

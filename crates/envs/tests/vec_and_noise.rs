@@ -249,11 +249,11 @@ fn randomisation_draws_parameters_per_episode_from_the_seed() {
     };
     let mut v = SimVehicle::new(sim(), SpawnMode::Random, Randomisation::sim2real()).unwrap();
     v.reset(1).unwrap();
-    let p1 = v.sim().params();
+    let p1 = v.sim().car(0).params();
     v.reset(2).unwrap();
-    let p2 = v.sim().params();
+    let p2 = v.sim().car(0).params();
     v.reset(1).unwrap();
-    assert_eq!(v.sim().params(), p1);
+    assert_eq!(v.sim().car(0).params(), p1);
     assert_ne!(p1, p2);
     let nominal = v.sim().nominal_params();
     assert!((p1.drive.c_t / nominal.drive.c_t - 1.0).abs() <= 0.1);

@@ -72,14 +72,14 @@ impl Inner {
         };
         for i in 0..n {
             raw.scans
-                .extend(self.sim.lidar_scan_of(i).ranges.iter().map(|&r| f64::from(r)));
-            let p = self.sim.pose2_of(i);
+                .extend(self.sim.lidar_scan(i).ranges.iter().map(|&r| f64::from(r)));
+            let p = self.sim.car(i).pose2();
             raw.poses
                 .extend([f64::from(p.x_m), f64::from(p.y_m), f64::from(p.yaw_rad)]);
             // Body-frame velocity (forward, leftward) and the yaw rate.
-            let imu = self.sim.imu_of(i);
+            let imu = self.sim.car(i).imu();
             raw.vels.extend([imu.lin_vel_b[0], imu.lin_vel_b[1], imu.ang_vel_w[2]]);
-            self.collided[i] |= !self.sim.contacts_of(i).is_empty() || !self.sim.car_contacts_of(i).is_empty();
+            self.collided[i] |= !self.sim.car(i).contacts().is_empty() || !self.sim.car(i).car_contacts().is_empty();
             raw.collisions.push(f64::from(u8::from(self.collided[i])));
         }
         raw
@@ -286,7 +286,7 @@ impl F110Sim {
                         .chunks(2)
                         .enumerate()
                         .map(|(i, r)| {
-                            let measured = f64::from(g.sim.forward_speed_mps_of(i));
+                            let measured = f64::from(g.sim.car(i).forward_speed_mps());
                             Control {
                                 throttle: speed_throttle(&g.limits, g.speed_gain, r[1], measured),
                                 steering_rad: r[0].clamp(-self.steer_max, self.steer_max),

@@ -86,7 +86,7 @@ fn drive(cfg: SimConfig) {
             return;
         }
     }
-    let _ = sim.lidar_scan();
+    let _ = sim.lidar_scan(0);
 }
 
 fn vehicle(path: &std::path::Path) -> SimSettings {

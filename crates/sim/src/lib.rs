@@ -31,7 +31,7 @@ pub use error::{InvalidSetting, SimError};
 pub use fs::write_atomic;
 pub use scene::{CircuitInfo, CircuitSettings, MapTrack, SCENE_IDS, Scene, SceneKind};
 pub use sim::{
-    CarContact, MAX_CARS, PlanarPose, SceneSource, Sim, SimConfig, SimSettings, VehicleParams, VehicleSource,
+    CarContact, CarView, MAX_CARS, PlanarPose, SceneSource, Sim, SimConfig, SimSettings, VehicleParams, VehicleSource,
     contact_distance_m,
 };
 pub use vehicle::{Control, DriveModel, DynamicsMode};

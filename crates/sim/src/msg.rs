@@ -173,3 +173,41 @@ mod tests {
         assert_eq!(s.min_range_within(quarter), 91.0);
     }
 }
+
+/// A rigid pose in the world frame (like `geometry_msgs/Pose`): where a car's base, LiDAR or
+/// camera stands.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Pose3 {
+    /// Position, metres.
+    pub position_m: [f32; 3],
+    /// Orientation as a unit quaternion (x, y, z, w).
+    pub orientation_xyzw: [f32; 4],
+}
+
+impl Default for Pose3 {
+    fn default() -> Self {
+        Self {
+            position_m: [0.0; 3],
+            orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
+        }
+    }
+}
+
+impl Pose3 {
+    /// At `position_m`, turned `yaw_rad` about z (counter-clockwise seen from above).
+    pub fn from_position_yaw(position_m: [f32; 3], yaw_rad: f32) -> Self {
+        let (s, c) = (0.5 * yaw_rad).sin_cos();
+        Self {
+            position_m,
+            orientation_xyzw: [0.0, 0.0, s, c],
+        }
+    }
+
+    /// Whether every number is finite.
+    pub fn is_finite(&self) -> bool {
+        self.position_m
+            .iter()
+            .chain(&self.orientation_xyzw)
+            .all(|v| v.is_finite())
+    }
+}

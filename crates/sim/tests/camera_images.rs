@@ -29,7 +29,7 @@ fn cam_sim(scene: SceneSource, w: u32, h: u32, fov: f32) -> Sim {
 fn depth_of_a_wall_facing_the_camera_is_exact_at_every_pixel() {
     let s = cam_sim(room(5.0, "cam-depth").src(), 64, 48, 10.0);
     let pose = Pose::from_parts(Vector::new(1.0, 0.3, 0.5), Rotation::IDENTITY);
-    let f = s.render_at(&pose);
+    let f = s.render_at(&mp(&pose));
     assert_eq!(f.frame.depth_m.len(), 64 * 48);
     for (i, z) in f.frame.depth_m.iter().enumerate() {
         assert!((z - 4.0).abs() < 0.01, "pixel {i}: depth {z}");
@@ -52,7 +52,7 @@ fn a_depth_only_frame_is_the_full_frames_depth() {
     .unwrap();
     for (x, y, yaw) in [(0.0, 0.0, 0.0), (3.0, -4.0, 2.0), (-10.0, 6.0, -1.0)] {
         let pose = Pose::from_parts(Vector::new(x, y, 0.3), Rotation::from_rotation_z(yaw));
-        let (a, b) = (full.render_at(&pose), depth.render_at(&pose));
+        let (a, b) = (full.render_at(&mp(&pose)), depth.render_at(&mp(&pose)));
         assert_eq!(a.frame.depth_m, b.frame.depth_m);
         assert!(a.frame.depth_m.iter().any(|z| *z < 20.0));
         assert!(b.frame.rgb.is_empty() && b.frame.segmentation.is_empty() && b.classes.is_empty());
@@ -81,7 +81,7 @@ fn objects_at_the_edge_of_the_field_of_view_land_on_the_edge_columns() {
     )
     .unwrap();
     let s = cam_sim(SceneSource::File(d.path().join("edge.toml")), w, h, fov);
-    let f = s.render_at(&Pose::from_parts(Vector::new(0.0, 0.0, 1.0), Rotation::IDENTITY));
+    let f = s.render_at(&mp(&Pose::from_parts(Vector::new(0.0, 0.0, 1.0), Rotation::IDENTITY)));
     let at = |u: usize, v: usize| f.frame.segmentation[v * w as usize + u];
     let v = h as usize / 2;
     // Left edge (+y) shows object 0, right edge object 1; the middle sees past both.
@@ -98,7 +98,7 @@ fn objects_at_the_edge_of_the_field_of_view_land_on_the_edge_columns() {
 #[test]
 fn the_camera_rides_on_the_vehicle_and_does_not_see_it() {
     let s = cam_sim(SceneSource::Builtin("oval".into()), 80, 60, 80.0);
-    let f = s.camera_frame().expect("xtenth_car has a camera link");
+    let f = s.car(0).camera_frame().expect("xtenth_car has a camera link");
     assert_eq!((f.frame.width, f.frame.height), (80, 60));
     // Looking down the straight from the centre line: walls left and right, track ahead,
     // and no pixel closer than the ground in front of the bumper.
@@ -108,6 +108,7 @@ fn the_camera_rides_on_the_vehicle_and_does_not_see_it() {
         "the car's own body is not in view"
     );
     let same = cam_sim(SceneSource::Builtin("oval".into()), 80, 60, 80.0)
+        .car(0)
         .camera_frame()
         .unwrap();
     assert_eq!(f, same, "rendering is deterministic");

@@ -444,7 +444,7 @@ fn a_circuit_scene_builds_from_its_seed_with_the_car_on_the_start_line() {
     let mut s = Sim::new(cfg).unwrap();
     assert_eq!(s.scene().centreline.as_ref(), Some(&t.centreline));
     run(&mut s, Control::default(), 10);
-    let pose = s.pose2();
+    let pose = s.car(0).pose2();
     let c = &t.centreline;
     let yaw = (c[1][1] - c[0][1]).atan2(c[1][0] - c[0][0]);
     assert!(

@@ -26,9 +26,9 @@ fn full_throttle_reaches_model_steady_state_without_slip() {
         );
         let p = s.nominal_params().drive;
         let w_ss = p.steady_state(1.0);
-        let w = s.wheel_speed_radps();
+        let w = s.car(0).wheel_speed_radps();
         assert!((w - w_ss).abs() / w_ss < 0.01, "{mode:?}: w {w} vs steady state {w_ss}");
-        let v = s.forward_speed_mps() as f64;
+        let v = s.car(0).forward_speed_mps() as f64;
         let wr = w * s.vehicle().drive_radius_m() as f64;
         assert!((v - wr).abs() / wr < 0.05, "{mode:?}: ground speed {v} vs w r {wr}");
         let top = s.vehicle().top_speed_mps() as f64;
@@ -36,13 +36,17 @@ fn full_throttle_reaches_model_steady_state_without_slip() {
             (v - top).abs() / top < 0.05,
             "{mode:?}: ground speed {v} vs top speed {top}"
         );
-        let imu = s.imu();
+        let imu = s.car(0).imu();
         assert!(
             imu.lin_vel_b[1].abs() < 0.05 * v,
             "{mode:?}: sideways drift {}",
             imu.lin_vel_b[1]
         );
-        assert!(s.pose2().y_m.abs() < 0.5, "{mode:?}: drifted to y = {}", s.pose2().y_m);
+        assert!(
+            s.car(0).pose2().y_m.abs() < 0.5,
+            "{mode:?}: drifted to y = {}",
+            s.car(0).pose2().y_m
+        );
     }
 }
 
@@ -62,20 +66,24 @@ fn reverse_backs_the_car_at_the_models_steady_speed_on_the_mirrored_arc() {
         };
         run(&mut s, back, 300);
         let w_ss = s.nominal_params().drive.steady_state(0.5);
-        let w = s.wheel_speed_radps();
+        let w = s.car(0).wheel_speed_radps();
         assert!((w + w_ss).abs() / w_ss < 0.01, "{mode:?}: w {w} vs -{w_ss}");
-        let v = s.forward_speed_mps() as f64;
+        let v = s.car(0).forward_speed_mps() as f64;
         let wr = w * s.vehicle().drive_radius_m() as f64;
         assert!(
             (v - wr).abs() / wr.abs() < 0.05,
             "{mode:?}: ground speed {v} vs w r {wr}"
         );
         assert!(
-            s.pose2().x_m < 30.0 - 5.0,
+            s.car(0).pose2().x_m < 30.0 - 5.0,
             "{mode:?}: backed only to x = {}",
-            s.pose2().x_m
+            s.car(0).pose2().x_m
         );
-        assert!(s.pose2().y_m.abs() < 0.5, "{mode:?}: drifted to y = {}", s.pose2().y_m);
+        assert!(
+            s.car(0).pose2().y_m.abs() < 0.5,
+            "{mode:?}: drifted to y = {}",
+            s.car(0).pose2().y_m
+        );
     }
     // Reversing on left lock turns the car clockwise, on the forward arc's radius.
     let mut s = sim(room(40.0, "rev-arc").src(), DynamicsMode::Raycast);
@@ -94,7 +102,7 @@ fn reverse_backs_the_car_at_the_models_steady_speed_on_the_mirrored_arc() {
         },
         60,
     );
-    let p = s.pose2();
+    let p = s.car(0).pose2();
     assert!(p.yaw_rad < -0.3 && p.x_m < -0.3, "{p:?}");
 }
 
@@ -122,14 +130,14 @@ fn braking_stops_the_car_within_the_closed_form_distance() {
             steering_rad: 0.0,
         };
         run(&mut s, full, 240);
-        let v0 = s.forward_speed_mps() as f64;
-        let x0 = s.pose2().x_m as f64;
+        let v0 = s.car(0).forward_speed_mps() as f64;
+        let x0 = s.car(0).pose2().x_m as f64;
         run(&mut s, Control::default(), 90);
-        let d = s.pose2().x_m as f64 - x0;
+        let d = s.car(0).pose2().x_m as f64 - x0;
         // v0^2 / 2a, plus up to one control period at v0 before the first braked step and
         // the speed tracking's lag.
         let expect = v0 * v0 / (2.0 * a);
-        assert!(s.forward_speed_mps().abs() < 0.02, "{mode:?}: still moving");
+        assert!(s.car(0).forward_speed_mps().abs() < 0.02, "{mode:?}: still moving");
         assert!(
             d > 0.9 * expect && d < expect + v0 * (1.0 / 30.0 + 0.05),
             "{mode:?}: stopped in {d:.3} m from {v0:.2} m/s, closed form {expect:.3} m"
@@ -170,8 +178,8 @@ fn low_speed_turning_radius_matches_ackermann_geometry() {
                     steering_rad: delta,
                 })
                 .unwrap();
-                v_sum += s.forward_speed_mps() as f64;
-                w_sum += s.yaw_rate_radps() as f64;
+                v_sum += s.car(0).forward_speed_mps() as f64;
+                w_sum += s.car(0).yaw_rate_radps() as f64;
             }
             let r = v_sum / w_sum;
             let expect = L_XTENTH / delta.tan();
@@ -200,9 +208,13 @@ fn no_tunnelling_through_a_wall_at_top_speed() {
                 steering_rad: 0.0,
             })
             .unwrap();
-            touched |= !s.contacts().is_empty();
+            touched |= !s.car(0).contacts().is_empty();
             // Wall face at x = 6; the front of the car is ~0.42 m ahead of the base.
-            assert!(s.pose2().x_m < 6.0, "{mode:?}: passed the wall, x = {}", s.pose2().x_m);
+            assert!(
+                s.car(0).pose2().x_m < 6.0,
+                "{mode:?}: passed the wall, x = {}",
+                s.car(0).pose2().x_m
+            );
         }
         assert!(touched, "{mode:?}: driving into the wall must report a contact");
     }
@@ -215,16 +227,12 @@ fn swept_collision_checks_run_only_where_a_substep_could_skip_a_wall() {
     // is not.
     for id in SCENE_IDS {
         let s = sim(SceneSource::Builtin(id.to_string()), DynamicsMode::Raycast);
-        assert!(!s.world().continuous_collision(), "{id}");
+        assert!(!s.continuous_collision(), "{id}");
     }
-    assert!(
-        !sim(room(6.0, "thick").src(), DynamicsMode::Raycast)
-            .world()
-            .continuous_collision()
-    );
+    assert!(!sim(room(6.0, "thick").src(), DynamicsMode::Raycast).continuous_collision());
     for mode in MODES {
         let mut s = sim(walled_room(6.0, 0.02, "thin").src(), mode);
-        assert!(s.world().continuous_collision(), "{mode:?}");
+        assert!(s.continuous_collision(), "{mode:?}");
         s.reset(PlanarPose {
             x_m: -5.0,
             y_m: 0.0,
@@ -238,9 +246,9 @@ fn swept_collision_checks_run_only_where_a_substep_could_skip_a_wall() {
             })
             .unwrap();
             assert!(
-                s.pose2().x_m < 6.0,
+                s.car(0).pose2().x_m < 6.0,
                 "{mode:?}: passed the thin wall, x = {}",
-                s.pose2().x_m
+                s.car(0).pose2().x_m
             );
         }
     }
@@ -251,15 +259,15 @@ fn no_jitter_at_rest() {
     for mode in MODES {
         let mut s = sim(room(10.0, "rest").src(), mode);
         run(&mut s, Control::default(), 60);
-        let p0 = s.pose2();
+        let p0 = s.car(0).pose2();
         run(&mut s, Control::default(), 60);
-        let p1 = s.pose2();
+        let p1 = s.car(0).pose2();
         let moved = ((p1.x_m - p0.x_m).powi(2) + (p1.y_m - p0.y_m).powi(2)).sqrt();
         assert!(moved < 1e-3, "{mode:?}: moved {moved} m at rest");
         assert!(
-            s.linvel_w().length() < 1e-2,
+            Vector::from_array(s.car(0).linvel_w()).length() < 1e-2,
             "{mode:?}: speed {} at rest",
-            s.linvel_w().length()
+            Vector::from_array(s.car(0).linvel_w()).length()
         );
     }
 }
@@ -278,8 +286,8 @@ fn same_actions_give_bit_identical_trajectories() {
                     steering_rad: 0.36 * (2.0 * x - 1.0),
                 })
                 .unwrap();
-                let p = s.base_pose();
-                out.push((p.translation.to_array(), p.rotation.to_array(), s.lidar_scan().ranges));
+                let p = s.car(0).pose();
+                out.push((p.position_m, p.orientation_xyzw, s.lidar_scan(0).ranges));
             }
             out
         };
@@ -302,7 +310,7 @@ fn same_actions_give_bit_identical_trajectories() {
                     steering_rad: 0.36 * (2.0 * x - 1.0),
                 })
                 .unwrap();
-                out.push(s.base_pose().translation.to_array());
+                out.push(s.car(0).pose().position_m);
             }
             out
         };
@@ -335,11 +343,11 @@ fn free_flight_moves_the_car_as_rapier_does_to_the_bit_up_to_a_contact() {
             .unwrap()
         };
         let (mut a, mut b) = (make(true), make(false));
-        assert_eq!(a.world().continuous_collision(), id == "thin walls", "{id}");
+        assert_eq!(a.continuous_collision(), id == "thin walls", "{id}");
         let spawn = a.default_spawn();
         let (mut x, mut compared, mut episodes) = (0.31f64, 0, 0);
         for _ in 0..1200 {
-            if a.steps() > 150 || !a.contacts().is_empty() || !b.contacts().is_empty() {
+            if a.steps() > 150 || !a.car(0).contacts().is_empty() || !b.car(0).contacts().is_empty() {
                 a.reset(spawn).unwrap();
                 b.reset(spawn).unwrap();
                 episodes += 1;
@@ -351,10 +359,12 @@ fn free_flight_moves_the_car_as_rapier_does_to_the_bit_up_to_a_contact() {
             };
             a.step(c).unwrap();
             b.step(c).unwrap();
-            if a.contacts().is_empty() && b.contacts().is_empty() {
-                let (pa, pb) = (a.base_pose(), b.base_pose());
+            if a.car(0).contacts().is_empty() && b.car(0).contacts().is_empty() {
+                let (pa, pb) = (a.car(0).pose(), b.car(0).pose());
                 assert!(
-                    pa == pb && a.linvel_w() == b.linvel_w() && a.angvel_w() == b.angvel_w(),
+                    pa == pb
+                        && a.car(0).linvel_w() == b.car(0).linvel_w()
+                        && a.car(0).angvel_w() == b.car(0).angvel_w(),
                     "{id}: step {} of episode {episodes} differs: {pa:?} against {pb:?}",
                     a.steps()
                 );
@@ -385,21 +395,25 @@ fn ackermann_can_be_switched_to_autovrl_equal_angles() {
         steering_rad: 0.3,
     })
     .unwrap();
-    assert_eq!(s.wheel_angles_rad(), (0.3, 0.3));
+    assert_eq!(s.car(0).wheel_angles_rad(), (0.3, 0.3));
     let mut s = Sim::new(SimConfig::default()).unwrap();
     s.step(Control {
         throttle: 0.0,
         steering_rad: 0.3,
     })
     .unwrap();
-    let (l, r) = s.wheel_angles_rad();
+    let (l, r) = s.car(0).wheel_angles_rad();
     assert!(l > 0.3 && r < 0.3, "inner (left) wheel steers more: {l} {r}");
     s.step(Control {
         throttle: 0.0,
         steering_rad: 5.0,
     })
     .unwrap();
-    assert_eq!(s.control().steering_rad, 0.36, "steering limit from the vehicle file");
+    assert_eq!(
+        s.car(0).control().steering_rad,
+        0.36,
+        "steering limit from the vehicle file"
+    );
 }
 
 #[test]

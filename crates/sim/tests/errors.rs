@@ -116,11 +116,11 @@ fn non_finite_controls_never_reach_physics() {
     })
     .unwrap();
     assert_eq!(
-        s.control(),
+        s.car(0).control(),
         Control {
             throttle: 0.0,
             steering_rad: 0.0
         }
     );
-    assert!(s.base_pose().is_finite());
+    assert!(s.car(0).pose().is_finite());
 }

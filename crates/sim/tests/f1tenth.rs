@@ -46,9 +46,9 @@ fn circle(s: &mut Sim, v: f64, delta: f64, settle: usize, measure: usize) -> (f6
     let (mut v_sum, mut w_sum) = (0.0, 0.0);
     for _ in 0..measure {
         s.step(c).unwrap();
-        assert!(s.contacts().is_empty(), "the circle met a wall");
-        v_sum += s.forward_speed_mps() as f64;
-        w_sum += s.yaw_rate_radps() as f64;
+        assert!(s.car(0).contacts().is_empty(), "the circle met a wall");
+        v_sum += s.car(0).forward_speed_mps() as f64;
+        w_sum += s.car(0).yaw_rate_radps() as f64;
     }
     (v_sum / measure as f64, w_sum / measure as f64)
 }
@@ -72,9 +72,9 @@ fn the_f1tenth_car_has_f1tenth_gyms_geometry_mass_and_drive() {
     assert!((a0 - 9.51).abs() < 1e-3, "a0 {a0}");
     assert!((m.top_speed_mps() - 10.0).abs() < 0.01, "{}", m.top_speed_mps());
     assert!(
-        s.contacts().is_empty(),
+        s.car(0).contacts().is_empty(),
         "the car at rest touches something: {:?}",
-        s.contacts()
+        s.car(0).contacts()
     );
 }
 
@@ -110,7 +110,7 @@ fn the_f1tenth_cars_steering_turns_at_3_2_rad_per_s() {
             })
             .unwrap();
             expect += (target - expect).clamp(-per_period, per_period);
-            let got = s.control().steering_rad;
+            let got = s.car(0).control().steering_rad;
             assert!(
                 (got - expect).abs() < 1e-9,
                 "to {target}, period {k}: {got} vs {expect}"
@@ -118,7 +118,7 @@ fn the_f1tenth_cars_steering_turns_at_3_2_rad_per_s() {
             let m = s.vehicle();
             let split = agvrl_sim::vehicle::ackermann_split(got, m.wheelbase_m as f64, m.front_track_m as f64, true);
             assert_eq!(
-                s.wheel_angles_rad(),
+                s.car(0).wheel_angles_rad(),
                 split,
                 "period {k}: the wheels stand at the angle reached"
             );
@@ -129,8 +129,8 @@ fn the_f1tenth_cars_steering_turns_at_3_2_rad_per_s() {
 
 /// Sideslip of the base frame (the rear axle) in its own frame, rad.
 fn sideslip(s: &Sim) -> f64 {
-    let q = s.base_pose().rotation;
-    let v = s.linvel_w();
+    let q = rp(&s.car(0).pose()).rotation;
+    let v = Vector::from_array(s.car(0).linvel_w());
     (v.dot(q * Vector::Y) as f64).atan2(v.dot(q * Vector::X) as f64)
 }
 
@@ -167,10 +167,10 @@ fn beyond_its_grip_the_f1tenth_car_runs_wide_and_does_not_spin() {
         let (mut a_sum, mut n) = (0.0, 0);
         for k in 0..160 {
             s.step(c).unwrap();
-            assert!(s.contacts().is_empty(), "{v_set} m/s: the car met a wall");
+            assert!(s.car(0).contacts().is_empty(), "{v_set} m/s: the car met a wall");
             worst_slip = worst_slip.max(sideslip(&s).abs());
             if k >= 80 {
-                a_sum += s.forward_speed_mps() as f64 * s.yaw_rate_radps() as f64;
+                a_sum += s.car(0).forward_speed_mps() as f64 * s.car(0).yaw_rate_radps() as f64;
                 n += 1;
             }
         }
@@ -216,29 +216,29 @@ fn braking_hard_the_f1tenth_car_turns_in_as_f1tenth_gyms_model_does() {
         },
         240,
     );
-    let v_start = s.forward_speed_mps() as f64;
+    let v_start = s.car(0).forward_speed_mps() as f64;
     assert!((v_start - v0).abs() < 0.2, "speed before braking {v_start}");
-    let yaw0 = s.pose2().yaw_rad as f64;
+    let yaw0 = s.car(0).pose2().yaw_rad as f64;
     let c = Control {
         throttle: 0.0,
         steering_rad: delta,
     };
     let mut path = 0.0;
     for _ in 0..200 {
-        let v = s.linvel_w().length() as f64;
+        let v = Vector::from_array(s.car(0).linvel_w()).length() as f64;
         if v < 0.05 {
             break;
         }
         s.step(c).unwrap();
-        assert!(s.contacts().is_empty(), "the car met a wall");
-        path += 0.5 * (v + s.linvel_w().length() as f64) * 0.025;
+        assert!(s.car(0).contacts().is_empty(), "the car met a wall");
+        path += 0.5 * (v + Vector::from_array(s.car(0).linvel_w()).length() as f64) * 0.025;
     }
     let stop = v_start * v_start / (2.0 * a);
     assert!(
         (path - stop).abs() / stop < 0.05,
         "stopped in {path:.2} m, v^2/2a {stop:.2} m"
     );
-    let turned = s.pose2().yaw_rad as f64 - yaw0;
+    let turned = s.car(0).pose2().yaw_rad as f64 - yaw0;
     assert!(
         (turned - GYM_BRAKING_TURN).abs() / GYM_BRAKING_TURN < 0.2,
         "turned {:.1} degrees, f1tenth_gym {:.1}",

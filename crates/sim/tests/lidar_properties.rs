@@ -45,7 +45,7 @@ proptest! {
             let inner = half - 0.45;
             let rot = Rotation::from_rotation_z(yaw) * Rotation::from_rotation_y(pitch);
             let pose = Pose::from_parts(Vector::new(fx * inner, fy * inner, z), rot);
-            let scan = s.lidar_scan_at(&pose);
+            let scan = s.lidar_scan_at(&mp(&pose));
             prop_assert_eq!(scan.ranges.len(), n_rays);
             for (i, &r) in scan.ranges.iter().enumerate() {
                 prop_assert!(r >= range_min_m && r <= range_max_m, "ray {i}: {r}");

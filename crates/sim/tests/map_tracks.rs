@@ -163,7 +163,7 @@ fn the_lidar_meets_a_map_wall_at_the_analytic_distance() {
         yaw_rad: std::f32::consts::FRAC_PI_2,
     })
     .unwrap();
-    let scan = s.lidar_scan();
+    let scan = s.lidar_scan(0);
     // The island's bottom face: image row 28 from the top, y = origin + (40 - 28) * RES.
     let face_y = origin[1] + 12.0 * RES;
     let o = scan.origin_w;

@@ -11,9 +11,9 @@ fn every_scene_loads_spawns_clear_and_drives_five_seconds() {
             let mut s = sim(SceneSource::Builtin(id.to_string()), mode);
             s.step(Control::default()).unwrap();
             assert!(
-                s.contacts().is_empty(),
+                s.car(0).contacts().is_empty(),
                 "{mode:?} {id}: contact at spawn {:?}",
-                s.contacts()
+                s.car(0).contacts()
             );
             let mut x = 0.77f64;
             for _ in 0..150 {
@@ -23,10 +23,10 @@ fn every_scene_loads_spawns_clear_and_drives_five_seconds() {
                     steering_rad: 0.36 * (2.0 * x - 1.0),
                 })
                 .unwrap();
-                let p = s.base_pose();
+                let p = s.car(0).pose();
                 assert!(p.is_finite(), "{mode:?} {id}: non-finite pose");
-                assert!(!s.flipped(), "{mode:?} {id}: flipped");
-                assert!(p.translation.z.abs() < 0.5, "{mode:?} {id}: z = {}", p.translation.z);
+                assert!(!s.car(0).flipped(), "{mode:?} {id}: flipped");
+                assert!(p.position_m[2].abs() < 0.5, "{mode:?} {id}: z = {}", p.position_m[2]);
             }
         }
     }
@@ -59,7 +59,7 @@ fn oval_lane_is_two_metres_wide_on_straights_and_curves() {
         (-4.0, 2.0, std::f32::consts::FRAC_PI_2),
     ] {
         let pose = Pose::from_parts(Vector::new(x, y, 0.3), Rotation::from_rotation_z(yaw));
-        let scan = s.lidar_scan_at(&pose);
+        let scan = s.lidar_scan_at(&mp(&pose));
         for r in [scan.ranges[0], scan.ranges[99]] {
             assert!((r - std::f32::consts::SQRT_2).abs() < 0.01, "({x},{y}): {r}");
         }
@@ -86,7 +86,7 @@ fn procedural_layouts_are_seeded_and_keep_the_spawn_clear() {
         let sp = s.default_spawn();
         assert!(s.free_at(sp.x_m, sp.y_m, 0.5), "{kind:?}: spawn not clear");
         s.step(Control::default()).unwrap();
-        assert!(s.contacts().is_empty());
+        assert!(s.car(0).contacts().is_empty());
     }
 }
 

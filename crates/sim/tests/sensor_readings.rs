@@ -33,12 +33,12 @@ fn lidar_ranges_match_closed_form_away_from_the_origin() {
             })
             .unwrap();
             run(&mut s, Control::default(), 30);
-            let g = s.gps();
+            let g = s.car(0).gps();
             let yaw_now = g.rpy_rad[2] as f32;
             let (c, sn) = (yaw_now.cos(), yaw_now.sin());
             let ox = g.position_m[0] as f32 + c * LIDAR_MOUNT[0] - sn * LIDAR_MOUNT[1];
             let oy = g.position_m[1] as f32 + sn * LIDAR_MOUNT[0] + c * LIDAR_MOUNT[1];
-            let scan = s.lidar_scan();
+            let scan = s.lidar_scan(0);
             assert_eq!(scan.ranges.len(), 100);
             for (i, r) in scan.ranges.iter().enumerate() {
                 let a = yaw_now + scan.angle_min + i as f32 * scan.angle_increment;
@@ -78,7 +78,7 @@ fn the_vehicle_never_sees_itself() {
         let mut s = Sim::new(cfg).unwrap();
         for _ in 0..90 {
             s.step(Control::default()).unwrap();
-            let scan = s.lidar_scan();
+            let scan = s.lidar_scan(0);
             assert!(
                 scan.hit.iter().all(|h| !h),
                 "{mode:?}: a ray hit something in an empty room"
@@ -99,7 +99,7 @@ fn lidar_misses_read_range_max_and_ranges_stay_in_bounds() {
             steering_rad: 0.3 * (2.0 * x - 1.0),
         })
         .unwrap();
-        let scan = s.lidar_scan();
+        let scan = s.lidar_scan(0);
         for (r, h) in scan.ranges.iter().zip(&scan.hit) {
             assert!(*r >= scan.range_min && *r <= scan.range_max);
             if !h {
@@ -120,7 +120,7 @@ fn imu_at_rest_reads_gravity_and_no_rates() {
         })
         .unwrap();
         run(&mut s, Control::default(), 90);
-        let imu = s.imu();
+        let imu = s.car(0).imu();
         assert!((imu.lin_acc_b[2] - 9.81).abs() < 0.05, "{mode:?}: {:?}", imu.lin_acc_b);
         assert!(
             imu.lin_acc_b[0].abs() < 0.05 && imu.lin_acc_b[1].abs() < 0.05,
@@ -145,9 +145,9 @@ fn gps_displacement_equals_integrated_imu_velocity() {
             },
             30,
         );
-        let g0 = s.gps().position_m;
+        let g0 = s.car(0).gps().position_m;
         let dt = s.config().settings.control_period_s;
-        let mut v_prev = s.imu().lin_vel_w;
+        let mut v_prev = s.car(0).imu().lin_vel_w;
         let mut integ = [0.0f64; 3];
         for _ in 0..60 {
             s.step(Control {
@@ -155,13 +155,13 @@ fn gps_displacement_equals_integrated_imu_velocity() {
                 steering_rad: 0.25,
             })
             .unwrap();
-            let v = s.imu().lin_vel_w;
+            let v = s.car(0).imu().lin_vel_w;
             for k in 0..3 {
                 integ[k] += 0.5 * (v[k] + v_prev[k]) * dt;
             }
             v_prev = v;
         }
-        let g1 = s.gps().position_m;
+        let g1 = s.car(0).gps().position_m;
         let disp = [g1[0] - g0[0], g1[1] - g0[1]];
         let err = ((disp[0] - integ[0]).powi(2) + (disp[1] - integ[1]).powi(2)).sqrt();
         let len = (disp[0].powi(2) + disp[1].powi(2)).sqrt();
@@ -192,7 +192,7 @@ fn gps_geodetic_fix_moves_north_with_y() {
         yaw_rad: 0.0,
     })
     .unwrap();
-    let g = s.gps().geodetic.unwrap();
+    let g = s.car(0).gps().geodetic.unwrap();
     // 10 m north is 10 / 6378137 rad of latitude.
     assert!((g.latitude_deg - 35.0 - (10.0f64 / 6_378_137.0).to_degrees()).abs() < 1e-6);
     assert!((g.longitude_deg + 85.0).abs() < 1e-9);

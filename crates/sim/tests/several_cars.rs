@@ -19,7 +19,7 @@ fn at(x_m: f32, y_m: f32, yaw_rad: f32) -> PlanarPose {
 }
 
 fn speed_x(s: &Sim, i: usize) -> f32 {
-    s.linvel_w_of(i).x
+    s.car(i).linvel_w()[0]
 }
 
 /// Two cars head-on at top speed, the second twice as heavy, in both dynamics modes: they
@@ -64,10 +64,10 @@ fn two_cars_driven_into_each_other_exchange_momentum_and_never_pass_through() {
         for step in 0..4000 {
             let v = (speed_x(&s, 0), speed_x(&s, 1));
             s.step_cars(&[full, full]).unwrap();
-            let (a, b) = (s.car_contacts_of(0), s.car_contacts_of(1));
+            let (a, b) = (s.car(0).car_contacts(), s.car(1).car_contacts());
             // The fronts (bumpers 0.415 m ahead of the base) may overlap by the contact's
             // penetration at most.
-            let gap = s.pose2_of(1).x_m - s.pose2_of(0).x_m - 2.0 * 0.415;
+            let gap = s.car(1).pose2().x_m - s.car(0).pose2().x_m - 2.0 * 0.415;
             assert!(
                 gap > -0.02,
                 "{mode:?}: the cars pass through each other, gap {gap} at step {step}"
@@ -77,7 +77,7 @@ fn two_cars_driven_into_each_other_exchange_momentum_and_never_pass_through() {
                 assert_eq!((a[0].other, b[0].other), (1, 0));
                 let x = a[0].point_w[0];
                 assert!(
-                    x > s.pose2_of(0).x_m && x < s.pose2_of(1).x_m,
+                    x > s.car(0).pose2().x_m && x < s.car(1).pose2().x_m,
                     "{mode:?}: contact point x {x} lies between the cars"
                 );
                 impact = Some(step);
@@ -152,9 +152,9 @@ fn a_cars_lidar_and_camera_see_the_other_car_at_the_analytic_distance() {
         for _ in 0..30 {
             s.step_cars(&[Control::default(), Control::default()]).unwrap();
         }
-        let scan = s.lidar_scan_of(0);
-        let lidar = s.base_pose_of(0) * s.vehicle().lidar_b;
-        let other = s.base_pose_of(1);
+        let scan = s.lidar_scan(0);
+        let lidar = rp(&s.car(0).pose()) * s.vehicle().lidar_b;
+        let other = rp(&s.car(1).pose());
         // The face's world x (the other car stands level, a rotation about z only).
         let face_w = (other * Vector::new(face, 0.0, 0.0)).x;
         let face_w = if yaw1 == 0.0 {
@@ -171,14 +171,14 @@ fn a_cars_lidar_and_camera_see_the_other_car_at_the_analytic_distance() {
             scan.ranges[50]
         );
         assert!(scan.min_static_range() > 5.0, "the walls stand 9 m away");
-        let f = s.camera_frame_of(0).unwrap();
-        let cam = s.camera_pose_of(0).unwrap();
+        let f = s.car(0).camera_frame().unwrap();
+        let cam = s.car(0).camera_pose().unwrap();
         let k = 60 * 161 + 80;
         let depth = f.frame.depth_m[k];
         assert!(
-            (depth - (face_w - cam.translation.x)).abs() < 2e-3,
+            (depth - (face_w - cam.position_m[0])).abs() < 2e-3,
             "yaw {yaw1}: camera depth {depth} against {}",
-            face_w - cam.translation.x
+            face_w - cam.position_m[0]
         );
         assert_eq!(f.classes[k], class::CAR);
         // A car alone in the world sees nothing there.
@@ -188,7 +188,7 @@ fn a_cars_lidar_and_camera_see_the_other_car_at_the_analytic_distance() {
         })
         .unwrap();
         alone.reset(at(-1.0, 0.0, 0.0)).unwrap();
-        let scan = alone.lidar_scan();
+        let scan = alone.lidar_scan(0);
         assert!(scan.car.is_empty() && scan.ranges[50] > 9.0);
     }
 }
@@ -210,7 +210,7 @@ fn free_flight_stays_exact_per_car_with_several_cars() {
     let (mut a, mut b) = (make(true), make(false));
     let start = [at(-4.0, 0.0, 0.0), at(-4.0, 2.0, 0.3), at(-5.0, -2.0, -0.3)];
     let (mut x, mut compared, mut episodes) = (0.23f64, 0, 0);
-    let touching = |s: &Sim| (0..3).any(|i| !s.contacts_of(i).is_empty() || !s.car_contacts_of(i).is_empty());
+    let touching = |s: &Sim| (0..3).any(|i| !s.car(i).contacts().is_empty() || !s.car(i).car_contacts().is_empty());
     for _ in 0..1500 {
         if a.steps() > 200 || touching(&a) || touching(&b) {
             a.reset_cars(&start).unwrap();
@@ -231,7 +231,7 @@ fn free_flight_stays_exact_per_car_with_several_cars() {
         if !touching(&a) && !touching(&b) {
             for i in 0..3 {
                 assert!(
-                    a.base_pose_of(i) == b.base_pose_of(i) && a.linvel_w_of(i) == b.linvel_w_of(i),
+                    a.car(i).pose() == b.car(i).pose() && a.car(i).linvel_w() == b.car(i).linvel_w(),
                     "car {i}, step {} of episode {episodes}",
                     a.steps()
                 );
@@ -273,21 +273,21 @@ fn a_parked_car_stays_an_obstacle_until_the_reset() {
         s.step_cars(&[Control::default(), full]).unwrap();
     }
     s.park(1);
-    let held = s.base_pose_of(1);
+    let held = s.car(1).pose();
     let mut touched = false;
     for _ in 0..300 {
         s.step_cars(&[full, full]).unwrap();
-        touched |= s.car_contacts_of(0).iter().any(|c| c.other == 1);
-        assert_eq!(s.base_pose_of(1), held, "a parked car does not move");
+        touched |= s.car(0).car_contacts().iter().any(|c| c.other == 1);
+        assert_eq!(s.car(1).pose(), held, "a parked car does not move");
     }
     assert!(touched, "car 0 drove into the parked car");
-    assert!(s.pose2_of(0).x_m < held.translation.x, "and did not pass it");
+    assert!(s.car(0).pose2().x_m < held.position_m[0], "and did not pass it");
     s.reset_cars(&[at(-4.0, 0.0, 0.0), at(0.0, 0.0, 0.0)]).unwrap();
-    assert!(!s.parked(1));
+    assert!(!s.car(1).parked());
     for _ in 0..60 {
         s.step_cars(&[Control::default(), full]).unwrap();
     }
-    assert!(s.pose2_of(1).x_m > 0.5, "after the reset car 1 drives again");
+    assert!(s.car(1).pose2().x_m > 0.5, "after the reset car 1 drives again");
 }
 
 #[test]

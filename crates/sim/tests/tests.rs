@@ -19,6 +19,22 @@ use agvrl_sim::*;
 use rapier3d::prelude::*;
 use std::path::PathBuf;
 
+/// A pose the simulator gives as rapier's, for the tests' geometry.
+fn rp(p: &agvrl_sim::msg::Pose3) -> Pose {
+    Pose::from_parts(
+        Vector::from_array(p.position_m),
+        Rotation::from_array(p.orientation_xyzw),
+    )
+}
+
+/// A rapier pose as the simulator takes it.
+fn mp(p: &Pose) -> agvrl_sim::msg::Pose3 {
+    agvrl_sim::msg::Pose3 {
+        position_m: p.translation.to_array(),
+        orientation_xyzw: p.rotation.to_array(),
+    }
+}
+
 const MODES: [DynamicsMode; 2] = [DynamicsMode::Raycast, DynamicsMode::Multibody];
 
 /// A scratch directory, removed with everything in it when the guard drops.

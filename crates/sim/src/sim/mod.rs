@@ -2,18 +2,21 @@
 //! settings types are in `settings.rs`, the control period's step (actuation, substeps,
 //! velocities) in `step.rs`; this file builds the world, resets it and reads it.
 
+mod car;
 mod settings;
 mod step;
+
+pub use car::CarView;
 
 pub use settings::{PlanarPose, SceneSource, SimConfig, SimSettings, VehicleParams, VehicleSource, contact_distance_m};
 
 use crate::SimError;
 use crate::assets::AssetSource;
-use crate::msg::{GpsReading, ImuReading, LaserScan};
+use crate::msg::{LaserScan, Pose3};
 use crate::scene::{MapTrack, Scene};
+use crate::sensors::Lidar;
 use crate::sensors::fast_ray::FastRay;
 use crate::sensors::imu::ImuState;
-use crate::sensors::{Lidar, gps};
 use crate::vehicle::body::Body;
 use crate::vehicle::{BodyParams, Control, DriveModel, VehicleModel};
 use crate::world::{Movers, NearStatics, StaticEntry, World};
@@ -239,11 +242,6 @@ impl Sim {
         self.nominal
     }
 
-    /// The parameters in force (car 0).
-    pub fn params(&self) -> VehicleParams {
-        self.cars[0].params
-    }
-
     /// Change parameters (domain randomisation); they take effect at the next `reset`.
     pub fn set_params(&mut self, p: VehicleParams) {
         self.set_params_of(0, p);
@@ -319,11 +317,6 @@ impl Sim {
         car.vel_w = (Vector::ZERO, Vector::ZERO);
     }
 
-    /// Whether car `i` is parked.
-    pub fn parked(&self, i: usize) -> bool {
-        self.cars[i].parked
-    }
-
     /// Control steps that skipped rapier's pipeline (see `SimSettings::free_flight`) since the
     /// simulator was built.
     pub fn free_flight_steps(&self) -> u64 {
@@ -340,104 +333,19 @@ impl Sim {
         self.steps
     }
 
-    /// The drive model's wheel speed, rad/s.
-    pub fn wheel_speed_radps(&self) -> f64 {
-        self.cars[0].wheel_speed
-    }
-
-    /// The control in force (throttle, centre steering angle after limits and offset; with a
-    /// steering rate limit, the angle the wheels reached by the end of the period).
-    pub fn control(&self) -> Control {
-        self.control_of(0)
-    }
-
-    /// Car `i`'s control in force.
-    pub fn control_of(&self, i: usize) -> Control {
-        self.cars[i].control
-    }
-
-    /// Steering angles of the left and right front wheels, rad.
-    pub fn wheel_angles_rad(&self) -> (f64, f64) {
-        self.cars[0].wheel_angles
-    }
-
-    /// World pose of the vehicle's base frame.
-    pub fn base_pose(&self) -> Pose {
-        self.base_pose_of(0)
+    /// Car `i` of the world, read-only (its pose, velocities, readings, contacts).
+    pub fn car(&self, i: usize) -> CarView<'_> {
+        assert!(i < self.cars.len(), "car {i} of a world of {} cars", self.cars.len());
+        CarView { sim: self, i }
     }
 
     /// World pose of car `i`'s base frame.
-    pub fn base_pose_of(&self, i: usize) -> Pose {
+    fn base_pose(&self, i: usize) -> Pose {
         *self.world.pw.bodies[self.cars[i].body.base()].position()
     }
 
-    /// Planar pose of the base frame.
-    pub fn pose2(&self) -> PlanarPose {
-        self.pose2_of(0)
-    }
-
-    /// Planar pose of car `i`'s base frame.
-    pub fn pose2_of(&self, i: usize) -> PlanarPose {
-        let p = self.base_pose_of(i);
-        let fwd = p.rotation * Vector::X;
-        PlanarPose {
-            x_m: p.translation.x,
-            y_m: p.translation.y,
-            yaw_rad: fwd.y.atan2(fwd.x),
-        }
-    }
-
-    /// Linear velocity of the base origin over the last physics substep, world frame, m/s.
-    pub fn linvel_w(&self) -> Vector {
-        self.linvel_w_of(0)
-    }
-
-    /// Car `i`'s linear velocity over the last physics substep, world frame, m/s.
-    pub fn linvel_w_of(&self, i: usize) -> Vector {
-        self.cars[i].vel_w.0
-    }
-
-    /// Angular velocity of the base over the last physics substep, world frame, rad/s.
-    pub fn angvel_w(&self) -> Vector {
-        self.cars[0].vel_w.1
-    }
-
-    /// Speed along the heading, m/s (negative when rolling backwards).
-    pub fn forward_speed_mps(&self) -> f32 {
-        self.forward_speed_mps_of(0)
-    }
-
-    /// Car `i`'s speed along its heading, m/s.
-    pub fn forward_speed_mps_of(&self, i: usize) -> f32 {
-        let p = self.base_pose_of(i);
-        self.linvel_w_of(i).dot(p.rotation * Vector::X)
-    }
-
-    /// Yaw rate, rad/s.
-    pub fn yaw_rate_radps(&self) -> f32 {
-        let p = self.base_pose();
-        self.angvel_w().dot(p.rotation * Vector::Z)
-    }
-
-    /// Whether the car is on its side or roof (body z more than 60 degrees from world z).
-    pub fn flipped(&self) -> bool {
-        self.flipped_of(0)
-    }
-
-    /// Whether car `i` is on its side or roof.
-    pub fn flipped_of(&self, i: usize) -> bool {
-        (self.base_pose_of(i).rotation * Vector::Z).z < 0.5
-    }
-
-    /// Scene objects the vehicle touched in the last physics step (walls included, ground
-    /// excluded); empty right after a reset. (Refreshing contacts at reset with rapier's
-    /// collision-only pass would drop the multibody car from the solver's islands.)
-    pub fn contacts(&self) -> Vec<u32> {
-        self.contacts_of(0)
-    }
-
     /// Scene objects car `i` touched in the last physics step.
-    pub fn contacts_of(&self, i: usize) -> Vec<u32> {
+    fn contacts(&self, i: usize) -> Vec<u32> {
         if self.steps == 0 {
             return Vec::new();
         }
@@ -465,7 +373,7 @@ impl Sim {
 
     /// The other cars car `i` touched in the last physics step, each once, with the deepest
     /// contact point.
-    pub fn car_contacts_of(&self, i: usize) -> Vec<CarContact> {
+    fn car_contacts(&self, i: usize) -> Vec<CarContact> {
         let mut out: Vec<(f32, CarContact)> = Vec::new();
         if self.steps == 0 || self.cars.len() < 2 {
             return Vec::new();
@@ -496,49 +404,28 @@ impl Sim {
         out.into_iter().map(|(_, c)| c).collect()
     }
 
-    /// The LiDAR's world pose.
-    pub fn lidar_pose(&self) -> Pose {
-        self.base_pose() * self.model.lidar_b
-    }
-
-    /// The camera's world pose, when the vehicle has a camera link.
-    pub fn camera_pose(&self) -> Option<Pose> {
-        self.camera_pose_of(0)
-    }
-
     /// Car `i`'s camera pose, when the vehicle has a camera link.
-    pub fn camera_pose_of(&self, i: usize) -> Option<Pose> {
-        self.model.camera_b.map(|c| self.base_pose_of(i) * c)
-    }
-
-    /// A LiDAR scan from the current pose.
-    pub fn lidar_scan(&mut self) -> LaserScan {
-        self.lidar_scan_of(0)
+    fn camera_pose(&self, i: usize) -> Option<Pose> {
+        self.model.camera_b.map(|c| self.base_pose(i) * c)
     }
 
     /// Car `i`'s LiDAR scan: the scene and the other cars.
-    pub fn lidar_scan_of(&mut self, i: usize) -> LaserScan {
-        let pose = self.base_pose_of(i) * self.model.lidar_b;
+    pub fn lidar_scan(&mut self, i: usize) -> LaserScan {
+        let pose = self.base_pose(i) * self.model.lidar_b;
         let car = &mut self.cars[i];
         car.lidar
             .scan_with(&self.world.statics, &self.shapes, Some(i as u32), &pose)
     }
 
-    /// A LiDAR scan as if the LiDAR link were at `pose_w` (probing; the car does not move).
-    pub fn lidar_scan_at(&mut self, pose_w: &Pose) -> LaserScan {
-        self.cars[0].lidar.scan(&self.world.statics, pose_w)
-    }
-
-    /// The camera frame from the vehicle's camera link, when a camera is configured and the
-    /// vehicle has a camera link.
-    pub fn camera_frame(&self) -> Option<crate::sensors::camera::RenderedFrame> {
-        self.camera_frame_of(0)
+    /// A LiDAR scan as if car 0's LiDAR link were at `pose_w` (probing; the car does not move).
+    pub fn lidar_scan_at(&mut self, pose_w: &Pose3) -> LaserScan {
+        self.cars[0].lidar.scan(&self.world.statics, &car::pose_of(pose_w))
     }
 
     /// Car `i`'s camera frame: the scene and the other cars.
-    pub fn camera_frame_of(&self, i: usize) -> Option<crate::sensors::camera::RenderedFrame> {
+    fn camera_frame(&self, i: usize) -> Option<crate::sensors::camera::RenderedFrame> {
         self.cfg.settings.camera.as_ref()?;
-        let pose = self.camera_pose_of(i)?;
+        let pose = self.camera_pose(i)?;
         Some(
             self.camera
                 .render_with(&self.world.statics, &self.shapes, Some(i as u32), &pose),
@@ -547,8 +434,8 @@ impl Sim {
 
     /// Render the camera (configured, or the default 160x120) as if it stood at `pose_w`
     /// (looking along its x axis, z up).
-    pub fn render_at(&self, pose_w: &Pose) -> crate::sensors::camera::RenderedFrame {
-        self.camera.render(&self.world.statics, pose_w)
+    pub fn render_at(&self, pose_w: &Pose3) -> crate::sensors::camera::RenderedFrame {
+        self.camera.render(&self.world.statics, &car::pose_of(pose_w))
     }
 
     /// Place every car's collision shapes where the car stands now (worlds of several cars).
@@ -588,27 +475,6 @@ impl Sim {
                 m.car.push(j as u32);
             }
         }
-    }
-
-    /// The GPS reading.
-    pub fn gps(&self) -> GpsReading {
-        self.gps_of(0)
-    }
-
-    /// Car `i`'s GPS reading.
-    pub fn gps_of(&self, i: usize) -> GpsReading {
-        gps::read(&self.cfg.settings.gps, &self.base_pose_of(i))
-    }
-
-    /// The IMU reading (accelerations over the last control period).
-    pub fn imu(&self) -> ImuReading {
-        self.imu_of(0)
-    }
-
-    /// Car `i`'s IMU reading.
-    pub fn imu_of(&self, i: usize) -> ImuReading {
-        let c = &self.cars[i];
-        c.imu.read(&self.base_pose_of(i), c.vel_w.0, c.vel_w.1)
     }
 
     /// Whether a vertical cylinder of `radius_m` standing at (x, y) from the ground to 1 m
@@ -659,11 +525,9 @@ impl Sim {
         best
     }
 
-    /// The physics world (read-only), for renderers and tests. With free flight the vehicle's
-    /// colliders keep the pose of the last step that went through rapier; the vehicle's pose is
-    /// `base_pose`.
-    pub fn world(&self) -> &World {
-        &self.world
+    /// Whether continuous collision detection runs (see `SimSettings`'s thin-wall check).
+    pub fn continuous_collision(&self) -> bool {
+        self.world.continuous_collision()
     }
 }
 
