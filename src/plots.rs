@@ -96,6 +96,20 @@ pub fn learning_curve(path: &Path, points: &[(f64, f64)], title: &str) -> Result
     })
 }
 
+/// The series' legend in the lower right corner, on a light box.
+fn legend_lower_right<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .draw()
+        .map_err(|e| anyhow!("plot: {e}"))
+}
+
 /// Mean coverage against time of each `(label, csv)` (`agvrl eval --coverage-csv` output: an
 /// episode that ended early keeps its last coverage to the end).
 pub fn coverage_over_time(path: &Path, series: &[(String, String)], title: &str) -> Result<()> {
@@ -173,15 +187,7 @@ pub fn coverage_over_time(path: &Path, series: &[(String, String)], title: &str)
                 .label(label.as_str())
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .draw()
-            .map_err(e)?;
-        Ok(())
+        legend_lower_right(&mut chart)
     })
 }
 
@@ -254,15 +260,7 @@ pub fn race_gaps(path: &Path, series: &[GapSeries], title: &str) -> Result<()> {
                 .draw_series(s.at_fault_s.iter().map(|&t| Cross::new(at(t), 7, RED.stroke_width(2))))
                 .map_err(e)?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .draw()
-            .map_err(e)?;
-        Ok(())
+        legend_lower_right(&mut chart)
     })
 }
 

@@ -365,6 +365,54 @@ fn take_all<M: serde::de::DeserializeOwned + 'static>(s: &ros2_client::Subscript
     out
 }
 
+/// A race of `cars` on the oval, rows `grid_gap_m` apart, each race 1,000 ticks.
+fn served_race(cars: usize, grid_gap_m: f32) -> EnvConfig {
+    EnvConfig {
+        race: Some(agvrl_envs::RaceSettings {
+            cars,
+            grid_gap_m,
+            ..Default::default()
+        }),
+        max_steps: 1000,
+        ..EnvConfig::default()
+    }
+}
+
+/// A node of its own on `cfg`'s domain, as a team's tools would run (its context beside it).
+fn listener_node(cfg: &Ros2Config, name: &str) -> (ros2_client::Context, ros2_client::Node) {
+    let ctx = ros2_client::Context::with_options(ros2_client::ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
+    let node = ctx
+        .new_node(
+            ros2_client::NodeName::new("/", name).unwrap(),
+            ros2_client::NodeOptions::new().enable_rosout(false),
+        )
+        .unwrap();
+    (ctx, node)
+}
+
+/// Car 0 of a served race driven over DDS by the shipped oval policy for `ticks` ticks, none
+/// with a watchdog event; then the robot gets (within 10 s) every command and is stopped.
+fn drive_car0(cfg: &Ros2Config, env_cfg: &EnvConfig, ticks: u64, h: &RobotHandle) {
+    let car0 = Ros2Config {
+        topics: cfg.topics.namespaced("car0"),
+        ..cfg.clone()
+    };
+    let v = Ros2Vehicle::new(car0, true, None).unwrap();
+    let task = make_task("racing-oval", env_cfg, cfg.drive.steering_limit_rad).unwrap();
+    let policy = Policy::load(&shipped_policy("racing-oval-ppo")).unwrap();
+    let mut lp = DriveLoop::new(v, task, policy, DriveConfig::default(), 0).unwrap();
+    for k in 0..ticks {
+        let t = lp.tick().unwrap();
+        assert!(t.event.is_none(), "tick {k}: {:?}", t.event);
+    }
+    drop(lp);
+    let t0 = std::time::Instant::now();
+    while h.stats().commands < ticks && t0.elapsed().as_secs() < 10 {
+        std::thread::yield_now();
+    }
+    h.stop();
+}
+
 /// A race served over DDS (`SimRobot::race`): car 0 driven by the shipped policy through
 /// `/car0/...`, car 1 by the same policy in-process. The served car gets one period per
 /// command and laps; car 1's sensors are on `/car1/...` in its own frames; `/tf` moves both
@@ -380,22 +428,8 @@ fn a_served_race_drives_car0_over_dds_and_names_every_car_apart() {
     cfg.qos.sensors.depth = 4096;
     // Rows 2 m apart: this policy, trained alone, rams a car 0.8 m ahead. A race is
     // 1,000 ticks (a lap and a bit), so the second starts on the grid mid-drive.
-    let env_cfg = EnvConfig {
-        race: Some(agvrl_envs::RaceSettings {
-            cars: 2,
-            grid_gap_m: 2.0,
-            ..Default::default()
-        }),
-        max_steps: 1000,
-        ..EnvConfig::default()
-    };
-    let ctx = ros2_client::Context::with_options(ros2_client::ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
-    let mut node = ctx
-        .new_node(
-            ros2_client::NodeName::new("/", "race_listener").unwrap(),
-            ros2_client::NodeOptions::new().enable_rosout(false),
-        )
-        .unwrap();
+    let env_cfg = served_race(2, 2.0);
+    let (_ctx, mut node) = listener_node(&cfg, "race_listener");
     let scan1 = listen::<msg::LaserScan>(&mut node, "/car1/scan", ("sensor_msgs", "LaserScan"), false);
     let tf = listen::<msg::TFMessage>(&mut node, "/tf", ("tf2_msgs", "TFMessage"), false);
     let tf_static = listen::<msg::TFMessage>(&mut node, "/tf_static", ("tf2_msgs", "TFMessage"), true);
@@ -425,23 +459,7 @@ fn a_served_race_drives_car0_over_dds_and_names_every_car_apart() {
         }
         (scans, moves, mounts)
     });
-    let car0 = Ros2Config {
-        topics: cfg.topics.namespaced("car0"),
-        ..cfg.clone()
-    };
-    let v = Ros2Vehicle::new(car0, true, None).unwrap();
-    let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
-    let mut lp = DriveLoop::new(v, task, policy(), DriveConfig::default(), 0).unwrap();
-    for k in 0..ticks {
-        let t = lp.tick().unwrap();
-        assert!(t.event.is_none(), "tick {k}: {:?}", t.event);
-    }
-    drop(lp);
-    let t0 = std::time::Instant::now();
-    while h.stats().commands < ticks && t0.elapsed().as_secs() < 10 {
-        std::thread::yield_now();
-    }
-    h.stop();
+    drive_car0(&cfg, &env_cfg, ticks, &h);
     let blocked = th.join().unwrap();
     let stats = h.stats();
     listening.store(false, Ordering::Relaxed);
@@ -511,23 +529,9 @@ fn a_served_race_runs_classical_racers_as_opponents() {
     let ticks = 300; // 10 s: a racer at 0.75 of 1.79 m/s covers up to 13 m
     let mut cfg = ros_cfg(InvalidRay::Stop);
     cfg.qos.sensors.depth = 4096;
-    let env_cfg = EnvConfig {
-        race: Some(agvrl_envs::RaceSettings {
-            cars: 3,
-            // Rows 3 m apart: closer, follow-the-gap meets pure pursuit in the first turn.
-            grid_gap_m: 3.0,
-            ..Default::default()
-        }),
-        max_steps: 1000,
-        ..EnvConfig::default()
-    };
-    let ctx = ros2_client::Context::with_options(ros2_client::ContextOptions::new().domain_id(cfg.domain_id)).unwrap();
-    let mut node = ctx
-        .new_node(
-            ros2_client::NodeName::new("/", "racers_listener").unwrap(),
-            ros2_client::NodeOptions::new().enable_rosout(false),
-        )
-        .unwrap();
+    // Rows 3 m apart: closer, follow-the-gap meets pure pursuit in the first turn.
+    let env_cfg = served_race(3, 3.0);
+    let (_ctx, mut node) = listener_node(&cfg, "racers_listener");
     let odom: Vec<_> = (1..3)
         .map(|i| listen::<msg::Odometry>(&mut node, &format!("/car{i}/odom"), ("nav_msgs", "Odometry"), false))
         .collect();
@@ -555,24 +559,7 @@ fn a_served_race_runs_classical_racers_as_opponents() {
         }
         seen
     });
-    let car0 = Ros2Config {
-        topics: cfg.topics.namespaced("car0"),
-        ..cfg.clone()
-    };
-    let v = Ros2Vehicle::new(car0, true, None).unwrap();
-    let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
-    let policy = Policy::load(&shipped_policy("racing-oval-ppo")).unwrap();
-    let mut lp = DriveLoop::new(v, task, policy, DriveConfig::default(), 0).unwrap();
-    for k in 0..ticks {
-        let t = lp.tick().unwrap();
-        assert!(t.event.is_none(), "tick {k}: {:?}", t.event);
-    }
-    drop(lp);
-    let t0 = std::time::Instant::now();
-    while h.stats().commands < ticks && t0.elapsed().as_secs() < 10 {
-        std::thread::yield_now();
-    }
-    h.stop();
+    drive_car0(&cfg, &env_cfg, ticks, &h);
     th.join().unwrap();
     listening.store(false, Ordering::Relaxed);
     let seen = listener.join().unwrap();

@@ -165,11 +165,9 @@ impl RaceReport {
 
     /// Read a report `agvrl race --json` wrote.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| RunError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        serde_json::from_str(&text).map_err(|e| RunError::Config(format!("{}: not a race report: {e}", path.display())))
+        crate::report::read_json(path, |e| {
+            RunError::Config(format!("{}: not a race report: {e}", path.display()))
+        })
     }
 }
 

@@ -218,10 +218,18 @@ impl RunReport {
 
     /// Read a run directory's eval.json.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| RunError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        serde_json::from_str(&text).map_err(|e| RunError::RunDir(format!("{}: {e}", path.display())))
+        read_json(path, |e| RunError::RunDir(format!("{}: {e}", path.display())))
     }
+}
+
+/// A JSON report at `path`; `bad` words a file that does not parse as one.
+pub(crate) fn read_json<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    bad: impl FnOnce(serde_json::Error) -> RunError,
+) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|source| RunError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    serde_json::from_str(&text).map_err(bad)
 }
