@@ -206,7 +206,7 @@ fn new_learner(cfg: &RunConfig, device: &Device) -> Result<(Box<dyn Learner>, Op
                 added.len()
             );
         }
-        Box::new(ppo_with_threads(ppo, cfg))
+        Box::new(ppo_with_threads(ppo, cfg)?)
     } else {
         Box::new(sac_with_threads(
             Sac::new(cfg.sac.clone(), vec_env(cfg, &pool)?, device, cfg.seed)?,
@@ -229,7 +229,7 @@ fn resumed_learner(
         Box::new(ppo_with_threads(
             Ppo::load_checkpoint(&ckpt, vec_env(cfg, &pool)?, device)?,
             cfg,
-        ))
+        )?)
     } else {
         Box::new(sac_with_threads(
             Sac::load_checkpoint(&ckpt, vec_env(cfg, &pool)?, device)?,
@@ -465,10 +465,10 @@ fn sac_with_threads<E: Env>(mut sac: Sac<E>, cfg: &RunConfig) -> Result<Sac<E>> 
 
 /// `ppo` splitting each image minibatch over the run's `threads`, its learning rate scheduled
 /// over the run's `steps` (`ppo.learning_rate_final`).
-fn ppo_with_threads<E: Env>(mut ppo: Ppo<E>, cfg: &RunConfig) -> Ppo<E> {
-    ppo.set_threads(cfg.threads);
+fn ppo_with_threads<E: Env>(mut ppo: Ppo<E>, cfg: &RunConfig) -> Result<Ppo<E>> {
+    ppo.set_threads(cfg.threads)?;
     ppo.set_schedule_steps(cfg.steps);
-    ppo
+    Ok(ppo)
 }
 
 static STOP_HANDLER: std::sync::OnceLock<()> = std::sync::OnceLock::new();

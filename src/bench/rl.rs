@@ -298,7 +298,7 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         };
         let env = VecEnv::new(vec![RandomEnv::new(8 + spec.len(), a)], 1)?;
         let mut ppo = Ppo::new(cfg, env, &device, 0)?;
-        ppo.set_threads(threads);
+        ppo.set_threads(threads)?;
         ppo.learn(256, &mut |_| Control::Continue)?;
         let mut sps = vec![];
         for _ in 0..ppo_reps {

@@ -1,4 +1,4 @@
-//! Persistent helper threads for a learner's gradient steps.
+//! Persistent helper threads for a learner's gradient steps (SAC's and PPO's).
 //!
 //! A gradient step forks and joins twice (critic, actor) within a few milliseconds. On a
 //! virtual machine, waking a parked thread costs tens of microseconds each time, and a fresh
@@ -86,6 +86,41 @@ impl Workers {
     }
 }
 
+impl Workers {
+    /// [`Workers::run`] for jobs that borrow from the caller's stack. Every job has returned or
+    /// unwound before this returns (a panic in job 0 is resumed only once the helpers' jobs are
+    /// done), so nothing a job borrows goes away while it runs.
+    pub(crate) fn run_scoped<'s, T: Send + 's>(&self, jobs: Vec<Box<dyn FnOnce() -> T + Send + 's>>) -> Vec<Option<T>> {
+        assert!(jobs.len() <= self.len() + 1, "more jobs than threads");
+        let mut jobs = jobs.into_iter();
+        let Some(first) = jobs.next() else {
+            return vec![];
+        };
+        let receivers: Vec<Receiver<T>> = jobs
+            .zip(&self.senders)
+            .map(|(job, worker)| {
+                let (tx, rx) = mpsc::channel();
+                let job: Box<dyn FnOnce() + Send + 's> = Box::new(move || {
+                    let _ = tx.send(job());
+                });
+                // SAFETY: only the lifetime changes. The job ends (its result sent, or its
+                // channel dropped as it unwinds or is dropped unrun) before this function
+                // returns: every receiver is waited on below, even when job 0 panics.
+                let job: Job = unsafe { std::mem::transmute::<Box<dyn FnOnce() + Send + 's>, Job>(job) };
+                // A helper that is gone drops the job unrun, leaving `rx` disconnected: `None`.
+                let _ = worker.send(job);
+                rx
+            })
+            .collect();
+        let first = std::panic::catch_unwind(std::panic::AssertUnwindSafe(first));
+        let rest: Vec<Option<T>> = receivers.iter().map(wait).collect();
+        match first {
+            Ok(v) => std::iter::once(Some(v)).chain(rest).collect(),
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    }
+}
+
 impl Drop for Workers {
     fn drop(&mut self) {
         self.senders.clear();
@@ -116,6 +151,37 @@ mod tests {
             assert_eq!(out[0].1, std::thread::current().id());
             assert!(out[1].1 != out[0].1 && out[2].1 != out[0].1 && out[1].1 != out[2].1);
         }
+    }
+
+    /// Borrowing jobs see the caller's data and return in order; a panic in the caller's own
+    /// job reaches the caller, and the helpers run the next call's jobs.
+    #[test]
+    fn scoped_jobs_borrow_the_callers_data_and_a_panic_reaches_the_caller() {
+        let workers = Workers::new(2).unwrap();
+        let data: Vec<u64> = (0..300).collect();
+        let sums = |w: &Workers| -> Vec<u64> {
+            let jobs: Vec<Box<dyn FnOnce() -> u64 + Send + '_>> = data
+                .chunks(100)
+                .map(|c| Box::new(|| c.iter().sum::<u64>()) as Box<dyn FnOnce() -> u64 + Send + '_>)
+                .collect();
+            w.run_scoped(jobs).into_iter().map(Option::unwrap).collect()
+        };
+        assert_eq!(sums(&workers), [4950, 14950, 24950]);
+        let done = std::sync::atomic::AtomicUsize::new(0);
+        let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            let count = || {
+                done.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            };
+            let jobs: Vec<Box<dyn FnOnce() + Send + '_>> = vec![Box::new(|| panic!("job 0 failed")), Box::new(count)];
+            workers.run_scoped(jobs)
+        }));
+        assert!(caught.is_err());
+        assert_eq!(
+            done.load(std::sync::atomic::Ordering::SeqCst),
+            1,
+            "the helper's job ran"
+        );
+        assert_eq!(sums(&workers), [4950, 14950, 24950]);
     }
 
     #[test]

@@ -143,7 +143,7 @@ fn resumed_equals_straight<L: Learner>(name: &str, fresh: impl Fn() -> L, resume
 /// PPO as `agvrl train` sets it up (threads, the learning rate's schedule over the run).
 fn ppo(learner: Ppo<Lap>, threads: usize, run_steps: u64) -> Ppo<Lap> {
     let mut learner = learner;
-    learner.set_threads(threads);
+    learner.set_threads(threads).unwrap();
     learner.set_schedule_steps(run_steps);
     learner
 }

@@ -127,6 +127,8 @@ pub struct Ppo<E: Env> {
     shuffle: bool,
     /// Threads an image minibatch is split over (see [`Ppo::set_threads`]).
     threads: usize,
+    /// Their helpers, beside the calling thread (more than one thread only).
+    workers: Option<crate::workers::Workers>,
     /// The run's length for `learning_rate_final` (see [`Ppo::set_schedule_steps`]).
     schedule_steps: Option<u64>,
     /// With `correction_limit`, each env's multiplier: the charge per corrected step.
@@ -280,6 +282,7 @@ impl<E: Env> Ppo<E> {
             last: None,
             shuffle: true,
             threads: 1,
+            workers: None,
             schedule_steps: None,
             lambdas: vec![0.0; n_envs],
         })
@@ -309,8 +312,15 @@ impl<E: Env> Ppo<E> {
     /// Split each minibatch of an image config over `threads` threads (default 1). A run is
     /// the same bit for bit for a given count; configs without an image ignore it (their
     /// minibatches are too small to gain).
-    pub fn set_threads(&mut self, threads: usize) {
+    pub fn set_threads(&mut self, threads: usize) -> Result<()> {
         self.threads = threads.max(1);
+        self.workers = None;
+        if self.threads > 1 {
+            let workers = crate::workers::Workers::new(self.threads - 1)
+                .map_err(|e| RlError::Internal(format!("cannot start PPO worker threads: {e}")))?;
+            self.workers = Some(workers);
+        }
+        Ok(())
     }
 
     /// The run's length in env steps, over which `learning_rate_final` anneals the learning

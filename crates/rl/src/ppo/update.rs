@@ -13,6 +13,7 @@ use super::distribution::ActionDist;
 use super::{Layout, Ppo, Rollout, host};
 use crate::adam::Adam;
 use crate::error::{Result, RlError};
+use crate::workers::Workers;
 use agvrl_envs::Env;
 
 /// What [`Ppo::gradient_probe`] returns (weights in agvrl's layout: `[members, in, out]`).
@@ -192,20 +193,19 @@ fn explained_variance(returns: &[f32], advantages: &[f32]) -> f64 {
     1.0 - var(advantages) / vr
 }
 
-/// `job` on every item, item 0 on the calling thread and one scoped thread for each other;
-/// results in item order.
-fn on_threads<T: Sync, R: Send>(items: &[T], job: impl Fn(&T) -> R + Sync) -> Vec<R> {
-    std::thread::scope(|s| {
-        let job = &job;
-        let others: Vec<_> = items[1..].iter().map(|t| s.spawn(move || job(t))).collect();
-        let mut out = vec![job(&items[0])];
-        out.extend(
-            others
-                .into_iter()
-                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
-        );
-        out
-    })
+/// `job` on every item, item 0 on the calling thread and the others on `workers` (at most one
+/// item more than helpers); results in item order.
+fn on_threads<T: Sync, R: Send>(workers: &Workers, items: &[T], job: impl Fn(&T) -> R + Sync) -> Result<Vec<R>> {
+    let job = &job;
+    let jobs = items
+        .iter()
+        .map(|t| Box::new(move || job(t)) as Box<dyn FnOnce() -> R + Send + '_>)
+        .collect();
+    workers
+        .run_scoped(jobs)
+        .into_iter()
+        .map(|r| r.ok_or_else(|| RlError::Internal("a PPO minibatch thread panicked".into())))
+        .collect()
 }
 
 impl<E: Env> Ppo<E> {
@@ -239,50 +239,54 @@ impl<E: Env> Ppo<E> {
         let (encoder, act_fn) = (self.encoder(), self.cfg.activation_fn);
         let image = encoder.as_ref();
         // An image minibatch is split over the threads (MLP-only ones are too small to gain).
-        let k = if image.is_some() { self.threads.clamp(1, n) } else { 1 };
-        let (head, mut grads) = if k == 1 {
-            let f = host::forward(&self.params, &l, act_fn, image, &obs, n);
-            let head = head_of(&f.mean, &f.value, self.cfg.use_sde.then(|| f.latent(&obs)));
-            let grads = host::backward(&self.params, &l, act_fn, image, &obs, &f, &head.d_mean, &head.d_value);
-            (head, grads)
-        } else {
-            let rows: Vec<std::ops::Range<usize>> = (0..k).map(|i| i * n / k..(i + 1) * n / k).collect();
-            let (params, l, obs) = (&self.params, &l, &obs);
-            let passes = on_threads(&rows, |r| {
-                host::forward(params, l, act_fn, image, &obs[r.start * o..r.end * o], r.len())
-            });
-            let (mut mean, mut value, mut latent) = (Vec::with_capacity(n * a), Vec::with_capacity(n), Vec::new());
-            for (f, r) in passes.iter().zip(&rows) {
-                mean.extend_from_slice(&f.mean);
-                value.extend_from_slice(&f.value);
-                if self.cfg.use_sde {
-                    latent.extend_from_slice(f.latent(&obs[r.start * o..r.end * o]));
-                }
+        let workers = self.workers.as_ref().filter(|_| image.is_some());
+        let k = workers.map_or(1, |w| (w.len() + 1).clamp(1, n));
+        let (head, mut grads) = match workers.filter(|_| k > 1) {
+            None => {
+                let f = host::forward(&self.params, &l, act_fn, image, &obs, n);
+                let head = head_of(&f.mean, &f.value, self.cfg.use_sde.then(|| f.latent(&obs)));
+                let grads = host::backward(&self.params, &l, act_fn, image, &obs, &f, &head.d_mean, &head.d_value);
+                (head, grads)
             }
-            let head = head_of(&mean, &value, self.cfg.use_sde.then_some(&latent[..]));
-            let (d_mean, d_value) = (&head.d_mean, &head.d_value);
-            let jobs: Vec<_> = rows.iter().cloned().zip(&passes).collect();
-            let parts = on_threads(&jobs, |(r, f)| {
-                host::backward(
-                    params,
-                    l,
-                    act_fn,
-                    image,
-                    &obs[r.start * o..r.end * o],
-                    f,
-                    &d_mean[r.start * a..r.end * a],
-                    &d_value[r.clone()],
-                )
-            });
-            // Summed in row order, so a thread count gives the same bits every run.
-            let mut parts = parts.into_iter();
-            let mut grads = parts.next().expect("one part per thread");
-            for p in parts {
-                for (g, q) in grads.iter_mut().zip(p) {
-                    g.iter_mut().zip(q).for_each(|(g, q)| *g += q);
+            Some(workers) => {
+                let rows: Vec<std::ops::Range<usize>> = (0..k).map(|i| i * n / k..(i + 1) * n / k).collect();
+                let (params, l, obs) = (&self.params, &l, &obs);
+                let passes = on_threads(workers, &rows, |r| {
+                    host::forward(params, l, act_fn, image, &obs[r.start * o..r.end * o], r.len())
+                })?;
+                let (mut mean, mut value, mut latent) = (Vec::with_capacity(n * a), Vec::with_capacity(n), Vec::new());
+                for (f, r) in passes.iter().zip(&rows) {
+                    mean.extend_from_slice(&f.mean);
+                    value.extend_from_slice(&f.value);
+                    if self.cfg.use_sde {
+                        latent.extend_from_slice(f.latent(&obs[r.start * o..r.end * o]));
+                    }
                 }
+                let head = head_of(&mean, &value, self.cfg.use_sde.then_some(&latent[..]));
+                let (d_mean, d_value) = (&head.d_mean, &head.d_value);
+                let jobs: Vec<_> = rows.iter().cloned().zip(&passes).collect();
+                let parts = on_threads(workers, &jobs, |(r, f)| {
+                    host::backward(
+                        params,
+                        l,
+                        act_fn,
+                        image,
+                        &obs[r.start * o..r.end * o],
+                        f,
+                        &d_mean[r.start * a..r.end * a],
+                        &d_value[r.clone()],
+                    )
+                })?;
+                // Summed in row order, so a thread count gives the same bits every run.
+                let mut parts = parts.into_iter();
+                let mut grads = parts.next().expect("one part per thread");
+                for p in parts {
+                    for (g, q) in grads.iter_mut().zip(p) {
+                        g.iter_mut().zip(q).for_each(|(g, q)| *g += q);
+                    }
+                }
+                (head, grads)
             }
-            (head, grads)
         };
         grads[l.log_std] = head.d_log_std.clone();
         Ok((head, grads))
@@ -662,7 +666,7 @@ mod tests {
                 Some((spec, v)) => VecEnv::new(vec![Box::new(Shape(v + spec.len())) as Box<dyn Env>], 1).unwrap(),
             };
             let mut ppo = Ppo::new(cfg.clone(), env, &device, 3).unwrap();
-            ppo.set_threads(threads);
+            ppo.set_threads(threads).unwrap();
             let (o, a, n) = (ppo.obs_dim, ppo.act_dim, 40);
             let mut rng = Rng::new(5);
             // Images in [0, 1] as the envs give them; a vector part of any sign.
@@ -714,7 +718,7 @@ mod tests {
                 let mb =
                     |p: &Ppo<Box<dyn Env>>| p.minibatch(x.clone(), acts.clone(), &old_lp, &adv, &ret, None).unwrap();
                 let (h1, g1) = mb(&ppo);
-                ppo.set_threads(1);
+                ppo.set_threads(1).unwrap();
                 let (h2, g2) = mb(&ppo);
                 // Products of other shapes round differently: equal to f32 rounding.
                 let near = |p: f64, q: f64| (p - q).abs() < 1e-5 * (1.0 + q.abs());
