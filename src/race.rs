@@ -6,7 +6,7 @@
 use crate::plots::{self, Path2};
 use crate::viz::{self, Recorder};
 use agvrl_envs::{MultiEnv as _, RaceSettings};
-use agvrl_run::{CarFigures, PolicySettings, RaceReport, WidthBand};
+use agvrl_run::{CarFigures, PolicySettings, RaceReport, WIDTH_BANDS, WidthBand};
 use anyhow::{Result, bail};
 use clap::Args;
 use std::path::PathBuf;
@@ -122,9 +122,6 @@ impl Tally {
     }
 }
 
-/// The width bands `--circuits` reports, narrowest first.
-const BANDS: [&str; 3] = ["le2m", "2to3m", "ge3m"];
-
 pub fn race(a: RaceArgs) -> Result<()> {
     if a.races == 0 {
         bail!("--races must be at least 1");
@@ -211,7 +208,7 @@ pub fn race(a: RaceArgs) -> Result<()> {
     let mut paths: Vec<Path2> = Vec::new();
     let mut gaps: Vec<plots::GapSeries> = Vec::new();
     let mut tally: Vec<Tally> = (0..cars).map(|_| Tally::default()).collect();
-    let mut bands: Vec<Vec<Tally>> = BANDS
+    let mut bands: Vec<Vec<Tally>> = WIDTH_BANDS
         .iter()
         .map(|_| (0..cars).map(|_| Tally::default()).collect())
         .collect();
@@ -318,7 +315,7 @@ pub fn race(a: RaceArgs) -> Result<()> {
             }
         };
         let band = env.sim().circuit().map(|c| {
-            BANDS
+            WIDTH_BANDS
                 .iter()
                 .position(|&b| b == agvrl_run::width_band(c.width_m as f64))
                 .unwrap_or(0)
@@ -348,7 +345,7 @@ pub fn race(a: RaceArgs) -> Result<()> {
             .enumerate()
             .map(|(i, t)| t.figures(i, car_name(i)))
             .collect(),
-        by_width: BANDS
+        by_width: WIDTH_BANDS
             .iter()
             .zip(&bands)
             .filter(|(_, b)| b[0].races > 0)

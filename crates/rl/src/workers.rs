@@ -62,35 +62,11 @@ impl Workers {
     }
 
     /// Run `jobs` (at most `len() + 1`): job 0 on the calling thread, job `i` on helper
-    /// `i - 1`; results in job order. A job that panics on a helper returns `None`.
-    pub(crate) fn run<T: Send + 'static>(&self, jobs: Vec<Box<dyn FnOnce() -> T + Send>>) -> Vec<Option<T>> {
-        assert!(jobs.len() <= self.len() + 1, "more jobs than threads");
-        let mut jobs = jobs.into_iter();
-        let Some(first) = jobs.next() else {
-            return vec![];
-        };
-        let receivers: Vec<Receiver<T>> = jobs
-            .zip(&self.senders)
-            .map(|(job, worker)| {
-                let (tx, rx) = mpsc::channel();
-                // A helper that is gone leaves `rx` disconnected, read below as `None`.
-                let _ = worker.send(Box::new(move || {
-                    let _ = tx.send(job());
-                }));
-                rx
-            })
-            .collect();
-        let mut out = vec![Some(first())];
-        out.extend(receivers.iter().map(wait));
-        out
-    }
-}
-
-impl Workers {
-    /// [`Workers::run`] for jobs that borrow from the caller's stack. Every job has returned or
-    /// unwound before this returns (a panic in job 0 is resumed only once the helpers' jobs are
-    /// done), so nothing a job borrows goes away while it runs.
-    pub(crate) fn run_scoped<'s, T: Send + 's>(&self, jobs: Vec<Box<dyn FnOnce() -> T + Send + 's>>) -> Vec<Option<T>> {
+    /// `i - 1`; results in job order. A job that panics on a helper returns `None`. Jobs may
+    /// borrow from the caller's stack: every job has returned or unwound before this returns
+    /// (a panic in job 0 is resumed only once the helpers' jobs are done), so nothing a job
+    /// borrows goes away while it runs.
+    pub(crate) fn run<'s, T: Send + 's>(&self, jobs: Vec<Box<dyn FnOnce() -> T + Send + 's>>) -> Vec<Option<T>> {
         assert!(jobs.len() <= self.len() + 1, "more jobs than threads");
         let mut jobs = jobs.into_iter();
         let Some(first) = jobs.next() else {
@@ -164,7 +140,7 @@ mod tests {
                 .chunks(100)
                 .map(|c| Box::new(|| c.iter().sum::<u64>()) as Box<dyn FnOnce() -> u64 + Send + '_>)
                 .collect();
-            w.run_scoped(jobs).into_iter().map(Option::unwrap).collect()
+            w.run(jobs).into_iter().map(Option::unwrap).collect()
         };
         assert_eq!(sums(&workers), [4950, 14950, 24950]);
         let done = std::sync::atomic::AtomicUsize::new(0);
@@ -173,7 +149,7 @@ mod tests {
                 done.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
             };
             let jobs: Vec<Box<dyn FnOnce() + Send + '_>> = vec![Box::new(|| panic!("job 0 failed")), Box::new(count)];
-            workers.run_scoped(jobs)
+            workers.run(jobs)
         }));
         assert!(caught.is_err());
         assert_eq!(

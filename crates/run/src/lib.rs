@@ -21,7 +21,7 @@ pub use config::RunConfig;
 pub use dir::{Run, RunDir, files, stamp, write_atomic};
 pub use error::{Result, RunError};
 pub use error_line::error_line;
-pub use race_report::{CarFigures, RaceReport, WidthBand, width_band};
+pub use race_report::{CarFigures, RaceReport, WIDTH_BANDS, WidthBand, width_band};
 pub use report::{EvalReport, FilterReport, RacingReport, RunReport, SearchReport, SubjectsReport};
 pub use seeds::Seeds;
 pub use settings::{PolicySettings, SettingsSource};

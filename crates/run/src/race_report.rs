@@ -171,13 +171,10 @@ impl RaceReport {
     }
 }
 
-/// The width band of a circuit `width_m` wide (see [`WidthBand::band`]).
+/// The width bands, narrowest first (see [`WidthBand::band`]).
+pub const WIDTH_BANDS: [&str; 3] = ["le2m", "2to3m", "ge3m"];
+
+/// The width band of a circuit `width_m` wide.
 pub fn width_band(width_m: f64) -> &'static str {
-    if width_m <= 2.0 {
-        "le2m"
-    } else if width_m < 3.0 {
-        "2to3m"
-    } else {
-        "ge3m"
-    }
+    WIDTH_BANDS[usize::from(width_m > 2.0) + usize::from(width_m >= 3.0)]
 }

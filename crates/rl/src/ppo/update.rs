@@ -202,7 +202,7 @@ fn on_threads<T: Sync, R: Send>(workers: &Workers, items: &[T], job: impl Fn(&T)
         .map(|t| Box::new(move || job(t)) as Box<dyn FnOnce() -> R + Send + '_>)
         .collect();
     workers
-        .run_scoped(jobs)
+        .run(jobs)
         .into_iter()
         .map(|r| r.ok_or_else(|| RlError::Internal("a PPO minibatch thread panicked".into())))
         .collect()
