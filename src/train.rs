@@ -8,7 +8,7 @@ use crate::selfplay::{Pool, SelfPlayEnv};
 use crate::viz::{self, Recorder, Sink};
 use agvrl_envs::wrappers::TimeLimit;
 use agvrl_envs::{Env, VecEnv, make};
-use agvrl_rl::{Algorithm, Control, Device, DeviceChoice, Learner, Policy, Ppo, Progress, Sac};
+use agvrl_rl::{Algorithm, Control, Device, DeviceChoice, Learner, NetPath, Policy, Ppo, Progress, Sac};
 use agvrl_run::{Run, RunDir, RunReport, files, stamp, write_atomic};
 use anyhow::{Context, Result};
 use clap::Args;
@@ -43,6 +43,52 @@ impl From<DeviceArg> for DeviceChoice {
     }
 }
 
+/// What a learner trains on: the device, and the path its networks take there (the device's
+/// own when `None`: the host kernels on the CPU, Burn on a GPU; see [`NetPath`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Compute {
+    pub device: DeviceChoice,
+    pub net_path: Option<NetPath>,
+}
+
+impl From<DeviceChoice> for Compute {
+    fn from(device: DeviceChoice) -> Self {
+        Self { device, net_path: None }
+    }
+}
+
+impl Compute {
+    /// Set the learner's network path, when one was asked for, and say which it takes.
+    fn apply(&self, learner: &mut dyn Learner) {
+        if let Some(path) = self.net_path {
+            learner.set_net_path(path);
+        }
+        eprintln!(
+            "networks: {} path on {}",
+            learner.net_path().name(),
+            format!("{:?}", self.device).to_lowercase()
+        );
+    }
+}
+
+/// `--net-path`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum NetPathArg {
+    /// The host kernels (the CPU fast path).
+    Host,
+    /// Burn's tensors and autodiff on the device (what a GPU runs).
+    Burn,
+}
+
+impl From<NetPathArg> for NetPath {
+    fn from(p: NetPathArg) -> Self {
+        match p {
+            NetPathArg::Host => Self::Host,
+            NetPathArg::Burn => Self::Burn,
+        }
+    }
+}
+
 #[derive(Args, Default)]
 pub struct TrainArgs {
     /// Environment id (see `agvrl envs`).
@@ -71,6 +117,11 @@ pub struct TrainArgs {
     /// Compute device: flex or ndarray (CPU), cuda or wgpu (builds with that feature).
     #[arg(long, value_enum, default_value_t = DeviceArg::Flex)]
     pub device: DeviceArg,
+    /// Where the networks run on the device: host (the CPU's fast kernels, the default on
+    /// flex and ndarray) or burn (Burn's autodiff, the default on cuda and wgpu; on a CPU
+    /// device, a check of the GPU's path).
+    #[arg(long, value_enum)]
+    pub net_path: Option<NetPathArg>,
     /// Continue an interrupted (or finished) run directory up to its configured steps, or
     /// --steps more.
     #[arg(long, conflicts_with_all = ["env", "algo", "seed", "n_envs", "config", "out", "set", "track"])]
@@ -243,6 +294,15 @@ fn resumed_learner(
     Ok((learner, pool))
 }
 
+impl TrainArgs {
+    fn compute(&self) -> Compute {
+        Compute {
+            device: self.device.into(),
+            net_path: self.net_path.map(NetPath::from),
+        }
+    }
+}
+
 pub fn train(a: TrainArgs) -> Result<()> {
     if STOP_HANDLER.set(()).is_ok() {
         // A second Ctrl-C falls through to the default (kill) only after this one is handled.
@@ -267,6 +327,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
         let run = RunDir::resume(dir)?;
         let cfg = RunConfig::load(&run.file(files::CONFIG))?;
         let (mut learner, pool) = resumed_learner(&cfg, &|name: &str| run.file(name), &device)?;
+        a.compute().apply(learner.as_mut());
         let target = match a.steps {
             Some(more) => learner.num_timesteps() + more,
             None => cfg.steps,
@@ -304,7 +365,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
     if a.progress == ProgressMode::Json {
         stop_with_parent(&STOP);
     }
-    let (dir, report) = train_run(cfg, a.out.clone(), a.device.into(), &STOP, a.progress)?;
+    let (dir, report) = train_run(cfg, a.out.clone(), a.compute(), &STOP, a.progress)?;
     if a.progress == ProgressMode::Json {
         println!("{}", done_json(&dir, &report));
     } else {
@@ -351,21 +412,21 @@ fn done_json(dir: &std::path::Path, report: &RunReport) -> String {
 pub fn train_run(
     cfg: RunConfig,
     out: Option<PathBuf>,
-    device: DeviceChoice,
+    compute: Compute,
     stop: &AtomicBool,
     progress: ProgressMode,
 ) -> Result<(PathBuf, RunReport)> {
     let mut cfg = cfg;
     if let Some(first) = cfg.init_config().map(PathBuf::from) {
         let out = out.clone().unwrap_or_else(|| default_run_path(&cfg));
-        let (dir, report) = first_stage(&first, cfg.seed, &out, device, stop, progress)?;
+        let (dir, report) = first_stage(&first, cfg.seed, &out, compute, stop, progress)?;
         if report.interrupted {
             eprintln!("interrupted in the first stage; the fine-tuning did not start");
             return Ok((dir, report));
         }
         cfg.init_from = Some(dir);
     }
-    let device = device.device()?;
+    let device = compute.device.device()?;
     let device = &device;
     image_spec_from_env(&mut cfg);
     cfg.validate()?;
@@ -374,6 +435,7 @@ pub fn train_run(
         cfg.algo, cfg.env, cfg.steps, cfg.seed, cfg.n_envs
     );
     let (mut learner, pool) = new_learner(&cfg, device)?;
+    compute.apply(learner.as_mut());
     // Created once the learner stands, so a setting it refuses leaves no run directory behind.
     let run = match out {
         Some(out) => RunDir::create(out)?,
@@ -406,7 +468,7 @@ fn first_stage(
     first: &std::path::Path,
     seed: u64,
     out: &std::path::Path,
-    device: DeviceChoice,
+    compute: Compute,
     stop: &AtomicBool,
     progress: ProgressMode,
 ) -> Result<(PathBuf, RunReport)> {
@@ -435,7 +497,7 @@ fn first_stage(
         return Ok((dir, report.unwrap_or_default()));
     }
     eprintln!("first stage: {} at seed {seed} into {}", first.display(), dir.display());
-    train_run(cfg, Some(dir), device, stop, progress)
+    train_run(cfg, Some(dir), compute, stop, progress)
 }
 
 /// The observation inputs of `cfg` that the run in `from` (a run directory) did not have.

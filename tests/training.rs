@@ -204,3 +204,42 @@ fn sac_with_the_cli_defaults_learns_pendulum_in_six_thousand_steps() {
         "trained {trained}, random {random}"
     );
 }
+
+#[test]
+fn net_path_burn_trains_either_learner_through_burn_and_the_cpu_default_is_the_host() {
+    let d = tmp("net-path");
+    for algo in ["ppo", "sac"] {
+        for path in [None, Some("burn"), Some("host")] {
+            let out = d.path().join(format!("{algo}-{path:?}"));
+            let mut args = vec![
+                "train",
+                "--env",
+                "pendulum",
+                "--algo",
+                algo,
+                "--steps",
+                "256",
+                "--n-envs",
+                "2",
+                "--set",
+                "eval_episodes=1",
+                "--set",
+                "sac.learning_starts=200",
+                "--set",
+                "sac.batch_size=32",
+                "--set",
+                "ppo.n_steps=64",
+                "--out",
+                out.to_str().unwrap(),
+            ];
+            if let Some(p) = path {
+                args.extend(["--net-path", p]);
+            }
+            let o = agvrl(&args);
+            assert!(o.status.success(), "{algo} {path:?}: {}", stderr(&o));
+            let want = format!("networks: {} path on flex", path.unwrap_or("host"));
+            assert!(stderr(&o).contains(&want), "{algo} {path:?}: {}", stderr(&o));
+            assert!(out.join("policy.agvrl").is_file());
+        }
+    }
+}

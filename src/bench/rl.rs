@@ -30,7 +30,7 @@ use agvrl_rl::cnn::{Encoder, ImageSpec};
 use agvrl_rl::nets::{Activation, Init, MlpSpec};
 use agvrl_rl::policy::{ActionHead, Algorithm, Policy, PolicyData};
 use agvrl_rl::rng::Rng;
-use agvrl_rl::{Control, CpuBackend, Ppo, PpoConfig, Result, Sac, SacConfig};
+use agvrl_rl::{Control, CpuBackend, NetPath, Ppo, PpoConfig, Result, Sac, SacConfig};
 use burn::tensor::{Tensor, TensorData};
 use std::time::Instant;
 
@@ -180,11 +180,11 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
     };
     let flops = sac_update_flops(cfg.batch_size, o, a, &cfg.net_arch);
     let n = if quick { 20 } else { 50 };
-    let mut per_threads = vec![];
-    for threads in [1, 2] {
+    let sac_ups = |threads: usize, path: NetPath| -> Result<f64> {
         let env = VecEnv::new(vec![RandomEnv::new(o, a)], 1)?;
         let mut sac = Sac::new(cfg.clone(), env, &device, 0)?;
         sac.set_threads(threads)?;
+        sac.set_net_path(path);
         sac.learn(300, &mut |_| Control::Continue)?;
         let mut ups = vec![];
         for _ in 0..reps {
@@ -192,9 +192,9 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
             sac.learn(n, &mut |_| Control::Continue)?;
             ups.push(n as f64 / t.elapsed().as_secs_f64());
         }
-        per_threads.push(median(ups));
-    }
-    let (one, two) = (per_threads[0], per_threads[1]);
+        Ok(median(ups))
+    };
+    let (one, two) = (sac_ups(1, NetPath::Host)?, sac_ups(2, NetPath::Host)?);
     // The headline figure is the faster setting: a second thread only helps when a core is free.
     let (best, threads) = if two > one { (two, 2) } else { (one, 1) };
     lines.push(format!(
@@ -208,24 +208,37 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         best * flops / 1e9,
         flops / 1e9
     ));
+    // The same updates through Burn's autodiff on this backend: what a GPU runs.
+    lines.push(format!(
+        "sac_burn_updates_per_s={:.1} threads=1 reps={reps}",
+        sac_ups(1, NetPath::Burn)?
+    ));
 
     // PPO: pendulum, 8 envs, SB3 defaults; one iteration = 8 x 2048 steps + 10 epochs.
-    let envs = (0..8)
-        .map(|_| make("pendulum", &agvrl_envs::EnvConfig::default()))
-        .collect::<std::result::Result<Vec<_>, _>>()?;
-    let mut ppo = Ppo::new(PpoConfig::default(), VecEnv::new(envs, 1)?, &device, 0)?;
-    let per_iter = 8 * 2048;
-    ppo.learn(per_iter, &mut |_| Control::Continue)?;
     let ppo_reps = if quick { 1 } else { 3 };
-    let mut sps = vec![];
-    for _ in 0..ppo_reps {
-        let t = Instant::now();
+    let ppo_sps = |path: NetPath| -> Result<f64> {
+        let envs = (0..8)
+            .map(|_| make("pendulum", &agvrl_envs::EnvConfig::default()))
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        let mut ppo = Ppo::new(PpoConfig::default(), VecEnv::new(envs, 1)?, &device, 0)?;
+        ppo.set_net_path(path);
+        let per_iter = 8 * 2048;
         ppo.learn(per_iter, &mut |_| Control::Continue)?;
-        sps.push(per_iter as f64 / t.elapsed().as_secs_f64());
-    }
+        let mut sps = vec![];
+        for _ in 0..ppo_reps {
+            let t = Instant::now();
+            ppo.learn(per_iter, &mut |_| Control::Continue)?;
+            sps.push(per_iter as f64 / t.elapsed().as_secs_f64());
+        }
+        Ok(median(sps))
+    };
     lines.push(format!(
         "ppo_steps_per_s={:.0} env=pendulum n_envs=8 n_steps=2048 reps={ppo_reps}",
-        median(sps)
+        ppo_sps(NetPath::Host)?
+    ));
+    lines.push(format!(
+        "ppo_burn_steps_per_s={:.0} env=pendulum n_envs=8 n_steps=2048 reps={ppo_reps}",
+        ppo_sps(NetPath::Burn)?
     ));
 
     // Policy inference, batch 1.
@@ -289,8 +302,7 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
 
     // PPO with that encoder on random observations (vector 8 + image): rollouts and updates,
     // each minibatch on one thread, then split over two.
-    let mut per_threads = vec![];
-    for threads in [1, 2] {
+    let cnn_sps = |threads: usize, path: NetPath| -> Result<f64> {
         let cfg = PpoConfig {
             n_steps: 256,
             image: Some(spec),
@@ -299,6 +311,7 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
         let env = VecEnv::new(vec![RandomEnv::new(8 + spec.len(), a)], 1)?;
         let mut ppo = Ppo::new(cfg, env, &device, 0)?;
         ppo.set_threads(threads)?;
+        ppo.set_net_path(path);
         ppo.learn(256, &mut |_| Control::Continue)?;
         let mut sps = vec![];
         for _ in 0..ppo_reps {
@@ -306,15 +319,16 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
             ppo.learn(256, &mut |_| Control::Continue)?;
             sps.push(256.0 / t.elapsed().as_secs_f64());
         }
-        per_threads.push(median(sps));
-    }
+        Ok(median(sps))
+    };
+    let (one, two) = (cnn_sps(1, NetPath::Host)?, cnn_sps(2, NetPath::Host)?);
     lines.push(format!(
-        "ppo_cnn_steps_per_s={:.0} threads=2 image=1x48x64 n_envs=1 n_steps=256 batch=64 n_epochs=10 reps={ppo_reps}",
-        per_threads[1]
+        "ppo_cnn_steps_per_s={two:.0} threads=2 image=1x48x64 n_envs=1 n_steps=256 batch=64 n_epochs=10 reps={ppo_reps}"
     ));
+    lines.push(format!("ppo_cnn_steps_per_s_1thread={one:.0} reps={ppo_reps}"));
     lines.push(format!(
-        "ppo_cnn_steps_per_s_1thread={:.0} reps={ppo_reps}",
-        per_threads[0]
+        "ppo_cnn_burn_steps_per_s={:.0} reps={ppo_reps}",
+        cnn_sps(1, NetPath::Burn)?
     ));
     Ok(lines)
 }

@@ -637,7 +637,7 @@ fn train(
         let worker = std::thread::Builder::new()
             .name("agvrl-train".into())
             .spawn(move || {
-                agvrl::train::train_run(cfg, out, device, &flag, agvrl::train::ProgressMode::Bar)
+                agvrl::train::train_run(cfg, out, device.into(), &flag, agvrl::train::ProgressMode::Bar)
                     .map_err(|e| agvrl_run::error_line(e.as_ref()))
             })
             .map_err(|e| PyRuntimeError::new_err(format!("starting the trainer: {e}")))?;

@@ -97,6 +97,59 @@ impl DeviceChoice {
     }
 }
 
+/// Where a learner runs its networks' forward and backward passes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NetPath {
+    /// The host kernels (`host_gemm`, `host_cnn`) on the master weights: the CPU fast path.
+    #[default]
+    Host,
+    /// Burn's tensors and autodiff on the learner's device, the weights mirrored there: what a
+    /// GPU runs, and any CPU backend when asked for.
+    Burn,
+}
+
+impl NetPath {
+    /// The path a learner on `device` takes unless told otherwise: the host kernels on the CPU
+    /// backends, Burn on any other device.
+    pub fn for_device(device: &Device) -> Self {
+        let cpu = [Some(CpuBackend::Flex.device()), cpu_ndarray()];
+        if cpu.iter().flatten().any(|d| d == device) {
+            Self::Host
+        } else {
+            Self::Burn
+        }
+    }
+
+    /// Its name, as `from_str` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Host => "host",
+            Self::Burn => "burn",
+        }
+    }
+}
+
+impl std::str::FromStr for NetPath {
+    type Err = RlError;
+    fn from_str(name: &str) -> Result<Self> {
+        match name {
+            "host" => Ok(Self::Host),
+            "burn" => Ok(Self::Burn),
+            _ => Err(RlError::Config(format!("unknown network path '{name}' (host, burn)"))),
+        }
+    }
+}
+
+#[cfg(feature = "ndarray")]
+fn cpu_ndarray() -> Option<Device> {
+    Some(CpuBackend::NdArray.device())
+}
+
+#[cfg(not(feature = "ndarray"))]
+fn cpu_ndarray() -> Option<Device> {
+    None
+}
+
 /// A device by name: `flex` or `ndarray` (CPU, always built), `cuda` or `wgpu` (GPU, with the
 /// cargo feature of the same name).
 pub fn device_by_name(name: &str) -> Result<Device> {
@@ -155,6 +208,10 @@ mod tests {
         assert!(device_by_name("ndarray").is_ok());
         let e = device_by_name("tpu").unwrap_err().to_string();
         assert!(e.contains("tpu") && e.contains("flex"), "{e}");
+        assert_eq!(NetPath::for_device(&default_device()), NetPath::Host);
+        assert_eq!(NetPath::for_device(&default_device().autodiff()), NetPath::Host);
+        assert_eq!("burn".parse::<NetPath>().unwrap(), NetPath::Burn);
+        assert!("gpu".parse::<NetPath>().unwrap_err().to_string().contains("host, burn"));
         #[cfg(not(feature = "cuda"))]
         assert!(
             device_by_name("cuda")

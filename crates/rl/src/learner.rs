@@ -1,5 +1,6 @@
 //! What a training driver needs of a learner, whichever algorithm it runs.
 
+use crate::device::NetPath;
 use crate::error::Result;
 use crate::policy::PolicyData;
 use crate::progress::{Control, Progress};
@@ -21,6 +22,10 @@ pub trait Learner {
     fn policy_data(&self) -> PolicyData;
     /// Start fresh episodes at the next step, as a learner resumed from a checkpoint does.
     fn restart_episodes(&mut self);
+    /// Run the networks on the host kernels or through Burn on the learner's device.
+    fn set_net_path(&mut self, path: NetPath);
+    /// Where the networks run.
+    fn net_path(&self) -> NetPath;
 }
 
 impl<E: Env> Learner for Ppo<E> {
@@ -39,6 +44,12 @@ impl<E: Env> Learner for Ppo<E> {
     fn restart_episodes(&mut self) {
         Ppo::restart_episodes(self)
     }
+    fn set_net_path(&mut self, path: NetPath) {
+        Ppo::set_net_path(self, path)
+    }
+    fn net_path(&self) -> NetPath {
+        Ppo::net_path(self)
+    }
 }
 
 impl<E: Env> Learner for Sac<E> {
@@ -56,5 +67,11 @@ impl<E: Env> Learner for Sac<E> {
     }
     fn restart_episodes(&mut self) {
         Sac::restart_episodes(self)
+    }
+    fn set_net_path(&mut self, path: NetPath) {
+        Sac::set_net_path(self, path)
+    }
+    fn net_path(&self) -> NetPath {
+        Sac::net_path(self)
     }
 }

@@ -25,9 +25,14 @@
 //! - All randomness comes from one seeded [`rng::Rng`] per learner: the same seed on one thread
 //!   gives the same run, bit for bit (also for a fixed `Sac::set_threads` count).
 //! - The Burn `Device` is chosen by the caller ([`device`]); weights are held on the host and
-//!   mirrored to the device, so a policy file loads on any backend without autodiff. PPO
-//!   and SAC without an image encoder run their networks on the host (`ppo/host.rs`,
-//!   `sac/host.rs`), whatever the device.
+//!   mirrored to the device, so a policy file loads on any backend without autodiff.
+//! - Each network is laid out once (PPO's `Layout`, SAC's `NetParts`, over [`nets::MlpSpec`]
+//!   and [`cnn::ImageSpec`]) and runs on one of two paths ([`NetPath`]): Burn's tensors and
+//!   autodiff on the device (`ppo::forward`, `sac/update.rs`; the default on a GPU), or the
+//!   host kernels on the same weights (`ppo/host.rs`, `sac/host.rs`, `host_cnn.rs`; the default
+//!   on the CPU backends, the fast path). Both compute the same losses and gradients to 1e-5
+//!   of their scale (the `burn_path_*` tests); the loss heads, Adam and the action sampling are
+//!   the same code on either. SAC with an image runs through Burn on either path.
 //! - Files (policy, checkpoint) are written atomically and carry a CRC-32; a truncated,
 //!   corrupted or mismatching file is an error, never a silently wrong policy.
 //!
@@ -90,7 +95,7 @@ pub use buffer::ReplayBuffer;
 pub use checkpoint::CHECKPOINT_FORMAT_VERSION;
 pub use cnn::ImageSpec;
 pub use config::{EntCoef, PpoConfig, SacConfig};
-pub use device::{CpuBackend, DeviceChoice, default_device, device_by_name};
+pub use device::{CpuBackend, DeviceChoice, NetPath, default_device, device_by_name};
 pub use error::{Result, RlError};
 pub use eval::evaluate;
 #[cfg(feature = "train")]

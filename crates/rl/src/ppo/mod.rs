@@ -24,8 +24,9 @@ pub use update::GradientProbe;
 
 use crate::adam::Adam;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter, Common};
+use crate::device::NetPath;
 use crate::error::{Result, RlError};
-use crate::nets::{HostParams, Init, MlpSpec, init_layer};
+use crate::nets::{HostParams, Init, MlpSpec, init_layer, to_vec};
 use crate::normalize::ObsNormalizer;
 use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData};
 use crate::progress::{Control, Episodes, Losses, Progress};
@@ -83,13 +84,11 @@ impl Layout {
     }
 }
 
-#[cfg(test)]
-use burn::tensor::Tensor;
+use burn::tensor::{Tensor, TensorData};
 
 /// `(mean [1, b, a], value [1, b, 1], actor latent [1, b, latent])` for observations
-/// `x [1, b, o]`, with `params` laid out as [`Layout`]: the tensor formulation the host path
-/// is checked against.
-#[cfg(test)]
+/// `x [1, b, o]`, with `params` laid out as [`Layout`]: the networks on the Burn path
+/// ([`NetPath::Burn`]), and what the host path is checked against.
 pub(crate) fn forward(params: &[Tensor<3>], x: Tensor<3>, cfg: &PpoConfig) -> (Tensor<3>, Tensor<3>, Tensor<3>) {
     let l = Layout::of(cfg);
     let x = match &cfg.image {
@@ -110,6 +109,8 @@ pub struct Ppo<E: Env> {
     cfg_toml: String,
     env: VecEnv<E>,
     device: Device,
+    /// Where the networks run (the host kernels, or Burn on `device`).
+    net_path: NetPath,
     obs_dim: usize,
     act_dim: usize,
     params: HostParams,
@@ -268,6 +269,7 @@ impl<E: Env> Ppo<E> {
             opt: Adam::new(&params, cfg.learning_rate, 1e-5),
             normalizer: cfg.normalize_obs.then(|| ObsNormalizer::new(vec_dim)),
             device: device.clone().without_autodiff(),
+            net_path: NetPath::for_device(device),
             cfg,
             env,
             obs_dim,
@@ -301,6 +303,18 @@ impl<E: Env> Ppo<E> {
     #[cfg(any(test, feature = "parity"))]
     pub fn set_minibatch_shuffle(&mut self, on: bool) {
         self.shuffle = on;
+    }
+
+    /// Run the networks on `path` from the next step on: the host kernels (the CPU fast path,
+    /// the default on CPU devices) or Burn's tensors on the learner's device (the default on
+    /// any other). Both compute the same functions; they differ in f32 rounding.
+    pub fn set_net_path(&mut self, path: NetPath) {
+        self.net_path = path;
+    }
+
+    /// Where the networks run.
+    pub fn net_path(&self) -> NetPath {
+        self.net_path
     }
 
     /// The image encoder at the current weights, laid out for the host products.
@@ -434,8 +448,22 @@ impl<E: Env> Ppo<E> {
         let space = self.env.action_space().clone();
         let sde = self.cfg.use_sde;
         let (host_params, layout) = (&self.params, Layout::of(&self.cfg));
-        let encoder = self.encoder();
+        let burn = self.net_path == NetPath::Burn;
+        let encoder = if burn { None } else { self.encoder() };
+        // The weights stay the same over a rollout: on the Burn path they go up once.
+        let dev_params = if burn {
+            self.params.to_device(&self.device)
+        } else {
+            vec![]
+        };
+        let device = &self.device;
         let value_of = |x: Vec<f32>, n: usize, cfg: &PpoConfig| -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
+            if burn {
+                let x = Tensor::<3>::from_data(TensorData::new(x, [1, n, o]), device);
+                let (mean, value, latent) = forward(&dev_params, x, cfg);
+                let latent = if sde { to_vec(latent)? } else { vec![] };
+                return Ok((to_vec(mean)?, to_vec(value)?, latent));
+            }
             let f = host::forward(host_params, &layout, cfg.activation_fn, encoder.as_ref(), &x, n);
             let latent = if sde { f.latent(&x).to_vec() } else { vec![] };
             Ok((f.mean, f.value, latent))

@@ -21,6 +21,7 @@ use crate::adam::Adam;
 use crate::buffer::ReplayBuffer;
 use crate::checkpoint::{self, AdamMeta, ArrayWriter, Common};
 use crate::cnn::encode;
+use crate::device::NetPath;
 use crate::error::{Result, RlError};
 use crate::nets::{Activation, HostParams, Init, MlpSpec, NetParts, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
@@ -41,6 +42,8 @@ pub struct Sac<E: Env> {
     cfg_toml: String,
     env: VecEnv<E>,
     device: Device,
+    /// Where the networks run (the host kernels, or Burn on `device`).
+    net_path: NetPath,
     obs_dim: usize,
     act_dim: usize,
     actor_spec: MlpSpec,
@@ -156,6 +159,7 @@ impl<E: Env> Sac<E> {
             }]],
         };
         let ent_opt = ent_init.map(|_| Adam::new(&log_ent_coef, cfg.learning_rate, 1e-8));
+        let net_path = NetPath::for_device(device);
         let device = device.clone().without_autodiff();
         let mut s = Self {
             actor_opt: Adam::new(&actor, cfg.learning_rate, 1e-8),
@@ -172,6 +176,7 @@ impl<E: Env> Sac<E> {
             cfg,
             env,
             device,
+            net_path,
             obs_dim,
             act_dim,
             actor_spec,
@@ -197,10 +202,24 @@ impl<E: Env> Sac<E> {
         NetParts::mlp(self.cfg.net_arch.len())
     }
 
-    /// Whether gradient steps and actions run on the host ([`host`]) rather than through the
-    /// tensor backend: every config without an image encoder.
+    /// Whether gradient steps and actions run on the host ([`host`]) rather than through Burn
+    /// on the device: configs without an image encoder on [`NetPath::Host`].
     fn on_host(&self) -> bool {
-        self.cfg.image.is_none()
+        self.cfg.image.is_none() && self.net_path == NetPath::Host
+    }
+
+    /// Run the networks on `path` from the next step on: the host kernels (the CPU fast path,
+    /// the default on CPU devices; configs with an image run through Burn either way) or Burn's
+    /// tensors on the learner's device (the default on any other). Both compute the same
+    /// functions; they differ in f32 rounding.
+    pub fn set_net_path(&mut self, path: NetPath) {
+        self.net_path = path;
+        self.upload_all();
+    }
+
+    /// Where the networks run.
+    pub fn net_path(&self) -> NetPath {
+        if self.on_host() { NetPath::Host } else { NetPath::Burn }
     }
 
     /// Layers of each MLP (hidden + output).
