@@ -142,6 +142,11 @@ impl SelfPlayEnv {
         })
     }
 
+    /// Car 0's critic values, when the race gives them.
+    fn critic_obs(&self) -> Option<Vec<f32>> {
+        (self.race.critic_obs_dim() > 0).then(|| self.race.critic_obs_of(0))
+    }
+
     fn inputs(&mut self, action: &[f32]) -> Result<Vec<Input>, EnvError> {
         let mut inputs = vec![Input::Action(action.to_vec())];
         for (k, o) in self.opponents.iter_mut().enumerate() {
@@ -201,7 +206,11 @@ impl Env for SelfPlayEnv {
                 }
             };
         }
-        Ok((obs.into_iter().next().unwrap_or_default(), Info::default()))
+        let info = Info {
+            critic_obs: self.critic_obs(),
+            ..Info::default()
+        };
+        Ok((obs.into_iter().next().unwrap_or_default(), info))
     }
 
     fn step(&mut self, action: &[f32]) -> Result<Step, EnvError> {
@@ -216,11 +225,17 @@ impl Env for SelfPlayEnv {
         let st = self.race.step_inputs(&inputs)?;
         // The learner's episode is its car's: once it crashes the race is over for it (the
         // next call is a reset).
-        st.agents.into_iter().next().flatten().ok_or(EnvError::NeedsReset)
+        let mut st = st.agents.into_iter().next().flatten().ok_or(EnvError::NeedsReset)?;
+        st.info.critic_obs = self.critic_obs();
+        Ok(st)
     }
 
     fn dt_s(&self) -> f64 {
         self.race.dt_s()
+    }
+
+    fn critic_obs_dim(&self) -> usize {
+        self.race.critic_obs_dim()
     }
 }
 

@@ -17,6 +17,9 @@ use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
+/// Values per other car in [`RaceEnv::critic_obs_of`].
+const CRITIC_VALUES_PER_CAR: usize = 4;
+
 /// Race settings (`EnvConfig::race`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -51,6 +54,10 @@ pub struct RaceSettings {
     pub start_behind_share: f64,
     /// How far car 0 starts behind car 1 in those races, metres (centre to centre).
     pub start_behind_m: f32,
+    /// Give a learner's critic the other cars' state ([`RaceEnv::critic_obs_of`]) in
+    /// `Info::critic_obs`, beside the observation the policy acts on (an asymmetric
+    /// actor-critic: the policy still sees only what the car senses).
+    pub critic_sees_opponents: bool,
 }
 
 impl Default for RaceSettings {
@@ -67,6 +74,7 @@ impl Default for RaceSettings {
             grid_offset_m: 0.3,
             start_behind_share: 0.0,
             start_behind_m: 2.0,
+            critic_sees_opponents: false,
         }
     }
 }
@@ -298,6 +306,41 @@ impl RaceEnv {
     /// act on it.
     pub fn observation_of(&self, i: usize) -> Vec<f32> {
         self.tasks[i].observe(&self.frames[i])
+    }
+
+    /// Length of [`Self::critic_obs_of`]: 4 values per other car with
+    /// `critic_sees_opponents`, else 0.
+    pub fn critic_obs_dim(&self) -> usize {
+        if self.settings.critic_sees_opponents {
+            CRITIC_VALUES_PER_CAR * (self.racers.len() - 1)
+        } else {
+            0
+        }
+    }
+
+    /// What car `i` does not sense of the other cars, for a critic; per other car, in index
+    /// order: the gap along the centre line (its distance raced minus car `i`'s, wrapped to
+    /// half a lap, over 10 m, within +-3), its lateral offset from the centre line minus car
+    /// `i`'s (metres, within +-3), its forward speed minus car `i`'s (over 2 m/s), and 1 while
+    /// it races (0 once it crashed). Continuous across the lap line.
+    pub fn critic_obs_of(&self, i: usize) -> Vec<f32> {
+        let lap = self.track.lap_length_m() as f64;
+        let lateral = |k: usize| {
+            let p = self.sim.car(k).pose2();
+            self.track.lateral_offset_m(p.x_m, p.y_m)
+        };
+        let speed = |k: usize| self.sim.car(k).forward_speed_mps();
+        let mut out = Vec::with_capacity(self.critic_obs_dim());
+        for j in (0..self.racers.len()).filter(|&j| j != i) {
+            let gap = wrap(self.racers[j].distance_m - self.racers[i].distance_m, lap);
+            out.extend([
+                (gap / 10.0).clamp(-3.0, 3.0) as f32,
+                (lateral(j) - lateral(i)).clamp(-3.0, 3.0),
+                (speed(j) - speed(i)) / 2.0,
+                if self.racers[j].crashed { 0.0 } else { 1.0 },
+            ]);
+        }
+        out
     }
 
     /// Car `i`'s last sensor frame.

@@ -120,8 +120,7 @@ impl<V: Vehicle, T: Task> Env for TaskEnv<V, T> {
                 search: out.search,
                 final_obs: None,
                 corrected_action,
-                episode: None,
-                race: None,
+                ..Info::default()
             },
         })
     }

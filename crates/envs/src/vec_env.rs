@@ -109,8 +109,9 @@ impl<E: Env> Slot<E> {
                         len: self.len,
                     });
                     if mode == Autoreset::SameStep {
-                        let first = self.reset(None)?.obs;
-                        st.info.final_obs = Some(std::mem::replace(&mut st.obs, first));
+                        let first = self.reset(None)?;
+                        st.info.final_obs = Some(std::mem::replace(&mut st.obs, first.obs));
+                        st.info.final_critic_obs = std::mem::replace(&mut st.info.critic_obs, first.info.critic_obs);
                     } else {
                         self.ended = true;
                     }
@@ -212,6 +213,7 @@ pub struct VecEnv<E: Env> {
     obs_space: BoxSpace,
     act_space: BoxSpace,
     dt_s: f64,
+    critic_obs_dim: usize,
     /// Estimated time of one round on one thread, from the last round.
     round_cost: Duration,
 }
@@ -231,12 +233,12 @@ impl<E: Env + 'static> VecEnv<E> {
         let obs_space = first.observation_space();
         let act_space = first.action_space();
         let dt_s = first.dt_s();
-        if envs
-            .iter()
-            .any(|e| e.observation_space() != obs_space || e.action_space() != act_space)
-        {
+        let critic_obs_dim = first.critic_obs_dim();
+        if envs.iter().any(|e| {
+            e.observation_space() != obs_space || e.action_space() != act_space || e.critic_obs_dim() != critic_obs_dim
+        }) {
             return Err(EnvError::Config(
-                "VecEnv envs must share observation and action spaces".into(),
+                "VecEnv envs must share observation and action spaces (and critic observations)".into(),
             ));
         }
         let n_envs = envs.len();
@@ -306,6 +308,7 @@ impl<E: Env + 'static> VecEnv<E> {
             obs_space,
             act_space,
             dt_s,
+            critic_obs_dim,
             round_cost: Duration::MAX,
         })
     }
@@ -330,6 +333,11 @@ impl<E: Env> VecEnv<E> {
     /// Control period of the envs, seconds.
     pub fn dt_s(&self) -> f64 {
         self.dt_s
+    }
+
+    /// Length of each env's `Info::critic_obs` (0: none; see [`Env::critic_obs_dim`]).
+    pub fn critic_obs_dim(&self) -> usize {
+        self.critic_obs_dim
     }
 
     /// What happens to an env whose episode ended.

@@ -461,3 +461,48 @@ fn a_car_driven_by_controls_races_as_it_does_by_actions() {
         .to_string();
     assert!(e.contains("car 0") && e.contains("not finite"), "{e}");
 }
+
+/// With `critic_sees_opponents`, each car's critic values hold the other car's gap along the
+/// centre line (over 10 m), lateral offset and speed differences and whether it races: 2 m
+/// ahead on the centre line, wherever the start is drawn (across the lap line too), and the
+/// car behind sees it as 2 m behind; without the setting there are none.
+#[test]
+fn the_critic_sees_the_other_cars_gap_offset_and_speed() {
+    let cfg = |on: bool| EnvConfig {
+        race: Some(RaceSettings {
+            cars: 2,
+            start_behind_share: 1.0,
+            critic_sees_opponents: on,
+            ..RaceSettings::default()
+        }),
+        max_steps: 400,
+        ..EnvConfig::default()
+    };
+    assert_eq!(make_race("racing-duel", &cfg(false)).unwrap().critic_obs_dim(), 0);
+    let mut env = make_race("racing-duel", &cfg(true)).unwrap();
+    assert_eq!(env.critic_obs_dim(), 4);
+    for seed in 0..40 {
+        env.reset(Some(seed)).unwrap();
+        let (c0, c1) = (env.critic_obs_of(0), env.critic_obs_of(1));
+        assert_eq!(c0.len(), 4);
+        assert!(
+            (c0[0] - 0.2).abs() < 0.005 && (c1[0] + 0.2).abs() < 0.005,
+            "seed {seed}: {c0:?} {c1:?}"
+        );
+        assert!(
+            c0[1].abs() < 0.01 && c0[2] == 0.0 && c0[3] == 1.0,
+            "seed {seed}: {c0:?}"
+        );
+    }
+    // Car 1 drives on 0.4 m right of the centre line while car 0 waits: the gap grows, the
+    // offset and the speed difference show.
+    for _ in 0..150 {
+        env.step(&[vec![-1.0, 0.0], vec![0.6, steer_along(&env, 1, -0.4)]])
+            .unwrap();
+    }
+    let c0 = env.critic_obs_of(0);
+    let v1 = env.sim().car(1).forward_speed_mps();
+    assert!(c0[0] > 0.3, "{c0:?}");
+    assert!((c0[1].abs() - 0.4).abs() < 0.15, "{c0:?}");
+    assert!((c0[2] - v1 / 2.0).abs() < 0.05 && v1 > 0.5, "{c0:?} {v1}");
+}

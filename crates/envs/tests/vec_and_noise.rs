@@ -287,3 +287,66 @@ fn time_limit_passes_termination_through() {
         }
     }
 }
+
+/// An env whose critic values count the episode's steps; episodes last three steps.
+struct CountingCritic(u32);
+
+impl Env for CountingCritic {
+    fn observation_space(&self) -> agvrl_envs::BoxSpace {
+        agvrl_envs::BoxSpace::uniform(1, 0.0, 10.0)
+    }
+    fn action_space(&self) -> agvrl_envs::BoxSpace {
+        agvrl_envs::BoxSpace::uniform(1, -1.0, 1.0)
+    }
+    fn reset(&mut self, _: Option<u64>) -> Result<(Vec<f32>, Info), EnvError> {
+        self.0 = 0;
+        let info = Info {
+            critic_obs: Some(vec![0.0]),
+            ..Info::default()
+        };
+        Ok((vec![0.0], info))
+    }
+    fn step(&mut self, _: &[f32]) -> Result<Step, EnvError> {
+        self.0 += 1;
+        Ok(Step {
+            obs: vec![self.0 as f32],
+            reward: 0.0,
+            terminated: self.0 == 3,
+            truncated: false,
+            info: Info {
+                critic_obs: Some(vec![self.0 as f32]),
+                ..Info::default()
+            },
+        })
+    }
+    fn dt_s(&self) -> f64 {
+        0.1
+    }
+    fn critic_obs_dim(&self) -> usize {
+        1
+    }
+}
+
+/// Where a vector env auto-resets, the ended episode's critic values move to
+/// `final_critic_obs` beside `final_obs`, and `critic_obs` is the new episode's first.
+#[test]
+fn an_auto_reset_keeps_the_final_critic_values_beside_the_final_observation() {
+    let mut v = VecEnv::new(vec![CountingCritic(0), CountingCritic(0)], 1).unwrap();
+    assert_eq!(v.critic_obs_dim(), 1);
+    let (_, infos) = v.reset(Some(0)).unwrap();
+    assert_eq!(infos[0].critic_obs, Some(vec![0.0]));
+    for t in 1..=3 {
+        let st = v.step(&[0.0, 0.0]).unwrap();
+        let info = &st.infos[1];
+        if t < 3 {
+            assert_eq!(
+                (info.critic_obs.clone(), info.final_critic_obs.clone()),
+                (Some(vec![t as f32]), None)
+            );
+        } else {
+            assert_eq!(info.final_obs, Some(vec![3.0]));
+            assert_eq!(info.final_critic_obs, Some(vec![3.0]));
+            assert_eq!(info.critic_obs, Some(vec![0.0]));
+        }
+    }
+}

@@ -186,6 +186,12 @@ pub struct Info {
     pub episode: Option<EpisodeSummary>,
     /// A car's standing in a race against others.
     pub race: Option<RaceCarInfo>,
+    /// What a learner's critic may read beside `Step::obs` (or the reset's observation) that
+    /// the car does not sense: in a race with `race.critic_sees_opponents`, the other cars'
+    /// state ([`Env::critic_obs_dim`] values). Never an input of a policy.
+    pub critic_obs: Option<Vec<f32>>,
+    /// `critic_obs` of `final_obs`, where a vector env auto-reset.
+    pub final_critic_obs: Option<Vec<f32>>,
 }
 
 /// One car's standing in a race against others, reported every step.
@@ -249,6 +255,10 @@ pub trait Env: Send {
     fn step(&mut self, action: &[f32]) -> Result<Step, EnvError>;
     /// Control period, seconds (for converting steps to time).
     fn dt_s(&self) -> f64;
+    /// Length of `Info::critic_obs` on every reset and step (0: the env gives none).
+    fn critic_obs_dim(&self) -> usize {
+        0
+    }
 }
 
 impl<E: Env + ?Sized> Env for Box<E> {
@@ -266,6 +276,9 @@ impl<E: Env + ?Sized> Env for Box<E> {
     }
     fn dt_s(&self) -> f64 {
         (**self).dt_s()
+    }
+    fn critic_obs_dim(&self) -> usize {
+        (**self).critic_obs_dim()
     }
 }
 

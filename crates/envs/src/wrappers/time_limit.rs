@@ -56,4 +56,7 @@ impl<E: Env> Env for TimeLimit<E> {
     fn dt_s(&self) -> f64 {
         self.inner.dt_s()
     }
+    fn critic_obs_dim(&self) -> usize {
+        self.inner.critic_obs_dim()
+    }
 }

@@ -112,6 +112,9 @@ pub struct Ppo<E: Env> {
     /// Where the networks run (the host kernels, or Burn on `device`).
     net_path: NetPath,
     obs_dim: usize,
+    /// Values of `Info::critic_obs` per env (0: none): the critic's inputs beside the
+    /// observation, which the actor never reads.
+    critic_dim: usize,
     act_dim: usize,
     params: HostParams,
     opt: Adam,
@@ -122,8 +125,9 @@ pub struct Ppo<E: Env> {
     n_updates: u64,
     episodes: Episodes,
     losses: Losses,
-    /// Current raw observations and whether each env just started an episode.
-    last: Option<(Vec<f32>, Vec<bool>)>,
+    /// Current raw observations, whether each env just started an episode, and the envs'
+    /// critic observations.
+    last: Option<(Vec<f32>, Vec<bool>, Vec<f32>)>,
     /// Minibatches in shuffled order (off only to replay an update in another implementation).
     shuffle: bool,
     /// Threads an image minibatch is split over (see [`Ppo::set_threads`]).
@@ -146,6 +150,13 @@ struct Header {
     /// The envs' correction multipliers (`correction_limit`; absent in older checkpoints).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     correction_lambdas: Vec<f64>,
+    /// Critic observation values per row (absent: 0).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    critic_obs_dim: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// Charge each env's reward its multiplier on a step where the env corrected the policy
@@ -228,8 +239,15 @@ impl<E: Env> Ppo<E> {
             None => (obs_dim, obs_dim),
         };
         let n_envs = env.n_envs();
+        let critic_dim = env.critic_obs_dim();
+        if critic_dim > 0 && (cfg.image.is_some() || cfg.net_arch.is_empty()) {
+            return Err(RlError::Config(
+                "critic observations (race.critic_sees_opponents) need an MLP with hidden layers and no image".into(),
+            ));
+        }
         let mut rng = Rng::new(seed);
-        let mut sizes = vec![mlp_in];
+        // The critic's own inputs follow the observation's; the actor's weights from them stay 0.
+        let mut sizes = vec![mlp_in + critic_dim];
         sizes.extend(&cfg.net_arch);
         let trunk = MlpSpec {
             n_members: 2,
@@ -247,6 +265,7 @@ impl<E: Env> Ppo<E> {
             (Init::TorchDefault, Init::TorchDefault, Init::TorchDefault)
         };
         let mut params = trunk.init(&[hidden], &mut rng);
+        params.data[0][mlp_in * trunk.sizes[1]..(mlp_in + critic_dim) * trunk.sizes[1]].fill(0.0);
         let last = *cfg.net_arch.last().unwrap_or(&obs_dim);
         let (w, b) = init_layer(pi_init, 1, last, act_dim, &mut rng);
         params.push([1, last, act_dim], w);
@@ -273,6 +292,7 @@ impl<E: Env> Ppo<E> {
             cfg,
             env,
             obs_dim,
+            critic_dim,
             act_dim,
             params,
             rng,
@@ -380,6 +400,59 @@ impl<E: Env> Ppo<E> {
         x
     }
 
+    /// Width of a network input row: the observation, then the critic observation.
+    pub(crate) fn row_dim(&self) -> usize {
+        self.obs_dim + self.critic_dim
+    }
+
+    /// Normalised observation rows with each env's critic observation (from `critic`, the
+    /// rows' critic values in order) after them.
+    fn input_rows(&self, obs: &[f32], critic: &[f32]) -> Vec<f32> {
+        let x = self.normalized(obs);
+        if self.critic_dim == 0 {
+            return x;
+        }
+        let (o, c) = (self.obs_dim, self.critic_dim);
+        x.chunks_exact(o)
+            .zip(critic.chunks_exact(c))
+            .flat_map(|(x, c)| x.iter().chain(c).copied())
+            .collect()
+    }
+
+    /// The critic observations of `infos` (the final ones where an env auto-reset, if
+    /// `final_obs`), in env order; empty without critic observations.
+    fn critic_rows<'a>(&self, infos: impl Iterator<Item = &'a agvrl_envs::Info>, final_obs: bool) -> Result<Vec<f32>> {
+        let mut out = Vec::new();
+        if self.critic_dim == 0 {
+            return Ok(out);
+        }
+        for info in infos {
+            let c = match (final_obs, &info.final_critic_obs) {
+                (true, Some(c)) => Some(c),
+                _ => info.critic_obs.as_ref(),
+            };
+            match c.filter(|c| c.len() == self.critic_dim) {
+                Some(c) => out.extend_from_slice(c),
+                None => {
+                    return Err(RlError::Config(format!(
+                        "an env gave no critic observation of {} values",
+                        self.critic_dim
+                    )));
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Zero the actor's gradients from the critic observation, so the actor never reads it.
+    fn mask_critic_inputs(&self, grads: &mut [Vec<f32>]) {
+        if self.critic_dim > 0 {
+            let cols = self.params.shapes[0][2];
+            let from = self.params.shapes[0][1] - self.critic_dim;
+            grads[0][from * cols..(from + self.critic_dim) * cols].fill(0.0);
+        }
+    }
+
     /// Run rollouts and updates until `steps` more env steps are taken (whole rollouts);
     /// `callback` sees progress after every rollout + update and can stop early.
     pub fn learn(&mut self, steps: u64, callback: &mut dyn FnMut(&Progress<'_>) -> Control) -> Result<()> {
@@ -417,18 +490,19 @@ impl<E: Env> Ppo<E> {
         let dist = ActionDist::new(log_std, a, self.cfg.use_sde.then_some(latent_dim));
         let mut expl = vec![0.0f32; n_envs * latent_dim * a];
         let mut var = vec![0.0f64; a];
-        let (mut obs, mut starts) = match self.last.take() {
+        let (mut obs, mut starts, mut critic) = match self.last.take() {
             Some(l) => l,
             None => {
                 let seed = self.seed.wrapping_add(self.num_timesteps.wrapping_mul(0x9E37_79B9));
-                let (o0, _) = self.env.reset(Some(seed))?;
+                let (o0, infos) = self.env.reset(Some(seed))?;
+                let c0 = self.critic_rows(infos.iter(), false)?;
                 // After a resume (or `restart_episodes`) the normaliser has already counted the
                 // observations the run stood on, which these replace: counting them too would
                 // leave it a batch ahead of the run that never stopped.
                 if let Some(n) = self.normalizer.as_mut().filter(|_| self.num_timesteps == 0) {
                     n.update_rows(&o0, o);
                 }
-                (o0, vec![true; n_envs])
+                (o0, vec![true; n_envs], c0)
             }
         };
         let mut r = Rollout {
@@ -459,7 +533,8 @@ impl<E: Env> Ppo<E> {
         let device = &self.device;
         let value_of = |x: Vec<f32>, n: usize, cfg: &PpoConfig| -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
             if burn {
-                let x = Tensor::<3>::from_data(TensorData::new(x, [1, n, o]), device);
+                let w = x.len() / n.max(1);
+                let x = Tensor::<3>::from_data(TensorData::new(x, [1, n, w]), device);
                 let (mean, value, latent) = forward(&dev_params, x, cfg);
                 let latent = if sde { to_vec(latent)? } else { vec![] };
                 return Ok((to_vec(mean)?, to_vec(value)?, latent));
@@ -473,7 +548,7 @@ impl<E: Env> Ppo<E> {
             if sde && (step == 0 || (freq > 0 && step as i64 % freq == 0)) {
                 dist.draw_exploration(&mut self.rng, &mut expl);
             }
-            let x = self.normalized(&obs);
+            let x = self.input_rows(&obs, &critic);
             let (mean, value, latent) = value_of(x.clone(), n_envs, &self.cfg)?;
             let mut actions = Vec::with_capacity(n_envs * a);
             let mut clipped = Vec::with_capacity(n_envs * a);
@@ -499,7 +574,8 @@ impl<E: Env> Ppo<E> {
                     let f = st.infos[e].final_obs.as_deref().unwrap_or(&st.obs[e * o..(e + 1) * o]);
                     fx.extend_from_slice(f);
                 }
-                let fx = self.normalized(&fx);
+                let fc = self.critic_rows(trunc.iter().map(|&e| &st.infos[e]), true)?;
+                let fx = self.input_rows(&fx, &fc);
                 let (_, fv, _) = value_of(fx, trunc.len(), &self.cfg)?;
                 for (k, &e) in trunc.iter().enumerate() {
                     rew[e] += (self.cfg.gamma as f32) * fv[k];
@@ -532,16 +608,17 @@ impl<E: Env> Ppo<E> {
             self.episodes.record(&st.infos);
             self.num_timesteps += n_envs as u64;
             starts = (0..n_envs).map(|e| st.terminated[e] || st.truncated[e]).collect();
+            critic = self.critic_rows(st.infos.iter(), false)?;
             obs = st.obs;
         }
-        let (_, last_values, _) = value_of(self.normalized(&obs), n_envs, &self.cfg)?;
+        let (_, last_values, _) = value_of(self.input_rows(&obs, &critic), n_envs, &self.cfg)?;
         let dones = starts.iter().map(|s| *s as u8 as f32).collect();
         r.compute_gae(
             [rewards, values, episode_starts, last_values, dones],
             self.cfg.gamma as f32,
             self.cfg.gae_lambda as f32,
         );
-        self.last = Some((obs, starts));
+        self.last = Some((obs, starts, critic));
         if let Some(limit) = self.cfg.correction_limit {
             step_multipliers(
                 &mut self.lambdas,
@@ -562,14 +639,15 @@ impl<E: Env> Ppo<E> {
             shapes: vec![],
             data: vec![],
         };
-        // Member 0 of each trunk tensor is the actor's.
-        for (s, d) in l
+        // Member 0 of each trunk tensor is the actor's; it never reads the critic observation.
+        for (k, (s, d)) in l
             .trunk_of(&self.params.shapes)
             .iter()
             .zip(l.trunk_of(&self.params.data))
+            .enumerate()
         {
-            let per = s[1] * s[2];
-            params.push([1, s[1], s[2]], d[..per].to_vec());
+            let rows = if k == 0 { s[1] - self.critic_dim } else { s[1] };
+            params.push([1, rows, s[2]], d[..rows * s[2]].to_vec());
         }
         for i in [l.pi_w, l.pi_b] {
             params.push(self.params.shapes[i], self.params.data[i].clone());
@@ -581,7 +659,7 @@ impl<E: Env> Ppo<E> {
                 data: l.encoder_of(&self.params.data).to_vec(),
             },
         });
-        let mut sizes = vec![self.params.shapes[0][1]];
+        let mut sizes = vec![self.params.shapes[0][1] - self.critic_dim];
         sizes.extend(&self.cfg.net_arch);
         sizes.push(self.act_dim);
         PolicyData {
@@ -643,6 +721,7 @@ impl<E: Env> Ppo<E> {
             } else {
                 vec![]
             },
+            critic_obs_dim: self.critic_dim,
         };
         checkpoint::write(path, &header, &w)
     }
@@ -670,7 +749,8 @@ impl<E: Env> Ppo<E> {
     /// Start from the weights (and correction multipliers) of another run's checkpoint, whose
     /// observation lacked the inputs at `added` (indices into this env's observation). Those
     /// inputs get zero weights, so the policy starts out acting and valuing exactly as the
-    /// checkpoint's; the optimiser, counters and schedule start afresh.
+    /// checkpoint's; so do critic observation values the checkpoint's critic did not read. The
+    /// optimiser, counters and schedule start afresh.
     pub fn warm_start(&mut self, path: &Path, added: &[usize]) -> Result<()> {
         let new_space = self.env.observation_space().clone();
         let keep: Vec<usize> = (0..new_space.dim()).filter(|i| !added.contains(i)).collect();
@@ -692,15 +772,23 @@ impl<E: Env> Ppo<E> {
             });
         }
         let mut shapes = self.params.shapes.clone();
-        shapes[0][1] = keep.len();
+        let old_rows = keep.len() + h.critic_obs_dim;
+        shapes[0][1] = old_rows;
         let mut old = r.params(&shapes)?;
-        let [members, _, cols] = self.params.shapes[0];
-        let rows = new_space.dim();
+        let [members, rows, cols] = self.params.shapes[0];
+        // Where each old input row goes: the observation's kept inputs, then the critic's.
+        let to: Vec<Option<usize>> = keep
+            .iter()
+            .map(|&i| Some(i))
+            .chain((0..h.critic_obs_dim).map(|c| (c < self.critic_dim).then_some(new_space.dim() + c)))
+            .collect();
         let mut first = vec![0.0f32; members * rows * cols];
         for m in 0..members {
-            for (k, &i) in keep.iter().enumerate() {
-                let src = &old.data[0][(m * keep.len() + k) * cols..][..cols];
-                first[(m * rows + i) * cols..][..cols].copy_from_slice(src);
+            for (k, i) in to.iter().enumerate() {
+                if let Some(i) = i {
+                    let src = &old.data[0][(m * old_rows + k) * cols..][..cols];
+                    first[(m * rows + i) * cols..][..cols].copy_from_slice(src);
+                }
             }
         }
         old.shapes[0] = self.params.shapes[0];
@@ -859,5 +947,136 @@ mod tests {
                 ppo.opt.lr
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod critic_obs_tests {
+    use super::*;
+    use crate::Control;
+    use agvrl_envs::{EnvError, Info, Step};
+
+    /// Two observed values; with `critic`, two critic values, the first of which is the next
+    /// reward (so the critic has something to learn from them). Episodes last five steps.
+    struct Peek {
+        t: u32,
+        critic: bool,
+    }
+
+    impl Peek {
+        fn critic_values(&self) -> Option<Vec<f32>> {
+            self.critic.then(|| vec![(self.t % 3) as f32 - 1.0, 0.5])
+        }
+    }
+
+    impl Env for Peek {
+        fn observation_space(&self) -> BoxSpace {
+            BoxSpace::uniform(2, -1.0, 1.0)
+        }
+        fn action_space(&self) -> BoxSpace {
+            BoxSpace::uniform(1, -1.0, 1.0)
+        }
+        fn reset(&mut self, _: Option<u64>) -> std::result::Result<(Vec<f32>, Info), EnvError> {
+            self.t = 0;
+            let info = Info {
+                critic_obs: self.critic_values(),
+                ..Info::default()
+            };
+            Ok((vec![0.0, 0.1], info))
+        }
+        fn step(&mut self, a: &[f32]) -> std::result::Result<Step, EnvError> {
+            let reward = self.critic_values().map_or(0.0, |c| c[0] as f64) - (a[0] as f64).powi(2);
+            self.t += 1;
+            Ok(Step {
+                obs: vec![(self.t as f32 * 0.3).sin(), a[0]],
+                reward,
+                terminated: self.t == 5,
+                truncated: false,
+                info: Info {
+                    critic_obs: self.critic_values(),
+                    ..Info::default()
+                },
+            })
+        }
+        fn dt_s(&self) -> f64 {
+            0.1
+        }
+        fn critic_obs_dim(&self) -> usize {
+            if self.critic { 2 } else { 0 }
+        }
+    }
+
+    fn learner(critic: bool) -> Ppo<Peek> {
+        let cfg = PpoConfig {
+            n_steps: 32,
+            batch_size: 16,
+            n_epochs: 2,
+            net_arch: vec![8, 8],
+            ..Default::default()
+        };
+        let envs = VecEnv::new(vec![Peek { t: 0, critic }, Peek { t: 0, critic }], 1).unwrap();
+        Ppo::new(cfg, envs, &crate::default_device(), 1).unwrap()
+    }
+
+    /// `(mean, value)` of the learner's networks on one observation with critic values `c`.
+    fn outputs(p: &Ppo<Peek>, obs: &[f32], c: &[f32]) -> (f32, f32) {
+        let x = p.input_rows(obs, c);
+        let f = host::forward(&p.params, &Layout::of(&p.cfg), p.cfg.activation_fn, None, &x, 1);
+        (f.mean[0], f.value[0])
+    }
+
+    /// On either network path the critic learns from the critic values and the actor never
+    /// reads them: its weights from them stay 0 through training, its action does not move
+    /// with them, and the policy file reads the observation alone and acts as the actor.
+    #[test]
+    fn a_critic_observation_reaches_the_critic_and_never_the_actor() {
+        for path in [NetPath::Host, NetPath::Burn] {
+            let mut p = learner(true);
+            p.set_net_path(path);
+            let before = p.params.data[0].clone();
+            p.learn(256, &mut |_| Control::Continue).unwrap();
+            let [_, rows, cols] = p.params.shapes[0];
+            assert_eq!(rows, 4);
+            let w = &p.params.data[0];
+            let member = |m: usize, r: usize| &w[(m * rows + r) * cols..(m * rows + r + 1) * cols];
+            for r in 2..4 {
+                assert!(member(0, r).iter().all(|v| *v == 0.0), "{path:?}: actor row {r}");
+                let old = &before[(rows + r) * cols..(rows + r + 1) * cols];
+                assert!(member(1, r) != old, "{path:?}: critic row {r} did not learn");
+            }
+            let obs = [0.3, -0.7];
+            let (m0, v0) = outputs(&p, &obs, &[1.0, 0.5]);
+            let (m1, v1) = outputs(&p, &obs, &[-1.0, 0.5]);
+            assert_eq!(m0, m1, "{path:?}");
+            assert!(v0 != v1, "{path:?}");
+            let data = p.policy_data();
+            assert_eq!((data.net.sizes[0], data.observation_space.dim()), (2, 2));
+            let act = Policy::new(data, &p.device).act(&obs, true).unwrap();
+            assert!((act[0] - m0.clamp(-1.0, 1.0)).abs() < 1e-5, "{path:?}: {act:?} vs {m0}");
+        }
+    }
+
+    /// A learner with critic values warm-started from a checkpoint without them acts and
+    /// values as that checkpoint's learner, whatever the critic values, until it trains.
+    #[test]
+    fn a_warm_start_gives_added_critic_values_zero_weights() {
+        let dir = tempfile::tempdir().unwrap();
+        let ckpt = dir.path().join("plain.ckpt");
+        let mut plain = learner(false);
+        plain.learn(64, &mut |_| Control::Continue).unwrap();
+        plain.save_checkpoint(&ckpt).unwrap();
+        let mut seeing = learner(true);
+        seeing.warm_start(&ckpt, &[]).unwrap();
+        let obs = [0.2, 0.4];
+        let want = outputs(&plain, &obs, &[]);
+        for c in [[0.0, 0.0], [1.0, -3.0]] {
+            assert_eq!(outputs(&seeing, &obs, &c), want);
+        }
+        // And back: a checkpoint with critic values warm-starts a learner without them.
+        seeing.learn(64, &mut |_| Control::Continue).unwrap();
+        seeing.save_checkpoint(&ckpt).unwrap();
+        let mut again = learner(false);
+        again.warm_start(&ckpt, &[]).unwrap();
+        assert_eq!(outputs(&again, &obs, &[]).0, outputs(&seeing, &obs, &[0.0, 0.0]).0);
     }
 }

@@ -223,7 +223,7 @@ impl<E: Env> Ppo<E> {
         ret: &[f32],
         correction: Option<Correction<'_>>,
     ) -> Result<(Head, Vec<Vec<f32>>)> {
-        let (o, a, n) = (self.obs_dim, self.act_dim, old_lp.len());
+        let (o, a, n) = (self.row_dim(), self.act_dim, old_lp.len());
         let l = Layout::of(&self.cfg);
         let head_of = |mean: &[f32], value: &[f32], latent: Option<&[f32]>| {
             let x = HeadInput {
@@ -240,7 +240,9 @@ impl<E: Env> Ppo<E> {
             loss_head(&x, self.cfg.clip_range, self.cfg.vf_coef, self.cfg.ent_coef)
         };
         if self.net_path == NetPath::Burn {
-            return self.minibatch_burn(&obs, head_of);
+            let (head, mut grads) = self.minibatch_burn(&obs, head_of)?;
+            self.mask_critic_inputs(&mut grads);
+            return Ok((head, grads));
         }
         let (encoder, act_fn) = (self.encoder(), self.cfg.activation_fn);
         let image = encoder.as_ref();
@@ -295,6 +297,7 @@ impl<E: Env> Ppo<E> {
             }
         };
         grads[l.log_std] = head.d_log_std.clone();
+        self.mask_critic_inputs(&mut grads);
         Ok((head, grads))
     }
 
@@ -306,7 +309,8 @@ impl<E: Env> Ppo<E> {
         obs: &[f32],
         head_of: impl Fn(&[f32], &[f32], Option<&[f32]>) -> Head,
     ) -> Result<(Head, Vec<Vec<f32>>)> {
-        let (o, a, n) = (self.obs_dim, self.act_dim, obs.len() / self.obs_dim);
+        let (o, a) = (self.row_dim(), self.act_dim);
+        let n = obs.len() / o;
         let ad = self.device.clone().autodiff();
         let t3 = |v: &[f32], s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v.to_vec(), s), &ad);
         let params = self.params.to_tracked(&ad);
@@ -333,7 +337,7 @@ impl<E: Env> Ppo<E> {
         let r = self.collect_rollout()?;
         let params_before = self.params.data.clone();
         self.update(&r)?;
-        let (o, a) = (self.obs_dim, self.act_dim);
+        let (o, a) = (self.row_dim(), self.act_dim);
         let n = self.cfg.batch_size.min(r.log_probs.len());
         let mut adv = r.advantages[..n].to_vec();
         if self.cfg.normalize_advantage {
@@ -396,7 +400,7 @@ impl<E: Env> Ppo<E> {
     }
 
     pub(crate) fn update(&mut self, r: &Rollout) -> Result<()> {
-        let (o, a) = (self.obs_dim, self.act_dim);
+        let (o, a) = (self.row_dim(), self.act_dim);
         let total = r.log_probs.len();
         let bs = self.cfg.batch_size.min(total);
         let log_std_idx = Layout::of(&self.cfg).log_std;

@@ -115,6 +115,11 @@ impl<E: Env> Sac<E> {
         let obs_dim = env.observation_space().dim();
         let act_dim = env.action_space().dim();
         finite_box(env.action_space())?;
+        if env.critic_obs_dim() > 0 {
+            return Err(RlError::Config(
+                "SAC's critics do not read critic observations (race.critic_sees_opponents); train with PPO".into(),
+            ));
+        }
         let (vec_dim, mlp_in) = match &cfg.image {
             Some(spec) => {
                 let v = spec.vector_dim(obs_dim)?;
