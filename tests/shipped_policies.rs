@@ -100,3 +100,43 @@ fn the_shipped_camera_policy_laps_the_oval_from_depth_alone() {
         "{settings}"
     );
 }
+
+/// Every shipped policy acts the same on the host kernels (what the learners' host rollouts
+/// compute) as through Burn (what `Policy::act` runs by default): over 1,000 steps of its own
+/// env, driven by its Burn actions from a held-out seed, the largest difference between the
+/// two paths' deterministic actions stays under 1e-6 (f32 rounding: the host's rational tanh
+/// and the matrix products' summation order).
+#[test]
+fn every_shipped_policy_acts_the_same_on_either_network_path() {
+    use agvrl_envs::Env;
+    use agvrl_rl::NetPath;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for name in [
+        "search",
+        "racing-oval-ppo",
+        "racing-oval-camera",
+        "racing-any-track",
+        "racing-overtake",
+    ] {
+        let path = root.join(format!("assets/policies/{name}.agvrl"));
+        let mut settings = agvrl_run::PolicySettings::resolve(None, Some(&path), &[]).unwrap();
+        let mut burn = settings.load_policy().unwrap();
+        let mut host = settings.load_policy().unwrap();
+        assert_eq!(burn.net_path(), NetPath::Burn, "{name}: the default path");
+        host.set_net_path(NetPath::Host);
+        let id = settings.env_id(None).unwrap();
+        let mut env = agvrl_envs::make(&id, &settings.eval_env_config()).unwrap();
+        let (mut obs, _) = env.reset(Some(1_000_000)).unwrap();
+        let (mut worst, mut moved) = (0.0f32, 0.0f32);
+        for _ in 0..1000 {
+            let (a, b) = (burn.act(&obs, true).unwrap(), host.act(&obs, true).unwrap());
+            worst = a.iter().zip(&b).fold(worst, |m, (a, b)| m.max((a - b).abs()));
+            moved = moved.max(a[0].abs());
+            let st = env.step(&a).unwrap();
+            obs = if st.done() { env.reset(None).unwrap().0 } else { st.obs };
+        }
+        eprintln!("{name}: largest action difference {worst:.2e}");
+        assert!(worst < 1e-6, "{name}: {worst}");
+        assert!(moved > 0.05, "{name}: the policy never acted");
+    }
+}

@@ -264,19 +264,27 @@ pub(super) fn run_on(backend: CpuBackend, quick: bool) -> Result<Vec<String>> {
     let mut policy = Policy::new(data, &device);
     let obs = rng.normals(o);
     let calls = 2000;
-    let mut us = vec![];
-    for r in 0..=reps {
-        let t = Instant::now();
-        for _ in 0..calls {
-            std::hint::black_box(policy.act(&obs, true)?);
+    let mut infer_us = |path: NetPath| -> Result<f64> {
+        policy.set_net_path(path);
+        let mut us = vec![];
+        for r in 0..=reps {
+            let t = Instant::now();
+            for _ in 0..calls {
+                std::hint::black_box(policy.act(&obs, true)?);
+            }
+            if r > 0 {
+                us.push(t.elapsed().as_secs_f64() * 1e6 / calls as f64);
+            }
         }
-        if r > 0 {
-            us.push(t.elapsed().as_secs_f64() * 1e6 / calls as f64);
-        }
-    }
+        Ok(median(us))
+    };
     lines.push(format!(
         "policy_infer_us={:.1} obs={o} act={a} net=256x256 batch=1 reps={reps}",
-        median(us)
+        infer_us(NetPath::Burn)?
+    ));
+    lines.push(format!(
+        "policy_infer_host_us={:.1} reps={reps}",
+        infer_us(NetPath::Host)?
     ));
 
     // NatureCNN encoder alone, batch 1, one 48x64 depth image.

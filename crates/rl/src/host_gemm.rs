@@ -2,7 +2,7 @@
 //! the learners' host paths (PPO's networks, SAC's networks), through ndarray's
 //! `general_mat_mul` (matrixmultiply's kernels, picked for the CPU at run time).
 
-use crate::nets::Activation;
+use crate::nets::{Activation, HostParams};
 use ndarray::linalg::general_mat_mul;
 use ndarray::{ArrayView2, ArrayViewMut2};
 
@@ -21,6 +21,34 @@ pub(crate) fn affine(x: &[f32], w: &[f32], b: &[f32], (n, i, o): (usize, usize, 
         out.extend_from_slice(b);
     }
     general_mat_mul(1.0, &view(x, n, i), &view(w, i, o), 1.0, &mut view_mut(out, n, o));
+}
+
+/// The first `layers` layers of member `m` of the stacked MLP `p` (`[w0, b0, w1, b1, ...]`) on
+/// `n` rows of `x`: every layer's output, each activated with `act` except the last unless
+/// `activate_last`. The learners' host rollouts and `Policy::act` on the host path run this.
+pub(crate) fn mlp_forward(
+    p: &HostParams,
+    layers: usize,
+    m: usize,
+    (act, activate_last): (Activation, bool),
+    x: &[f32],
+    n: usize,
+) -> Vec<Vec<f32>> {
+    let mut outs: Vec<Vec<f32>> = Vec::with_capacity(layers);
+    for l in 0..layers {
+        let [_, i, o] = p.shapes[2 * l];
+        let (w, b) = (
+            &p.data[2 * l][m * i * o..(m + 1) * i * o],
+            &p.data[2 * l + 1][m * o..(m + 1) * o],
+        );
+        let mut out = Vec::new();
+        affine(outs.last().map_or(x, |h| h.as_slice()), w, b, (n, i, o), &mut out);
+        if l + 1 < layers || activate_last {
+            activate(&mut out, act);
+        }
+        outs.push(out);
+    }
+    outs
 }
 
 /// `dw[i x o] += x[n x i]^T dz[n x o]`, `db[o] += sum over rows of dz`.

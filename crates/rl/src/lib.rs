@@ -32,7 +32,9 @@
 //!   host kernels on the same weights (`ppo/host.rs`, `sac/host.rs`, `host_cnn.rs`; the default
 //!   on the CPU backends, the fast path). Both compute the same losses and gradients to 1e-5
 //!   of their scale (the `burn_path_*` tests); the loss heads, Adam and the action sampling are
-//!   the same code on either. SAC with an image runs through Burn on either path.
+//!   the same code on either. SAC with an image runs through Burn on either path. A
+//!   [`Policy`] runs through Burn unless set to the host path, where it computes the host
+//!   rollout's forward pass bit for bit.
 //! - Files (policy, checkpoint) are written atomically and carry a CRC-32; a truncated,
 //!   corrupted or mismatching file is an error, never a silently wrong policy.
 //!
@@ -70,7 +72,6 @@ pub mod fuzz;
 #[cfg(feature = "train")]
 mod gaussian;
 mod host_cnn;
-#[cfg(feature = "train")]
 mod host_gemm;
 #[cfg(feature = "train")]
 mod learner;

@@ -8,8 +8,10 @@
 //! TOML in the header), so a policy file is self-contained.
 
 use crate::cnn::ImageSpec;
+use crate::device::NetPath;
 use crate::error::{Result, RlError};
 use crate::file;
+use crate::host_gemm::mlp_forward as mlp_forward_host;
 use crate::nets::{HostParams, MlpSpec, mlp_forward, to_vec};
 use crate::normalize::ObsNormalizer;
 use crate::rng::Rng;
@@ -351,8 +353,13 @@ pub(crate) fn check_space(what: &'static str, file: &BoxSpace, env: &BoxSpace) -
 /// ```
 pub struct Policy {
     data: PolicyData,
+    /// Where the networks run: the host kernels (the learners' host rollouts compute the same),
+    /// or Burn on `device` (as their Burn rollouts).
+    net_path: NetPath,
+    /// The MLP's weights on the device (the Burn path only).
     weights: Vec<Tensor<3>>,
-    /// The image encoder on the host, when there is one.
+    /// The image encoder on the host, when there is one, on either path: batch-1 inference is
+    /// dominated by per-op overhead on the tensor path.
     encoder: Option<crate::host_cnn::HostEncoder>,
     device: Device,
     rng: Rng,
@@ -360,22 +367,39 @@ pub struct Policy {
 }
 
 impl Policy {
-    /// A policy from host data on `device` (autodiff is stripped).
+    /// A policy from host data on `device` (autodiff is stripped), its networks through Burn
+    /// there: every figure in the docs was measured on that path. [`Self::set_net_path`] with
+    /// [`NetPath::Host`] runs the host kernels instead, as the learners' host rollouts do.
     pub fn new(data: PolicyData, device: &Device) -> Self {
         let device = device.clone().without_autodiff();
-        let weights = data.params.to_device(&device);
-        let encoder = data
-            .encoder
-            .as_ref()
-            .map(|e| crate::host_cnn::HostEncoder::new(&e.spec, &e.params.data));
-        Self {
+        let encoder = (data.encoder.as_ref()).map(|e| crate::host_cnn::HostEncoder::new(&e.spec, &e.params.data));
+        let mut policy = Self {
             data,
-            weights,
+            net_path: NetPath::Host,
+            weights: vec![],
             encoder,
             device,
             rng: Rng::new(0),
             scratch: Vec::new(),
-        }
+        };
+        policy.set_net_path(NetPath::Burn);
+        policy
+    }
+
+    /// Run the networks on `path`: the host kernels, or Burn on the policy's device. The two
+    /// differ in f32 rounding only (the largest action difference of each shipped policy over
+    /// 1,000 recorded steps is pinned below 1e-6).
+    pub fn set_net_path(&mut self, path: NetPath) {
+        self.net_path = path;
+        self.weights = match path {
+            NetPath::Host => vec![],
+            NetPath::Burn => self.data.params.to_device(&self.device),
+        };
+    }
+
+    /// Where the networks run.
+    pub fn net_path(&self) -> NetPath {
+        self.net_path
     }
 
     /// Load a policy file onto the default CPU device.
@@ -442,17 +466,22 @@ impl Policy {
         if let Some(norm) = &self.data.normalizer {
             norm.normalize_rows(&mut self.scratch, o);
         }
-        // The encoder runs on the host (`host_cnn`): batch-1 inference is dominated by
-        // per-op overhead on the tensor path.
-        let x = match &self.encoder {
-            Some(e) => {
-                let (_, rows) = e.encode_rows(&self.scratch, o, n);
-                let w = rows.len() / n;
-                Tensor::<3>::from_data(TensorData::new(rows, [1, n, w]), &self.device)
-            }
-            None => Tensor::<3>::from_data(TensorData::new(self.scratch.clone(), [1, n, o]), &self.device),
-        };
         let net = &self.data.net;
+        let encoded = self.encoder.as_ref().map(|e| e.encode_rows(&self.scratch, o, n).1);
+        let x = encoded.as_deref().unwrap_or(&self.scratch);
+        if self.net_path == NetPath::Host {
+            let layers = net.n_layers();
+            let mut outs = mlp_forward_host(&self.data.params, layers, 0, (net.activation, net.activate_last), x, n);
+            let out = outs.pop().unwrap_or_default();
+            let latent = match self.data.head {
+                ActionHead::StateDependent { .. } if !deterministic => outs.pop().unwrap_or_else(|| x.to_vec()),
+                _ => vec![],
+            };
+            return Ok(self
+                .data
+                .actions_from_outputs(&out, &latent, deterministic, &mut self.rng));
+        }
+        let x = Tensor::<3>::from_data(TensorData::new(x.to_vec(), [1, n, x.len() / n]), &self.device);
         let (out, latent) = match self.data.head {
             ActionHead::StateDependent { .. } if !deterministic => {
                 let k = self.weights.len() - 2;

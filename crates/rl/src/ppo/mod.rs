@@ -1056,6 +1056,20 @@ mod critic_obs_tests {
         }
     }
 
+    /// `Policy::act` on the host path is the rollout's forward pass: its deterministic action
+    /// is the rollout's action mean (clipped to the box), bit for bit.
+    #[test]
+    fn the_policy_on_the_host_path_acts_with_the_rollouts_forward_pass() {
+        let mut p = learner(false);
+        p.learn(64, &mut |_| Control::Continue).unwrap();
+        let mut policy = Policy::new(p.policy_data(), &p.device);
+        policy.set_net_path(NetPath::Host);
+        for obs in [[0.3f32, -0.7], [0.9, 0.05], [-1.0, 1.0]] {
+            let (mean, _) = outputs(&p, &obs, &[]);
+            assert_eq!(policy.act(&obs, true).unwrap(), vec![mean.clamp(-1.0, 1.0)]);
+        }
+    }
+
     /// A learner with critic values warm-started from a checkpoint without them acts and
     /// values as that checkpoint's learner, whatever the critic values, until it trains.
     #[test]

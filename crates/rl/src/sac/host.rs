@@ -13,7 +13,7 @@
 //! `[obs | action]`.
 
 use crate::gaussian::HALF_LN_2PI_F32;
-use crate::host_gemm::{activate, activation_grad, affine, input_grads, view, view_mut, weight_grads};
+use crate::host_gemm::{activation_grad, input_grads, mlp_forward, view, view_mut, weight_grads};
 use crate::nets::{Activation, HostParams};
 use crate::policy::{LOG_STD_MAX, LOG_STD_MIN};
 use ndarray::linalg::general_mat_mul;
@@ -21,21 +21,7 @@ use ndarray::linalg::general_mat_mul;
 /// Member `m` of the MLP made of `p`'s first `2 * layers` tensors on `x [n x in]`: every
 /// layer's output, hidden ones after ReLU.
 pub(crate) fn forward(p: &HostParams, layers: usize, m: usize, x: &[f32], n: usize) -> Vec<Vec<f32>> {
-    let mut outs: Vec<Vec<f32>> = Vec::with_capacity(layers);
-    for l in 0..layers {
-        let [_, i, o] = p.shapes[2 * l];
-        let (w, b) = (
-            &p.data[2 * l][m * i * o..(m + 1) * i * o],
-            &p.data[2 * l + 1][m * o..(m + 1) * o],
-        );
-        let mut out = Vec::new();
-        affine(outs.last().map_or(x, |h| h.as_slice()), w, b, (n, i, o), &mut out);
-        if l + 1 < layers {
-            activate(&mut out, Activation::Relu);
-        }
-        outs.push(out);
-    }
-    outs
+    mlp_forward(p, layers, m, (Activation::Relu, false), x, n)
 }
 
 /// Back from `d_out` (the loss's gradient at member `m`'s output) through the layers of
