@@ -52,6 +52,7 @@ pub(crate) fn mlp_forward(
 }
 
 /// `dw[i x o] += x[n x i]^T dz[n x o]`, `db[o] += sum over rows of dz`.
+#[cfg(feature = "train")]
 pub(crate) fn weight_grads(x: &[f32], dz: &[f32], (n, i, o): (usize, usize, usize), dw: &mut [f32], db: &mut [f32]) {
     for r in 0..n {
         db.iter_mut().zip(&dz[r * o..(r + 1) * o]).for_each(|(b, d)| *b += d);
@@ -60,6 +61,7 @@ pub(crate) fn weight_grads(x: &[f32], dz: &[f32], (n, i, o): (usize, usize, usiz
 }
 
 /// `dx[n x i] = dz[n x o] w[i x o]^T`.
+#[cfg(feature = "train")]
 pub(crate) fn input_grads(dz: &[f32], w: &[f32], (n, i, o): (usize, usize, usize), dx: &mut Vec<f32>) {
     dx.clear();
     dx.resize(n * i, 0.0);
@@ -95,6 +97,7 @@ pub(crate) fn activate(v: &mut [f32], act: Activation) {
 }
 
 /// `dz = dh * act'(y)` in place on `dh`, from the activation's output `y`.
+#[cfg(feature = "train")]
 pub(crate) fn activation_grad(dh: &mut [f32], y: &[f32], act: Activation) {
     match act {
         Activation::Tanh => dh.iter_mut().zip(y).for_each(|(d, y)| *d *= 1.0 - y * y),
