@@ -244,6 +244,16 @@ pub fn grads_of(params: &[Tensor<3>], grads: &burn::tensor::Gradients) -> Result
         .collect()
 }
 
+/// Largest difference over `q`'s largest magnitude: how closely two computations of a tensor
+/// agree, relative to its scale.
+#[cfg(test)]
+pub(crate) fn scaled_diff(p: &[f32], q: &[f32]) -> f64 {
+    assert_eq!(p.len(), q.len());
+    let scale = q.iter().fold(0.0f64, |m, v| m.max(v.abs() as f64));
+    let diff = p.iter().zip(q).fold(0.0f64, |m, (p, q)| m.max((p - q).abs() as f64));
+    if scale == 0.0 { diff } else { diff / scale }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

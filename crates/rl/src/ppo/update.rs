@@ -487,7 +487,7 @@ mod tests {
     use super::super::forward;
     use super::*;
     use crate::gaussian;
-    use crate::nets::{grads_of, to_vec};
+    use crate::nets::{grads_of, scaled_diff, to_vec};
     use crate::rng::Rng;
     use agvrl_envs::VecEnv;
     use burn::tensor::{Tensor, TensorData};
@@ -620,6 +620,34 @@ mod tests {
         }
     }
 
+    /// A small NatureCNN over a `c`-channel 38x44 image after `v` vector values.
+    fn small_image(c: usize, v: usize) -> Option<(crate::cnn::ImageSpec, usize)> {
+        let spec = crate::cnn::ImageSpec {
+            features_dim: 24,
+            ..crate::cnn::ImageSpec::new(c, 38, 44)
+        };
+        Some((spec, v))
+    }
+
+    /// Envs for a learner of that observation: pendulum without an image, else [`Shape`].
+    fn envs_for(image: Option<(crate::cnn::ImageSpec, usize)>) -> VecEnv<Box<dyn Env>> {
+        match image {
+            None => crate::learning::pendulum_envs(2).unwrap(),
+            Some((spec, v)) => VecEnv::new(vec![Box::new(Shape(v + spec.len())) as Box<dyn Env>], 1).unwrap(),
+        }
+    }
+
+    /// `n` observation rows of `o` values: images in [0, 1] as the envs give them, a vector
+    /// part of any sign.
+    fn observations(image: Option<(crate::cnn::ImageSpec, usize)>, o: usize, n: usize, rng: &mut Rng) -> Vec<f32> {
+        (0..n * o)
+            .map(|k| match image {
+                Some((_, v)) if k % o >= v => rng.uniform() as f32,
+                _ => 2.0 * rng.normal() as f32,
+            })
+            .collect()
+    }
+
     /// A warm start gives the added inputs zero weights in both trunks (actor and critic) and
     /// keeps every other weight, so the actor acts as the checkpoint's on the inputs they share.
     #[test]
@@ -675,15 +703,8 @@ mod tests {
     /// or none, split over 1 and 3 threads).
     #[test]
     fn host_gradients_match_autodiff() {
-        use crate::cnn::ImageSpec;
         use crate::nets::Activation;
-        let image = |c, v| {
-            let spec = ImageSpec {
-                features_dim: 24,
-                ..ImageSpec::new(c, 38, 44)
-            };
-            Some((spec, v))
-        };
+        let image = small_image;
         for (arch, act, sde, image, threads) in [
             (vec![64, 64], Activation::Tanh, false, None, 1),
             (vec![32, 16], Activation::Relu, true, None, 1),
@@ -700,21 +721,11 @@ mod tests {
                 ..Default::default()
             };
             let device = crate::device::default_device();
-            let env: VecEnv<Box<dyn Env>> = match image {
-                None => crate::learning::pendulum_envs(2).unwrap(),
-                Some((spec, v)) => VecEnv::new(vec![Box::new(Shape(v + spec.len())) as Box<dyn Env>], 1).unwrap(),
-            };
-            let mut ppo = Ppo::new(cfg.clone(), env, &device, 3).unwrap();
+            let mut ppo = Ppo::new(cfg.clone(), envs_for(image), &device, 3).unwrap();
             ppo.set_threads(threads).unwrap();
             let (o, a, n) = (ppo.obs_dim, ppo.act_dim, 40);
             let mut rng = Rng::new(5);
-            // Images in [0, 1] as the envs give them; a vector part of any sign.
-            let x: Vec<f32> = (0..n * o)
-                .map(|k| match image {
-                    Some((_, v)) if k % o >= v => rng.uniform() as f32,
-                    _ => 2.0 * rng.normal() as f32,
-                })
-                .collect();
+            let x = observations(image, o, n, &mut rng);
             let (d_mean, d_value) = (rng.normals(n * a), rng.normals(n));
             let l = Layout::of(&cfg);
             let enc = ppo.encoder();
@@ -770,29 +781,14 @@ mod tests {
         }
     }
 
-    /// Largest difference over `q`'s largest magnitude: agreement relative to the tensor's scale.
-    fn scaled_diff(p: &[f32], q: &[f32]) -> f64 {
-        assert_eq!(p.len(), q.len());
-        let scale = q.iter().fold(0.0f64, |m, v| m.max(v.abs() as f64));
-        let diff = p.iter().zip(q).fold(0.0f64, |m, (p, q)| m.max((p - q).abs() as f64));
-        if scale == 0.0 { diff } else { diff / scale }
-    }
-
     /// The Burn path (the networks through autodiff on a CPU backend: what a GPU runs) against
     /// the host kernels on one minibatch, MLP with either activation, gSDE, and the NatureCNN:
     /// the losses and every gradient agree to 1e-5 of their scale; a rollout and an update on
     /// each path from the same seed end at weights within 1e-4 of theirs.
     #[test]
     fn burn_path_gives_the_host_paths_loss_and_gradients() {
-        use crate::cnn::ImageSpec;
         use crate::nets::Activation;
-        let image = |c, v| {
-            let spec = ImageSpec {
-                features_dim: 24,
-                ..ImageSpec::new(c, 38, 44)
-            };
-            Some((spec, v))
-        };
+        let image = small_image;
         for (arch, act, sde, image) in [
             (vec![64, 64], Activation::Tanh, false, None),
             (vec![32, 16], Activation::Relu, true, None),
@@ -808,25 +804,14 @@ mod tests {
                 n_epochs: 2,
                 ..Default::default()
             };
-            let envs = || -> VecEnv<Box<dyn Env>> {
-                match image {
-                    None => crate::learning::pendulum_envs(2).unwrap(),
-                    Some((spec, v)) => VecEnv::new(vec![Box::new(Shape(v + spec.len())) as Box<dyn Env>], 1).unwrap(),
-                }
-            };
             let device = crate::device::default_device();
-            let mut host = Ppo::new(cfg.clone(), envs(), &device, 3).unwrap();
-            let mut burn = Ppo::new(cfg.clone(), envs(), &device, 3).unwrap();
+            let mut host = Ppo::new(cfg.clone(), envs_for(image), &device, 3).unwrap();
+            let mut burn = Ppo::new(cfg.clone(), envs_for(image), &device, 3).unwrap();
             assert_eq!(host.net_path(), NetPath::Host);
             burn.set_net_path(NetPath::Burn);
             let (o, a, n) = (host.obs_dim, host.act_dim, 40);
             let mut rng = Rng::new(5);
-            let x: Vec<f32> = (0..n * o)
-                .map(|k| match image {
-                    Some((_, v)) if k % o >= v => rng.uniform() as f32,
-                    _ => 2.0 * rng.normal() as f32,
-                })
-                .collect();
+            let x = observations(image, o, n, &mut rng);
             let (acts, adv, ret) = (rng.normals(n * a), rng.normals(n), rng.normals(n));
             let old_lp = vec![-1.0; n];
             let mb = |p: &Ppo<Box<dyn Env>>| p.minibatch(x.clone(), acts.clone(), &old_lp, &adv, &ret, None).unwrap();

@@ -321,7 +321,7 @@ impl<E: Env> Sac<E> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nets::{HostParams, Init, MlpSpec};
+    use crate::nets::{HostParams, Init, MlpSpec, scaled_diff};
     use crate::rng::Rng;
 
     fn mlp(sizes: Vec<usize>, members: usize, rng: &mut Rng) -> HostParams {
@@ -339,14 +339,6 @@ mod tests {
         for (k, (p, q)) in p.iter().zip(q).enumerate() {
             assert!((p - q).abs() < 2e-5 + 2e-4 * q.abs(), "{what}[{k}]: {p} vs {q}");
         }
-    }
-
-    /// Largest difference over `q`'s largest magnitude: agreement relative to the tensor's scale.
-    fn scaled_diff(p: &[f32], q: &[f32]) -> f64 {
-        assert_eq!(p.len(), q.len());
-        let scale = q.iter().fold(0.0f64, |m, v| m.max(v.abs() as f64));
-        let diff = p.iter().zip(q).fold(0.0f64, |m, (p, q)| m.max((p - q).abs() as f64));
-        if scale == 0.0 { diff } else { diff / scale }
     }
 
     /// A learner on the Burn path (autodiff on a CPU backend: what a GPU runs) against one on
