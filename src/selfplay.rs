@@ -258,6 +258,26 @@ mod tests {
         }
     }
 
+    /// With `critic_sees_opponents` the learner's car carries its critic values on every reset
+    /// and step (what PPO's critic reads); without it, none.
+    #[test]
+    fn the_learners_car_carries_its_critic_values_on_every_reset_and_step() {
+        let mut cfg = race_cfg();
+        for on in [false, true] {
+            cfg.race.as_mut().unwrap().critic_sees_opponents = on;
+            let mut env =
+                SelfPlayEnv::new("racing-duel", &cfg, Pool::default(), &["pure-pursuit@0.75".into()]).unwrap();
+            assert_eq!(env.critic_obs_dim(), if on { 4 } else { 0 });
+            let (_, info) = env.reset(Some(3)).unwrap();
+            assert_eq!(info.critic_obs.is_some(), on);
+            for _ in 0..20 {
+                let st = env.step(&[0.5, 0.0]).unwrap();
+                let want = on.then(|| env.race.critic_obs_of(0));
+                assert_eq!(st.info.critic_obs, want);
+            }
+        }
+    }
+
     /// The distance car 1 races in 150 steps while the learner's car brakes.
     fn opponent_distance(opponents: &[String]) -> f64 {
         let mut env = SelfPlayEnv::new("racing-duel", &race_cfg(), Pool::default(), opponents).unwrap();
