@@ -464,8 +464,9 @@ fn a_car_driven_by_controls_races_as_it_does_by_actions() {
 
 /// With `critic_sees_opponents`, each car's critic values hold the other car's gap along the
 /// centre line (over 10 m), lateral offset and speed differences and whether it races: 2 m
-/// ahead on the centre line, wherever the start is drawn (across the lap line too), and the
-/// car behind sees it as 2 m behind; without the setting there are none.
+/// ahead on the centre line wherever along the lap the start is drawn, and the car ahead sees
+/// the one behind 2 m behind; without the setting there are none. (The gap is the difference
+/// of the distances raced, which `relative_progress_across_the_lap_line_is_continuous` pins.)
 #[test]
 fn the_critic_sees_the_other_cars_gap_offset_and_speed() {
     let cfg = |on: bool| EnvConfig {
