@@ -26,6 +26,7 @@ pub mod sim_vehicle;
 pub mod task;
 pub mod task_env;
 pub mod vec_env;
+pub mod workers;
 pub mod wrappers;
 
 /// Order statistics (agvrl-sim's), for the crates above.
@@ -43,3 +44,4 @@ pub use sim_vehicle::{Randomisation, SimCar, SimVehicle, SpawnMode};
 pub use task::ActionMapping;
 pub use task_env::TaskEnv;
 pub use vec_env::{Autoreset, VecEnv, VecStep};
+pub use workers::Workers;

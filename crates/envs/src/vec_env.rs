@@ -3,21 +3,21 @@
 //! `infos[i].final_obs` the last one of the episode that ended. [`Autoreset`] selects Gymnasium's
 //! other two modes (reset on the next step, or never).
 //!
-//! Threads: the envs are split into `threads` contiguous chunks; the caller's thread steps the
-//! first and each other chunk belongs to a persistent worker thread. A thread that finishes its
-//! chunk takes over the unclaimed envs at the ends of the others (a per-env claim), so one slow
-//! step (a reset, a crowded scan) does not leave a core idle. A step costs tens of microseconds,
-//! so handing work over must cost far less: workers spin briefly for the next command before
-//! they park (on this class of machine a park/unpark round trip took ~100 us, which ate the
-//! whole gain of a second core with a sleeping thread pool). Rounds cheaper than handing one
-//! over (tiny envs like pendulum) run on the caller's thread alone.
+//! Threads: the envs are split into `threads` contiguous chunks, one per thread of a
+//! [`Workers`] pool (the caller's thread steps the first). A thread that finishes its chunk
+//! takes over the unclaimed envs at the ends of the others (a per-env claim), so one slow step
+//! (a reset, a crowded scan) does not leave a core idle. A step costs tens of microseconds, so
+//! handing work over must cost far less: the pool's helpers wait for the next round by yielding
+//! before they park. Rounds cheaper than handing one over (tiny envs like pendulum) run on the
+//! caller's thread alone. A learner that owns the VecEnv runs its gradient steps on the same
+//! pool ([`VecEnv::workers`]).
 
 use crate::Env;
 use crate::api::{BoxSpace, EnvError, EpisodeSummary, Info, Step};
+use crate::workers::Workers;
 use std::ops::Range;
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 /// The result of stepping every env once. Observations are flat, row `i` belongs to env `i`.
@@ -129,7 +129,7 @@ enum Cmd {
     Step(Vec<f32>),
 }
 
-/// What every thread sees: the envs, which round each was last claimed in, and the command.
+/// What every thread sees: the envs and which round each was last claimed in.
 struct Shared<E> {
     slots: Vec<Mutex<Slot<E>>>,
     claimed: Vec<AtomicU64>,
@@ -137,10 +137,6 @@ struct Shared<E> {
     chunks: Vec<Range<usize>>,
     act_dim: usize,
     autoreset: Autoreset,
-    round: AtomicU64,
-    finished: AtomicUsize,
-    cmd: Mutex<(u64, Option<Arc<Cmd>>)>,
-    quit: AtomicBool,
 }
 
 impl<E: Env> Shared<E> {
@@ -170,7 +166,6 @@ impl<E: Env> Shared<E> {
             return false;
         }
         self.run_one(i, cmd);
-        self.finished.fetch_add(1, Ordering::Release);
         true
     }
 
@@ -186,27 +181,13 @@ impl<E: Env> Shared<E> {
 /// step) save on a second core.
 const SOLO_BELOW: Duration = Duration::from_micros(25);
 
-/// How long a thread spins for its next command before parking.
-const SPIN: Duration = Duration::from_micros(300);
-
-fn wait_until(flag: impl Fn() -> bool, park: bool) {
-    let t0 = Instant::now();
-    while !flag() {
-        if t0.elapsed() < SPIN {
-            std::hint::spin_loop();
-        } else if park {
-            std::thread::park_timeout(Duration::from_millis(1));
-        } else {
-            std::thread::yield_now();
-        }
-    }
-}
-
 /// Envs that step together. Env `i` is seeded with `seed + i` on `reset(Some(seed))`, so the
 /// results do not depend on the number of threads.
 pub struct VecEnv<E: Env> {
-    shared: Arc<Shared<E>>,
-    workers: Vec<JoinHandle<()>>,
+    shared: Shared<E>,
+    workers: Arc<Workers>,
+    /// Rounds run on more than one thread so far (what a claim compares against).
+    round: u64,
     n_envs: usize,
     obs_dim: usize,
     act_dim: usize,
@@ -251,7 +232,7 @@ impl<E: Env + 'static> VecEnv<E> {
             chunks.push(start..start + size);
             start += size;
         }
-        let shared = Arc::new(Shared {
+        let shared = Shared {
             slots: envs
                 .into_iter()
                 .map(|env| {
@@ -269,39 +250,13 @@ impl<E: Env + 'static> VecEnv<E> {
             chunks,
             act_dim,
             autoreset,
-            round: AtomicU64::new(0),
-            finished: AtomicUsize::new(0),
-            cmd: Mutex::new((0, None)),
-            quit: AtomicBool::new(false),
-        });
-        let mut workers = Vec::new();
-        for t in 1..threads {
-            let sh = shared.clone();
-            let handle = std::thread::Builder::new()
-                .name("agvrl-vecenv".into())
-                .spawn(move || {
-                    let mut seen = 0u64;
-                    loop {
-                        wait_until(
-                            || sh.round.load(Ordering::Acquire) > seen || sh.quit.load(Ordering::Acquire),
-                            true,
-                        );
-                        if sh.quit.load(Ordering::Acquire) {
-                            return;
-                        }
-                        let Ok((round, Some(cmd))) = sh.cmd.lock().map(|c| (c.0, c.1.clone())) else {
-                            return;
-                        };
-                        seen = round;
-                        sh.work(t, round, &cmd);
-                    }
-                })
-                .map_err(|e| EnvError::Config(format!("spawning a VecEnv thread: {e}")))?;
-            workers.push(handle);
-        }
+        };
+        let workers = Workers::new(threads - 1)
+            .map_err(|e| EnvError::Config(format!("starting the VecEnv's worker threads: {e}")))?;
         Ok(Self {
             shared,
-            workers,
+            workers: Arc::new(workers),
+            round: 0,
             n_envs,
             obs_dim: obs_space.dim(),
             act_dim,
@@ -350,10 +305,16 @@ impl<E: Env> VecEnv<E> {
         self.shared.chunks.len()
     }
 
+    /// The worker pool the envs step on (`threads() - 1` helpers), for a learner to share.
+    pub fn workers(&self) -> &Arc<Workers> {
+        &self.workers
+    }
+
     /// Run `cmd` on every env once, on all threads; results in env order.
     fn run_all(&mut self, cmd: Cmd) -> Result<Vec<Step>, EnvError> {
         let sh = &self.shared;
-        if self.workers.is_empty() || self.round_cost < SOLO_BELOW {
+        let threads = sh.chunks.len();
+        if threads == 1 || self.round_cost < SOLO_BELOW {
             // Results do not depend on which thread steps an env, so this changes speed only.
             let t0 = Instant::now();
             for i in 0..self.n_envs {
@@ -362,26 +323,22 @@ impl<E: Env> VecEnv<E> {
             self.round_cost = t0.elapsed();
             return self.collect();
         }
-        let cmd = Arc::new(cmd);
-        let round = {
-            let mut c = sh
-                .cmd
-                .lock()
-                .map_err(|_| EnvError::Internal("VecEnv lock poisoned by a panic in an env"))?;
-            // Every env of the last round is done, so no thread still counts into `finished`.
-            sh.finished.store(0, Ordering::Relaxed);
-            c.0 += 1;
-            c.1 = Some(cmd.clone());
-            sh.round.store(c.0, Ordering::Release);
-            c.0
-        };
-        for h in &self.workers {
-            h.thread().unpark();
+        self.round += 1;
+        let (round, cmd) = (self.round, &cmd);
+        let jobs = (0..threads)
+            .map(|t| {
+                Box::new(move || {
+                    let t0 = Instant::now();
+                    (sh.work(t, round, cmd), t0.elapsed())
+                }) as Box<dyn FnOnce() -> (usize, Duration) + Send + '_>
+            })
+            .collect();
+        // Every job has tried every env, and returned only once the ones it claimed are done;
+        // an env whose step panicked reports a lost result in `collect`.
+        let ran = self.workers.run(jobs);
+        if let Some(Some((done, took))) = ran.first() {
+            self.round_cost = *took * self.n_envs as u32 / (*done).max(1) as u32;
         }
-        let t0 = Instant::now();
-        let done = sh.work(0, round, &cmd);
-        self.round_cost = t0.elapsed() * self.n_envs as u32 / done.max(1) as u32;
-        wait_until(|| sh.finished.load(Ordering::Acquire) >= self.n_envs, false);
         self.collect()
     }
 
@@ -484,15 +441,5 @@ impl<E: Env> VecEnv<E> {
             out.infos.push(st.info);
         }
         Ok(out)
-    }
-}
-
-impl<E: Env> Drop for VecEnv<E> {
-    fn drop(&mut self) {
-        self.shared.quit.store(true, Ordering::Release);
-        for h in self.workers.drain(..) {
-            h.thread().unpark();
-            let _ = h.join();
-        }
     }
 }

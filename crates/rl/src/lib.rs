@@ -87,8 +87,6 @@ mod progress;
 pub mod rng;
 #[cfg(feature = "train")]
 pub mod sac;
-#[cfg(feature = "train")]
-mod workers;
 
 #[cfg(feature = "train")]
 pub use buffer::ReplayBuffer;
@@ -112,3 +110,20 @@ pub use sac::Sac;
 
 /// Re-exported so callers can name the device without depending on Burn.
 pub use burn::tensor::Device;
+
+/// The pool a learner's gradient steps run on with `threads` threads (the caller's included):
+/// its VecEnv's own when that has as many, since stepping the envs and updating the networks
+/// take turns; else a pool of its own.
+#[cfg(feature = "train")]
+fn shared_workers<E: agvrl_envs::Env>(
+    env: &agvrl_envs::VecEnv<E>,
+    threads: usize,
+    learner: &str,
+) -> Result<std::sync::Arc<agvrl_envs::Workers>> {
+    if env.workers().len() + 1 == threads {
+        return Ok(env.workers().clone());
+    }
+    agvrl_envs::Workers::new(threads - 1)
+        .map(std::sync::Arc::new)
+        .map_err(|e| RlError::Internal(format!("cannot start {learner} worker threads: {e}")))
+}

@@ -133,7 +133,7 @@ pub struct Ppo<E: Env> {
     /// Threads an image minibatch is split over (see [`Ppo::set_threads`]).
     threads: usize,
     /// Their helpers, beside the calling thread (more than one thread only).
-    workers: Option<crate::workers::Workers>,
+    workers: Option<std::sync::Arc<agvrl_envs::Workers>>,
     /// The run's length for `learning_rate_final` (see [`Ppo::set_schedule_steps`]).
     schedule_steps: Option<u64>,
     /// With `correction_limit`, each env's multiplier: the charge per corrected step.
@@ -350,9 +350,7 @@ impl<E: Env> Ppo<E> {
         self.threads = threads.max(1);
         self.workers = None;
         if self.threads > 1 {
-            let workers = crate::workers::Workers::new(self.threads - 1)
-                .map_err(|e| RlError::Internal(format!("cannot start PPO worker threads: {e}")))?;
-            self.workers = Some(workers);
+            self.workers = Some(crate::shared_workers(&self.env, self.threads, "PPO")?);
         }
         Ok(())
     }
@@ -809,6 +807,24 @@ impl<E: Env> Ppo<E> {
 #[cfg(test)]
 mod tests {
     use super::Rollout;
+
+    /// A learner on as many threads as its VecEnv runs its minibatches on the env's pool (one
+    /// set of helpers for both); on another count, on a pool of its own with that many.
+    #[test]
+    fn the_learner_shares_its_vec_envs_worker_pool() {
+        use super::{Ppo, PpoConfig};
+        let make = || agvrl_envs::registry::make("pendulum", &agvrl_envs::EnvConfig::default()).unwrap();
+        let env = agvrl_envs::VecEnv::new(vec![make(), make()], 2).unwrap();
+        let device = crate::device::default_device();
+        let mut ppo = Ppo::new(PpoConfig::default(), env, &device, 0).unwrap();
+        ppo.set_threads(2).unwrap();
+        let pool = ppo.workers.clone().expect("a pool on 2 threads");
+        assert!(std::sync::Arc::ptr_eq(&pool, ppo.env.workers()));
+        ppo.set_threads(3).unwrap();
+        let own = ppo.workers.clone().expect("a pool on 3 threads");
+        assert!(!std::sync::Arc::ptr_eq(&own, ppo.env.workers()));
+        assert_eq!(own.len(), 2);
+    }
 
     #[test]
     fn gae_by_hand_stops_at_episode_ends_and_bootstraps_the_last_value() {

@@ -15,8 +15,8 @@ use crate::adam::Adam;
 use crate::device::NetPath;
 use crate::error::{Result, RlError};
 use crate::nets::{grads_of, to_vec};
-use crate::workers::Workers;
 use agvrl_envs::Env;
+use agvrl_envs::Workers;
 use burn::tensor::{Tensor, TensorData};
 
 /// What [`Ppo::gradient_probe`] returns (weights in agvrl's layout: `[members, in, out]`).
@@ -247,7 +247,7 @@ impl<E: Env> Ppo<E> {
         let (encoder, act_fn) = (self.encoder(), self.cfg.activation_fn);
         let image = encoder.as_ref();
         // An image minibatch is split over the threads (MLP-only ones are too small to gain).
-        let workers = self.workers.as_ref().filter(|_| image.is_some());
+        let workers = self.workers.as_deref().filter(|_| image.is_some());
         let k = workers.map_or(1, |w| (w.len() + 1).clamp(1, n));
         let (head, mut grads) = match workers.filter(|_| k > 1) {
             None => {

@@ -28,7 +28,7 @@ use crate::normalize::ObsNormalizer;
 use crate::policy::{ActionHead, Algorithm, EncoderData, Policy, PolicyData, unsquash};
 use crate::progress::{Control, Episodes, Losses, Progress};
 use crate::rng::Rng;
-use crate::workers::Workers;
+use agvrl_envs::Workers;
 use agvrl_envs::{BoxSpace, Env, VecEnv};
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
@@ -70,7 +70,7 @@ pub struct Sac<E: Env> {
     /// Threads one gradient step may use (row blocks of the minibatch).
     threads: usize,
     /// Helper threads for `threads > 1`.
-    workers: Option<Workers>,
+    workers: Option<std::sync::Arc<Workers>>,
     /// Device copies of the actor, critics and target critics, refreshed after each change;
     /// empty on the host path (no image encoder), which reads the master weights.
     actor_dev: Vec<Tensor<3>>,
@@ -254,9 +254,7 @@ impl<E: Env> Sac<E> {
         self.threads = threads.max(1);
         self.workers = None;
         if self.threads > 1 {
-            let workers = Workers::new(self.threads - 1)
-                .map_err(|e| RlError::Internal(format!("cannot start SAC worker threads: {e}")))?;
-            self.workers = Some(workers);
+            self.workers = Some(crate::shared_workers(&self.env, self.threads, "SAC")?);
         }
         Ok(())
     }
@@ -515,5 +513,20 @@ impl<E: Env> Sac<E> {
     /// Mean return of `n_episodes` deterministic episodes on `env` (seeded `seed`, `seed + 1`, ...).
     pub fn evaluate<F: Env>(&self, env: &mut F, n_episodes: usize, seed: u64) -> Result<f64> {
         crate::eval::evaluate(&mut self.policy(&self.device), env, n_episodes, seed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// SAC on as many threads as its VecEnv runs its gradient blocks on the env's pool.
+    #[test]
+    fn the_learner_shares_its_vec_envs_worker_pool() {
+        use super::{Sac, SacConfig};
+        let make = || agvrl_envs::registry::make("pendulum", &agvrl_envs::EnvConfig::default()).unwrap();
+        let env = agvrl_envs::VecEnv::new(vec![make(), make()], 2).unwrap();
+        let mut sac = Sac::new(SacConfig::default(), env, &crate::device::default_device(), 0).unwrap();
+        sac.set_threads(2).unwrap();
+        let pool = sac.workers.clone().expect("a pool on 2 threads");
+        assert!(std::sync::Arc::ptr_eq(&pool, sac.env.workers()));
     }
 }

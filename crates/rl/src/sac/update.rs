@@ -19,8 +19,8 @@ use crate::cnn::{ImageSpec, encode};
 use crate::error::{Result, RlError};
 use crate::nets::{Activation, NetParts, grads_of, mlp_forward, to_vec};
 use crate::policy::{LOG_STD_MAX, LOG_STD_MIN};
-use crate::workers::Workers;
 use agvrl_envs::Env;
+use agvrl_envs::Workers;
 use burn::tensor::{Device, Tensor, TensorData};
 use std::sync::Arc;
 
@@ -259,12 +259,12 @@ impl<E: Env> Sac<E> {
         let none = || vec![(); blocks.len()];
         let mut critic_out = if on_host {
             let nets = Arc::new(self.nets(ent_coef));
-            run_blocks(self.workers.as_ref(), &nets, &blocks, none(), |n, b, ()| {
+            run_blocks(self.workers.as_deref(), &nets, &blocks, none(), |n, b, ()| {
                 Ok(n.critic_part(&b.rows()))
             })?
         } else {
             let shared = Arc::new(self.shared(ent_coef));
-            run_blocks(self.workers.as_ref(), &shared, &blocks, none(), |s, b, ()| {
+            run_blocks(self.workers.as_deref(), &shared, &blocks, none(), |s, b, ()| {
                 s.critic_block(b)
             })?
         };
@@ -284,12 +284,12 @@ impl<E: Env> Sac<E> {
         let actor_out = if on_host {
             let nets = Arc::new(self.nets(ent_coef));
             let passes: Vec<ActorPass> = critic_out.iter_mut().filter_map(|c| c.actor_pass.take()).collect();
-            run_blocks(self.workers.as_ref(), &nets, &blocks, passes, |n, b, pass| {
+            run_blocks(self.workers.as_deref(), &nets, &blocks, passes, |n, b, pass| {
                 Ok(n.actor_part(&b.rows(), pass))
             })?
         } else {
             let shared = Arc::new(self.shared(ent_coef));
-            run_blocks(self.workers.as_ref(), &shared, &blocks, none(), |s, b, ()| {
+            run_blocks(self.workers.as_deref(), &shared, &blocks, none(), |s, b, ()| {
                 s.actor_block(b)
             })?
         };

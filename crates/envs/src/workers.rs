@@ -1,26 +1,47 @@
-//! Persistent helper threads for a learner's gradient steps (SAC's and PPO's).
+//! The one worker pool: persistent helper threads that VecEnv's rounds and the learners'
+//! gradient steps (SAC's blocks, PPO's image minibatches) spread their work over.
 //!
-//! A gradient step forks and joins twice (critic, actor) within a few milliseconds. On a
-//! virtual machine, waking a parked thread costs tens of microseconds each time, and a fresh
-//! thread per fork also starts with cold GEMM packing buffers; so the helpers live as long as
-//! the learner, and both sides wait for each other by yielding for a short while before they
-//! park. Yielding, unlike a pure spin, hands the core to any other runnable thread (a
-//! VecEnv's worker) at once.
+//! A round of env steps or a gradient step forks and joins within tens of microseconds to a
+//! few milliseconds. On a virtual machine, waking a parked thread costs tens of microseconds
+//! each time, and a fresh thread per fork also starts with cold caches and GEMM packing
+//! buffers; so the helpers live as long as the pool, and both sides wait for each other by
+//! yielding for a short while before they park. Yielding, unlike a pure spin, hands the core
+//! to any other runnable thread at once.
+//!
+//! A VecEnv and its learner share one pool ([`crate::VecEnv::workers`]): their work
+//! alternates, so one set of helpers serves both.
 
+use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 /// How long a waiting side yields before it parks: longer than the gap between the forks of
-/// one gradient step, shorter than anything a person would notice as a busy core.
+/// one gradient step or two env rounds, shorter than anything a person would notice as a busy
+/// core.
 const YIELD_FOR: Duration = Duration::from_millis(2);
 
 type Job = Box<dyn FnOnce() + Send>;
 
+static NEXT_POOL: AtomicU64 = AtomicU64::new(1);
+
+thread_local! {
+    /// The pool this thread is a helper of (0: none).
+    static HELPER_OF: Cell<u64> = const { Cell::new(0) };
+}
+
 /// `n` helper threads; [`Workers::run`] spreads jobs over them and the calling thread.
-pub(crate) struct Workers {
+pub struct Workers {
+    id: u64,
     senders: Vec<Sender<Job>>,
     handles: Vec<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for Workers {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Workers").field("helpers", &self.len()).finish()
+    }
 }
 
 /// Take the next message, yielding for [`YIELD_FOR`] before blocking.
@@ -38,37 +59,60 @@ fn wait<T>(rx: &Receiver<T>) -> Option<T> {
 
 impl Workers {
     /// Start `n` helpers (none when `n == 0`).
-    pub(crate) fn new(n: usize) -> std::io::Result<Self> {
+    pub fn new(n: usize) -> std::io::Result<Self> {
+        let id = NEXT_POOL.fetch_add(1, Ordering::Relaxed);
         let mut senders = Vec::with_capacity(n);
         let mut handles = Vec::with_capacity(n);
         for i in 0..n {
             let (tx, rx) = mpsc::channel::<Job>();
             let handle = std::thread::Builder::new()
-                .name(format!("agvrl-learner-{}", i + 1))
+                .name(format!("agvrl-worker-{}", i + 1))
                 .spawn(move || {
+                    HELPER_OF.set(id);
                     while let Some(job) = wait(&rx) {
-                        job();
+                        // A panicking job reads as `None` to its caller (its result channel is
+                        // dropped); the helper stays for the next job.
+                        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(job));
                     }
                 })?;
             senders.push(tx);
             handles.push(handle);
         }
-        Ok(Self { senders, handles })
+        Ok(Self { id, senders, handles })
     }
 
     /// Helper threads (the calling thread not counted).
-    pub(crate) fn len(&self) -> usize {
+    pub fn len(&self) -> usize {
         self.senders.len()
+    }
+
+    /// Whether the pool has no helpers (every job runs on the calling thread).
+    pub fn is_empty(&self) -> bool {
+        self.senders.is_empty()
     }
 
     /// Run `jobs` (at most `len() + 1`): job 0 on the calling thread, job `i` on helper
     /// `i - 1`; results in job order. A job that panics on a helper returns `None`. Jobs may
     /// borrow from the caller's stack: every job has returned or unwound before this returns
     /// (a panic in job 0 is resumed only once the helpers' jobs are done), so nothing a job
-    /// borrows goes away while it runs.
-    pub(crate) fn run<'s, T: Send + 's>(&self, jobs: Vec<Box<dyn FnOnce() -> T + Send + 's>>) -> Vec<Option<T>> {
+    /// borrows goes away while it runs. Called from one of this pool's own helpers (a job that
+    /// forks again), the jobs run one after another on that helper: its queue would otherwise
+    /// wait on itself.
+    pub fn run<'s, T: Send + 's>(&self, jobs: Vec<Box<dyn FnOnce() -> T + Send + 's>>) -> Vec<Option<T>> {
         assert!(jobs.len() <= self.len() + 1, "more jobs than threads");
         let mut jobs = jobs.into_iter();
+        if HELPER_OF.get() == self.id {
+            let Some(first) = jobs.next() else {
+                return vec![];
+            };
+            let first = std::panic::catch_unwind(std::panic::AssertUnwindSafe(first));
+            let rest = jobs.map(|job| std::panic::catch_unwind(std::panic::AssertUnwindSafe(job)).ok());
+            let rest: Vec<Option<T>> = rest.collect();
+            return match first {
+                Ok(v) => std::iter::once(Some(v)).chain(rest).collect(),
+                Err(panic) => std::panic::resume_unwind(panic),
+            };
+        }
         let Some(first) = jobs.next() else {
             return vec![];
         };
@@ -160,10 +204,41 @@ mod tests {
         assert_eq!(sums(&workers), [4950, 14950, 24950]);
     }
 
+    /// A panicking job reads as `None` and the others still return; its helper serves the next
+    /// call (the pool is shared by a VecEnv and
+    /// its learner, so one failed env step must not take the learner's helpers with it).
     #[test]
-    fn a_panicking_job_reads_as_none_and_the_others_still_return() {
+    fn a_panicking_job_reads_as_none_and_its_helper_serves_the_next_call() {
         let workers = Workers::new(1).unwrap();
         let jobs: Vec<Box<dyn FnOnce() -> u32 + Send>> = vec![Box::new(|| 1), Box::new(|| panic!("job failed"))];
         assert_eq!(workers.run(jobs), vec![Some(1), None]);
+        let me = std::thread::current().id();
+        let jobs: Vec<Box<dyn FnOnce() -> bool + Send>> =
+            vec![Box::new(|| true), Box::new(move || std::thread::current().id() != me)];
+        assert_eq!(workers.run(jobs), vec![Some(true), Some(true)]);
+    }
+
+    /// A job on a helper that forks over the same pool gets its results: the nested jobs run
+    /// on that helper instead of queueing behind the job that waits for them.
+    #[test]
+    fn a_job_that_forks_over_its_own_pool_finishes() {
+        let workers = std::sync::Arc::new(Workers::new(1).unwrap());
+        let (tx, rx) = mpsc::channel();
+        let pool = workers.clone();
+        std::thread::spawn(move || {
+            let inner = pool.clone();
+            let jobs: Vec<Box<dyn FnOnce() -> Vec<Option<u32>> + Send>> = vec![
+                Box::new(|| vec![Some(0)]),
+                Box::new(move || {
+                    let nested: Vec<Box<dyn FnOnce() -> u32 + Send>> = vec![Box::new(|| 2), Box::new(|| 3)];
+                    inner.run(nested)
+                }),
+            ];
+            let _ = tx.send(pool.run(jobs));
+        });
+        let out = rx
+            .recv_timeout(Duration::from_secs(60))
+            .expect("the nested fork never returned");
+        assert_eq!(out, vec![Some(vec![Some(0)]), Some(vec![Some(2), Some(3)])]);
     }
 }
