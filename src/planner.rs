@@ -311,8 +311,7 @@ impl CoveragePlanner {
             && let Some(scan) = env.inner().last_frame().and_then(|f| f.scan.as_ref())
         {
             let l = sim.car(0).lidar_pose();
-            let fwd = rapier3d::prelude::Rotation::from_array(l.orientation_xyzw) * rapier3d::prelude::Vector::X;
-            let yaw = fwd.y.atan2(fwd.x);
+            let yaw = l.yaw_rad();
             for (i, (r, hit)) in scan.ranges.iter().zip(&scan.hit).enumerate() {
                 if *hit && r.is_finite() {
                     let b = yaw + scan.angle_min + i as f32 * scan.angle_increment;

@@ -67,9 +67,9 @@ pub struct Setup<'a> {
     /// Sensors to record.
     pub sensors: Subscribed,
     /// The car's LiDAR and camera mounts in base_link.
-    pub lidar_b: rapier3d::prelude::Pose,
+    pub lidar_b: agvrl_sim::msg::Pose3,
     /// The camera mount, when there is one.
-    pub camera_b: Option<rapier3d::prelude::Pose>,
+    pub camera_b: Option<agvrl_sim::msg::Pose3>,
     /// The URDF text.
     pub urdf: Option<String>,
     /// Key/value pairs of the `agvrl` metadata record (policy hash, env settings).
@@ -99,22 +99,22 @@ pub struct DriveBag {
     sim_time: bool,
 }
 
-pub(crate) fn transform(parent: &str, child: &str, stamp_s: f64, p: &rapier3d::prelude::Pose) -> msg::TransformStamped {
-    let (t, r) = (p.translation, p.rotation);
+pub(crate) fn transform(parent: &str, child: &str, stamp_s: f64, p: &agvrl_sim::msg::Pose3) -> msg::TransformStamped {
+    let ([tx, ty, tz], [rx, ry, rz, rw]) = (p.position_m, p.orientation_xyzw);
     msg::TransformStamped {
         header: mapping::header(stamp_s, parent),
         child_frame_id: child.into(),
         transform: msg::Transform {
             translation: msg::Vector3 {
-                x: t.x as f64,
-                y: t.y as f64,
-                z: t.z as f64,
+                x: tx as f64,
+                y: ty as f64,
+                z: tz as f64,
             },
             rotation: msg::Quaternion {
-                x: r.x as f64,
-                y: r.y as f64,
-                z: r.z as f64,
-                w: r.w as f64,
+                x: rx as f64,
+                y: ry as f64,
+                z: rz as f64,
+                w: rw as f64,
             },
         },
     }
@@ -333,8 +333,8 @@ pub fn for_policy(
         topics: car.topics,
         drive: car.drive,
         sensors: car.sensors,
-        lidar_b: model.lidar_b,
-        camera_b: model.camera_b,
+        lidar_b: model.lidar_mount(),
+        camera_b: model.camera_mount(),
         urdf,
         metadata,
         sim_time: car.sim_time,

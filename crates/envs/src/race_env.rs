@@ -233,17 +233,10 @@ impl RaceEnv {
         let clearance_m = (end_below_m + GRID_MARGIN_M).max(GRID_MIN_CLEARANCE_M);
         let slots = grid(&sim, &track, &settings, clearance_m);
         let model = sim.vehicle();
-        let mut body_x_m = model
-            .body_shapes
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), s| {
-                let b = s.shape.compute_aabb(&s.pose);
-                (lo.min(b.mins.x), hi.max(b.maxs.x))
-            });
-        if body_x_m.0 >= body_x_m.1 {
-            // A vehicle of wheels alone: its axles.
-            body_x_m = (0.0, model.wheelbase_m);
-        }
+        // A vehicle of wheels alone: its axles.
+        let body_x_m = model
+            .body_bounds_m()
+            .map_or((0.0, model.wheelbase_m), |(lo, hi)| (lo[0], hi[0]));
         Ok(Self {
             sim,
             map,

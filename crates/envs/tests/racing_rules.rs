@@ -9,11 +9,7 @@ use agvrl_envs::{Vehicle, registry};
 /// How far the car reaches to its left of the base, metres: its body and its wheels (balls
 /// of the wheel's radius on the ground).
 fn left_reach_m(model: &agvrl_sim::vehicle::VehicleModel) -> f32 {
-    let body = model
-        .body_shapes
-        .iter()
-        .map(|s| s.shape.compute_aabb(&s.pose).maxs.y)
-        .fold(f32::NEG_INFINITY, f32::max);
+    let body = model.body_bounds_m().map_or(f32::NEG_INFINITY, |(_, hi)| hi[1]);
     let wheels = model
         .wheels
         .iter()

@@ -142,6 +142,31 @@ pub struct CameraFrame {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The yaw is where the pose's x axis points seen from above, as rapier's rotation puts
+    /// it, also for a pose pitched and rolled.
+    #[test]
+    fn yaw_is_the_heading_of_the_x_axis_seen_from_above() {
+        use rapier3d::prelude::{Rotation, Vector};
+        for k in -15..=15 {
+            let yaw = k as f32 * 0.2;
+            for (pitch, roll) in [(0.0, 0.0), (0.5, 0.0), (-0.3, 0.7)] {
+                let q =
+                    Rotation::from_rotation_z(yaw) * Rotation::from_rotation_y(pitch) * Rotation::from_rotation_x(roll);
+                let fwd = q * Vector::X;
+                let pose = Pose3 {
+                    position_m: [1.0, 2.0, 3.0],
+                    orientation_xyzw: q.to_array(),
+                };
+                let d = pose.yaw_rad() - fwd.y.atan2(fwd.x);
+                assert!(
+                    d.sin().abs() < 1e-5 && d.cos() > 0.0,
+                    "yaw {yaw}, pitch {pitch}: off by {d}"
+                );
+            }
+            assert!((Pose3::from_position_yaw([0.0; 3], yaw).yaw_rad() - yaw).sin().abs() < 1e-6);
+        }
+    }
     use crate::sensors::LidarConfig;
 
     fn scan(fov_deg: f32, n: usize) -> LaserScan {
@@ -201,6 +226,13 @@ impl Pose3 {
             position_m,
             orientation_xyzw: [0.0, 0.0, s, c],
         }
+    }
+
+    /// Heading of the pose's x axis seen from above (its projection on the ground),
+    /// counter-clockwise from the world's x axis, radians in (-pi, pi].
+    pub fn yaw_rad(&self) -> f32 {
+        let [x, y, z, w] = self.orientation_xyzw;
+        (2.0 * (x * y + w * z)).atan2(1.0 - 2.0 * (y * y + z * z))
     }
 
     /// Whether every number is finite.

@@ -492,12 +492,17 @@ impl SimRobot {
         let mut transforms = Vec::new();
         for c in &self.cars {
             let base = &c.topics.frame_id;
-            transforms.push(transform(base, &format!("{}laser", c.prefix), stamp_s, &model.lidar_b));
-            if let Some(cam) = &model.camera_b {
-                transforms.push(transform(base, &format!("{}camera", c.prefix), stamp_s, cam));
+            transforms.push(transform(
+                base,
+                &format!("{}laser", c.prefix),
+                stamp_s,
+                &model.lidar_mount(),
+            ));
+            if let Some(cam) = model.camera_mount() {
+                transforms.push(transform(base, &format!("{}camera", c.prefix), stamp_s, &cam));
             }
             if race {
-                let at = rapier3d::prelude::Pose::IDENTITY;
+                let at = agvrl_sim::msg::Pose3::default();
                 transforms.push(transform("map", &format!("{}odom", c.prefix), stamp_s, &at));
             }
         }

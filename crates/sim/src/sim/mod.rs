@@ -7,6 +7,7 @@ mod settings;
 mod step;
 
 pub use car::CarView;
+pub(crate) use car::pose3;
 
 pub use settings::{PlanarPose, SceneSource, SimConfig, SimSettings, VehicleParams, VehicleSource, contact_distance_m};
 

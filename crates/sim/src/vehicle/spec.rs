@@ -142,6 +142,24 @@ pub struct VehicleModel {
 }
 
 impl VehicleModel {
+    /// The LiDAR's mount in the base frame (`base_link` -> `laser`).
+    pub fn lidar_mount(&self) -> crate::msg::Pose3 {
+        crate::sim::pose3(&self.lidar_b)
+    }
+
+    /// The camera's mount in the base frame, when the vehicle has one.
+    pub fn camera_mount(&self) -> Option<crate::msg::Pose3> {
+        self.camera_b.as_ref().map(crate::sim::pose3)
+    }
+
+    /// The box the body (every link but the wheels) fills in the base frame, as its lowest and
+    /// highest corner (x ahead, y left, z up; metres): `None` for a vehicle of wheels alone.
+    pub fn body_bounds_m(&self) -> Option<([f32; 3], [f32; 3])> {
+        let boxes = self.body_shapes.iter().map(|s| s.shape.compute_aabb(&s.pose));
+        let b = boxes.reduce(|a, b| a.merged(&b))?;
+        Some((b.mins.to_array(), b.maxs.to_array()))
+    }
+
     /// Load `<name>.toml` (and its URDF) from `vehicles/` of `src`.
     pub fn builtin(src: &AssetSource, name: &str) -> Result<Self, SimError> {
         let rel = format!("vehicles/{name}.toml");
@@ -342,5 +360,32 @@ impl VehicleModel {
             .iter()
             .map(|w| w.radius_m - w.center_b.z)
             .fold(0.0, f32::max)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The racecar's body is three boxes straight from its URDF: the chassis (0.4 x 0.16 x
+    /// 0.04 m at (0.16, 0, 0.03)), the LiDAR (0.1 m cube at (0.265, 0, 0.075)) and the camera
+    /// (0.033 x 0.175 x 0.03 m at (0.39, 0, 0.04)); the wheels are not part of it.
+    #[test]
+    fn the_body_bounds_are_the_union_of_the_urdfs_body_boxes() {
+        let model = VehicleModel::builtin(&AssetSource::Embedded, "racecar").unwrap();
+        let (lo, hi) = model.body_bounds_m().expect("the racecar has a body");
+        let want = ([-0.04, -0.0875, 0.01], [0.4065, 0.0875, 0.125]);
+        for k in 0..3 {
+            assert!(
+                (lo[k] - want.0[k]).abs() < 1e-5,
+                "lowest corner {lo:?}, want {:?}",
+                want.0
+            );
+            assert!(
+                (hi[k] - want.1[k]).abs() < 1e-5,
+                "highest corner {hi:?}, want {:?}",
+                want.1
+            );
+        }
     }
 }
