@@ -26,7 +26,8 @@
 
 use super::median;
 use agvrl_envs::{BoxSpace, Env, EnvError, Info, Step, VecEnv, make};
-use agvrl_rl::cnn::{Encoder, ImageSpec};
+use agvrl_rl::cnn::ImageSpec;
+use agvrl_rl::host_cnn::Encoder;
 use agvrl_rl::nets::{Activation, Init, MlpSpec};
 use agvrl_rl::policy::{ActionHead, Algorithm, Policy, PolicyData};
 use agvrl_rl::rng::Rng;

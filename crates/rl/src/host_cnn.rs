@@ -15,6 +15,8 @@
 #![cfg_attr(not(feature = "train"), allow(dead_code))]
 
 use crate::cnn::{CONV_LAYERS, ImageSpec};
+use crate::error::{Result, RlError};
+use crate::nets::HostParams;
 
 /// A matrix view: element `(r, c)` at `data[r * rs + c * cs]`.
 #[derive(Clone, Copy)]
@@ -442,9 +444,69 @@ impl HostEncoder {
     }
 }
 
+/// The NatureCNN with its weights on the host, for shape checks, inference
+/// and timing.
+pub struct Encoder {
+    spec: ImageSpec,
+    host: HostEncoder,
+}
+
+impl Encoder {
+    /// An encoder with weights `params`.
+    pub fn new(spec: ImageSpec, params: &HostParams) -> Result<Self> {
+        if params.shapes != spec.param_shapes()? {
+            return Err(RlError::Config("encoder weights do not match the image spec".into()));
+        }
+        Ok(Self {
+            spec,
+            host: HostEncoder::new(&spec, &params.data),
+        })
+    }
+
+    /// `n` rows of `obs_dim` values each -> `n` rows of `obs_dim - C*H*W + features_dim`.
+    pub fn forward(&self, obs: &[f32], obs_dim: usize) -> Result<Vec<f32>> {
+        self.spec.vector_dim(obs_dim)?;
+        if obs_dim == 0 || obs.is_empty() || !obs.len().is_multiple_of(obs_dim) {
+            return Err(RlError::Shape {
+                what: "observation",
+                got: obs.len(),
+                dim: obs_dim,
+            });
+        }
+        let n = obs.len() / obs_dim;
+        Ok(self.host.encode_rows(obs, obs_dim, n).1)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The host encoder (inference, the learners' host path) against the tensor formulation.
+    #[test]
+    fn host_encoder_matches_the_tensor_encoder() {
+        use crate::cnn::encode;
+        use crate::nets::Init;
+        use crate::rng::Rng;
+        use burn::tensor::Tensor;
+        let spec = ImageSpec {
+            features_dim: 48,
+            ..ImageSpec::new(3, 40, 52)
+        };
+        let params = spec.init(Init::Orthogonal(2f64.sqrt()), &mut Rng::new(4)).unwrap();
+        let (n, o) = (3, 4 + spec.len());
+        let mut rng = Rng::new(5);
+        let obs: Vec<f32> = (0..n * o).map(|_| rng.uniform() as f32).collect();
+        let host = Encoder::new(spec, &params).unwrap().forward(&obs, o).unwrap();
+        let dev = crate::device::default_device();
+        let x = Tensor::<3>::from_data(burn::tensor::TensorData::new(obs, [1, n, o]), &dev);
+        let tensor = crate::nets::to_vec(encode(&params.to_device(&dev), &spec, x)).unwrap();
+        assert_eq!(host.len(), tensor.len());
+        assert!(host.iter().any(|v| *v > 0.0));
+        for (k, (h, t)) in host.iter().zip(&tensor).enumerate() {
+            assert!((h - t).abs() < 1e-5 + 1e-4 * t.abs(), "[{k}] {h} vs {t}");
+        }
+    }
 
     /// The product against a triple loop, for every stride combination the encoder uses.
     #[test]

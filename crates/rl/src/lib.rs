@@ -28,7 +28,7 @@
 //!   mirrored to the device, so a policy file loads on any backend without autodiff.
 //! - Each network is laid out once (PPO's `Layout`, SAC's `NetParts`, over [`nets::MlpSpec`]
 //!   and [`cnn::ImageSpec`]) and runs on one of two paths ([`NetPath`]): Burn's tensors and
-//!   autodiff on the device (`ppo::forward`, `sac/update.rs`; the default on a GPU), or the
+//!   autodiff on the device (`ppo/network.rs`, `sac/update.rs`; the default on a GPU), or the
 //!   host kernels on the same weights (`ppo/host.rs`, `sac/host.rs`, `host_cnn.rs`; the default
 //!   on the CPU backends, the fast path). Both compute the same losses and gradients to 1e-5
 //!   of their scale (the `burn_path_*` tests); the loss heads, Adam and the action sampling are
@@ -71,7 +71,7 @@ mod file;
 pub mod fuzz;
 #[cfg(feature = "train")]
 mod gaussian;
-mod host_cnn;
+pub mod host_cnn;
 mod host_gemm;
 #[cfg(feature = "train")]
 mod learner;

@@ -3,7 +3,7 @@
 
 use agvrl_envs::api::validate_action;
 use agvrl_envs::{BoxSpace, Env, EnvError, Info, Step, VecEnv};
-use agvrl_rl::cnn::Encoder;
+use agvrl_rl::host_cnn::Encoder;
 use agvrl_rl::nets::Init;
 use agvrl_rl::rng::Rng;
 use agvrl_rl::{Control, ImageSpec, Policy, PolicyData, Ppo, PpoConfig, RlError, Sac, SacConfig, default_device};

@@ -19,7 +19,8 @@ pub use observation::{ArcObs, ImageChannels, ImageObs, ObsConfig, RangeScale, Re
 use serde::{Deserialize, Serialize};
 pub use termination::{common_termination, min_range_ahead_m, min_range_m, min_static_range_m, terminate};
 
-pub use racing::{Racing, RacingReward, RacingRules, RacingRulesSetting};
+pub use racing::{Racing, RacingRules, RacingRulesSetting};
+pub use reward::{RacingPay, RacingReward};
 pub use reward::{SafeShaping, SearchReward};
 pub use safety::{Intervention, SafetyFilter, SafetyFilterConfig};
 pub use search::{CoverageGrid, Search};

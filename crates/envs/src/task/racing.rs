@@ -3,21 +3,10 @@
 //! 2.2 m track admits on map-file and generated tracks (contact ends the episode, progress along
 //! the centre line pays).
 
-use super::reward;
+use super::reward::{self, RacingPay, RacingReward};
 use super::{CommonConfig, Intervention, Outcome, SafetyFilter, Task, min_static_range_m, terminate};
 use crate::api::{BoxSpace, Control, EnvError, MapInfo, RacingInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
-
-/// How a racing step is paid.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum RacingReward {
-    /// The paper's R_racing: 5 T^2 - 2 delta^2 (pays throttle, whichever way the car goes).
-    Paper,
-    /// `progress_per_m` per metre gained along the centre line (negative when going back),
-    /// minus `steering_weight` delta^2.
-    Progress,
-}
 
 /// The racing rules as run configs set them (`[env_config.racing]`): each unset key takes the
 /// track's default ([`RacingRules::oval`] on the oval, [`RacingRules::map_track`] on map-file and
@@ -76,6 +65,17 @@ pub struct RacingRules {
 pub const STALL_GAIN_M: f64 = 0.25;
 
 impl RacingRules {
+    /// What a step pays under these rules.
+    pub fn pay(&self) -> RacingPay {
+        RacingPay {
+            reward: self.reward,
+            progress_per_m: self.progress_per_m,
+            steering_weight: self.steering_weight,
+            end_below_m: self.end_below_m,
+            crash_penalty: self.crash_penalty,
+        }
+    }
+
     /// The paper's rules, the oval's default: AutoVRL's 0.8 m proximity end, 5 T^2 - 2 delta^2,
     /// -50 on the end, no stall limit.
     pub fn oval() -> Self {
@@ -259,7 +259,7 @@ impl Task for Racing {
         let d = min_static_range_m(frame);
         let c = frame.applied;
         let rules = &self.cfg.rules;
-        let mut terms = reward::racing(rules, d, c.throttle, c.steering_rad, 0.0);
+        let mut terms = reward::racing(&rules.pay(), d, c.throttle, c.steering_rad, 0.0);
         let termination = terminate(&mut terms, frame, map, d, rules.end_below_m, rules.crash_penalty);
         let mut racing = None;
         let mut truncate = false;
@@ -276,7 +276,7 @@ impl Task for Racing {
                 }
                 self.progress_m += ds;
                 if termination.is_none() {
-                    terms.progress = reward::racing(rules, d, c.throttle, c.steering_rad, ds).progress;
+                    terms.progress = reward::racing(&rules.pay(), d, c.throttle, c.steering_rad, ds).progress;
                 }
                 while self.progress_m >= (self.info.laps as f64 + 1.0) * lap {
                     self.info.laps += 1;

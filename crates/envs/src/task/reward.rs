@@ -198,11 +198,37 @@ pub fn weight_proximity_by_speed(terms: &mut RewardTerms, safe: &SafeShaping, fo
     }
 }
 
+/// How a racing step is paid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RacingReward {
+    /// The paper's R_racing: 5 T^2 - 2 delta^2 (pays throttle, whichever way the car goes).
+    Paper,
+    /// `progress_per_m` per metre gained along the centre line (negative when going back),
+    /// minus `steering_weight` delta^2.
+    Progress,
+}
+
+/// What a racing step pays: the reward fields of the racing rules
+/// ([`RacingRules::pay`](super::RacingRules::pay)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RacingPay {
+    /// The form.
+    pub reward: RacingReward,
+    /// Paid per metre along the centre line (`Progress`).
+    pub progress_per_m: f64,
+    /// Charged per rad^2 of steering (`Progress`).
+    pub steering_weight: f64,
+    /// Clearance below which the step pays `crash_penalty` alone (0: never).
+    pub end_below_m: f32,
+    /// What a crash pays.
+    pub crash_penalty: f64,
+}
+
 /// A racing step under `rules`: the paper's R_racing (5 T^2 - 2 delta^2), or `progress_per_m` per
 /// metre `ds_m` gained along the centre line minus `steering_weight` delta^2; only the crash
 /// penalty once `d` is under a positive `end_below_m` (the task ends the episode there).
-pub fn racing(rules: &super::racing::RacingRules, d: f64, t: f64, delta: f64, ds_m: f64) -> RewardTerms {
-    use super::racing::RacingReward;
+pub fn racing(rules: &RacingPay, d: f64, t: f64, delta: f64, ds_m: f64) -> RewardTerms {
     if d < rules.end_below_m as f64 {
         return RewardTerms {
             collision: rules.crash_penalty,
@@ -421,7 +447,7 @@ mod tests {
     #[test]
     fn racing_by_hand() {
         use crate::task::racing::RacingRules;
-        let paper = RacingRules::oval();
+        let paper = RacingRules::oval().pay();
         let r = racing(&paper, 1.2, 0.8, 0.2, 0.3).total();
         assert!((r - (3.2 - 0.08)).abs() < 1e-12, "{r}");
         assert_eq!(racing(&paper, 0.79, 1.0, 0.0, 0.3).total(), -50.0);
@@ -431,7 +457,8 @@ mod tests {
         let progress = RacingRules {
             progress_per_m: 2.0,
             ..RacingRules::map_track()
-        };
+        }
+        .pay();
         let r = racing(&progress, 0.05, 1.0, 0.2, 0.06);
         assert!((r.total() - (0.12 - 0.002)).abs() < 1e-12, "{r:?}");
         assert_eq!(r.throttle, 0.0);

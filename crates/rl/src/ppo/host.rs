@@ -11,7 +11,7 @@
 //! at the trunks' input. `tests::host_gradients_match_autodiff` checks both against Burn's
 //! autodiff.
 
-use super::Layout;
+use super::network::Layout;
 use crate::host_cnn::{EncoderPass, HostEncoder};
 use crate::host_gemm::{activate, activation_grad, affine, input_grads, weight_grads};
 use crate::nets::{Activation, HostParams};

@@ -10,7 +10,8 @@
 //! networks.
 
 use super::distribution::ActionDist;
-use super::{Layout, Ppo, Rollout, host};
+use super::network::Layout;
+use super::{Ppo, Rollout, host};
 use crate::adam::Adam;
 use crate::device::NetPath;
 use crate::error::{Result, RlError};
@@ -314,7 +315,7 @@ impl<E: Env> Ppo<E> {
         let ad = self.device.clone().autodiff();
         let t3 = |v: &[f32], s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v.to_vec(), s), &ad);
         let params = self.params.to_tracked(&ad);
-        let (mean, value, latent) = super::forward(&params, t3(obs, [1, n, o]), &self.cfg);
+        let (mean, value, latent) = super::network::forward(&params, t3(obs, [1, n, o]), &self.cfg);
         let (mean_v, value_v) = (to_vec(mean.clone().inner())?, to_vec(value.clone().inner())?);
         let latent = if self.cfg.use_sde {
             Some(to_vec(latent.inner())?)
@@ -484,7 +485,7 @@ impl<E: Env> Ppo<E> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::forward;
+    use super::super::network::forward;
     use super::*;
     use crate::gaussian;
     use crate::nets::{grads_of, scaled_diff, to_vec};
