@@ -5,8 +5,8 @@
 //! few milliseconds. On a virtual machine, waking a parked thread costs tens of microseconds
 //! each time, and a fresh thread per fork also starts with cold caches and GEMM packing
 //! buffers; so the helpers live as long as the pool, and both sides wait for each other by
-//! yielding for a short while before they park. Yielding, unlike a pure spin, hands the core
-//! to any other runnable thread at once.
+//! spinning for a few tens of microseconds, then yielding for a while, before they park.
+//! Yielding, unlike a spin, hands the core to any other runnable thread at once.
 //!
 //! A VecEnv and its learner share one pool ([`crate::VecEnv::workers`]): their work
 //! alternates, so one set of helpers serves both.
@@ -21,6 +21,10 @@ use std::time::{Duration, Instant};
 /// one gradient step or two env rounds, shorter than anything a person would notice as a busy
 /// core.
 const YIELD_FOR: Duration = Duration::from_millis(2);
+
+/// How long a waiting side spins before it yields: a VecEnv round's steps take tens of
+/// microseconds, and a yield is a system call that can cost a microsecond each time.
+const SPIN_FOR: Duration = Duration::from_micros(50);
 
 type Job = Box<dyn FnOnce() + Send>;
 
@@ -44,15 +48,23 @@ impl std::fmt::Debug for Workers {
     }
 }
 
-/// Take the next message, yielding for [`YIELD_FOR`] before blocking.
+/// Take the next message: spin for [`SPIN_FOR`], then yield until [`YIELD_FOR`], then block.
 fn wait<T>(rx: &Receiver<T>) -> Option<T> {
     let start = Instant::now();
     loop {
         match rx.try_recv() {
             Ok(v) => return Some(v),
             Err(TryRecvError::Disconnected) => return None,
-            Err(TryRecvError::Empty) if start.elapsed() < YIELD_FOR => std::thread::yield_now(),
-            Err(TryRecvError::Empty) => return rx.recv().ok(),
+            Err(TryRecvError::Empty) => {
+                let waited = start.elapsed();
+                if waited < SPIN_FOR {
+                    std::hint::spin_loop();
+                } else if waited < YIELD_FOR {
+                    std::thread::yield_now();
+                } else {
+                    return rx.recv().ok();
+                }
+            }
         }
     }
 }
