@@ -9,7 +9,8 @@
 #      (transient-local durability, XCDR2 only): refused too, naming the policy;
 #   f) a depth camera: 672x376 32FC1 Images (ZED 2 VGA, 1 MB each, fragmented) at 15 Hz over
 #      80 degrees vertically; the camera-only policy drives 5 s in real time without a watchdog
-#      event, and every traced observation's image is the crop and resize recomputed in Python.
+#      event, and every traced observation's image is the crop and resize recomputed in Python
+#      (up to three tries, each on a domain of its own).
 #
 #   tools/interop/check-cyclone.sh [path/to/agvrl-drive]
 #
@@ -42,7 +43,7 @@ TMP=$(mktemp -d)
 CAR_PID=
 cleanup() { [ -n "$CAR_PID" ] && kill "$CAR_PID" 2>/dev/null; rm -rf "$TMP"; }
 trap cleanup EXIT
-# Domains 20..219 (RustDDS and Cyclone take 0..232); a..e use five consecutive ones.
+# Domains 20..219 (RustDDS and Cyclone take 0..232); a..f use up to eight consecutive ones.
 DOMAIN=$((RANDOM % 200 + 20))
 FAILED=0
 
@@ -146,23 +147,39 @@ expect e drive_exit "$(cat $E.rc)" 'v != 0 && v != 124'
 expect e error_names_representation "$(grep -c 'incompatible QoS: Representation' $E.drive.err)" 'v >= 1'
 expect e commands_received "$(kv $E.car commands)" 'v == 0'
 
-# f) The camera-only policy from a depth camera that sees more than it was trained on.
+# f) The camera-only policy from a depth camera that sees more than it was trained on. A 1 MB
+# image published from Python can miss the 100 ms lag bound when another process holds both
+# cores, so f, a bound on wall-clock time like the realtime checks, gets up to three tries.
 printf '[camera]\nvertical_fov_deg = 80.0\n' >"$TMP/camera.toml"
-scenario f $((DOMAIN + 5)) "--duration-s 7.5 --depth-image-hz 15 --image-vfov-deg 80" \
-  "--steps 150 --config $TMP/camera.toml --trace $TMP/f.trace" assets/policies/racing-oval-camera.agvrl
 F=$TMP/f
-expect f drive_exit "$(cat $F.rc)" 'v == 0'
-expect f ticks "$(kv $F.drive ticks)" 'v == 150'
-# Images come every 2-3 ticks; each counts camera.max_lag_s (100 ms) past its stamp.
-expect f watchdog_events "$(kv $F.drive events)" 'v == 0'
-expect f images_published "$(kv $F.car images_published)" 'v >= 100'
-expect f commands_received "$(kv $F.car commands)" 'v >= 140'
-expect f fields_ok "$(kv $F.car fields_ok)" 'v == 1'
-"$PY" "$CAR" --verify-image-trace "$F.trace" --image-size 672x376 --image-vfov-deg 80 >"$F.verify"
-tr '\n' ' ' <"$F.verify" | sed 's/^/  trace: /'
-echo
-expect f image_rows "$(kv $F.verify image_rows)" 'v == 150'
-expect f image_pixels_wrong "$(kv $F.verify image_pixels_wrong)" 'v == 0'
+f_ok=0
+for try in 1 2 3; do
+  saved=$FAILED
+  FAILED=0
+  rm -f "$TMP/f.trace"
+  scenario f $((DOMAIN + 4 + try)) "--duration-s 7.5 --depth-image-hz 15 --image-vfov-deg 80" \
+    "--steps 150 --config $TMP/camera.toml --trace $TMP/f.trace" assets/policies/racing-oval-camera.agvrl
+  expect f drive_exit "$(cat $F.rc)" 'v == 0'
+  expect f ticks "$(kv $F.drive ticks)" 'v == 150'
+  # Images come every 2-3 ticks; each counts camera.max_lag_s (100 ms) past its stamp.
+  expect f watchdog_events "$(kv $F.drive events)" 'v == 0'
+  expect f images_published "$(kv $F.car images_published)" 'v >= 100'
+  expect f commands_received "$(kv $F.car commands)" 'v >= 140'
+  expect f fields_ok "$(kv $F.car fields_ok)" 'v == 1'
+  "$PY" "$CAR" --verify-image-trace "$F.trace" --image-size 672x376 --image-vfov-deg 80 >"$F.verify"
+  tr '\n' ' ' <"$F.verify" | sed 's/^/  trace: /'
+  echo
+  expect f image_rows "$(kv $F.verify image_rows)" 'v == 150'
+  expect f image_pixels_wrong "$(kv $F.verify image_pixels_wrong)" 'v == 0'
+  f_failed=$FAILED
+  FAILED=$saved
+  if [ "$f_failed" = 0 ]; then
+    f_ok=1
+    break
+  fi
+  echo "  f: try $try of 3 failed"
+done
+[ "$f_ok" = 1 ] || FAILED=1
 
 if [ "$FAILED" = 0 ]; then
   echo "PASS: agvrl-drive and Cyclone DDS interoperate (6 scenarios)"
