@@ -7,8 +7,8 @@
 //! [`Workers`] pool (the caller's thread steps the first). A thread that finishes its chunk
 //! takes over the unclaimed envs at the ends of the others (a per-env claim), so one slow step
 //! (a reset, a crowded scan) does not leave a core idle. A step costs tens of microseconds, so
-//! handing work over must cost far less: the pool's helpers wait for the next round by yielding
-//! before they park. Rounds cheaper than handing one over (tiny envs like pendulum) run on the
+//! handing work over must cost far less: the pool's helpers wait for the next round by spinning,
+//! then yielding, before they park. Rounds cheaper than handing one over (tiny envs like pendulum) run on the
 //! caller's thread alone. A learner that owns the VecEnv runs its gradient steps on the same
 //! pool ([`VecEnv::workers`]).
 
