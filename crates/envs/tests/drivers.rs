@@ -312,3 +312,59 @@ fn pure_pursuit_fits_a_too_wide_raceline_and_laps_the_bean_without_contact() {
     assert_eq!(run.contact_s, None, "{:?}", run.lap_s);
     assert_eq!(run.lap_s.len(), 1);
 }
+
+/// A map_server map (PGM, 5 cm pixels) of a loop round a thin wall, berlin's hairpin on its
+/// own: a wall 0.15 m thick along y = -0.925 m from x = -4 to 4 m, and the free lane 1.7 m wide
+/// round it, so the centre line runs through the map frame's origin heading +x and turns 180
+/// degrees round each tip at 0.925 m radius (XTENTH-CAR's tightest circle is 0.88 m).
+fn thin_wall_loop(dir: &std::path::Path) -> PathBuf {
+    let (res, x0, y0, w, h) = (0.05, -6.5, -3.5, 260, 100);
+    let (half_wall, lane, wall_y, wall_x) = (0.075, 1.7, -0.925, 4.0);
+    let mut pgm = format!("P5\n{w} {h}\n255\n").into_bytes();
+    for row in 0..h {
+        for col in 0..w {
+            let x = x0 + (col as f64 + 0.5) * res;
+            let y = y0 + (h - 1 - row) as f64 * res + 0.5 * res;
+            let d = (x.clamp(-wall_x, wall_x) - x).hypot(y - wall_y);
+            pgm.push(if d > half_wall && d < half_wall + lane { 254 } else { 0 });
+        }
+    }
+    std::fs::write(dir.join("thin_wall.pgm"), pgm).unwrap();
+    let yaml = dir.join("thin_wall.yaml");
+    std::fs::write(
+        &yaml,
+        format!(
+            "image: thin_wall.pgm\nresolution: {res}\norigin: [{x0}, {y0}, 0.0]\nnegate: 0\n\
+             occupied_thresh: 0.65\nfree_thresh: 0.196\n"
+        ),
+    )
+    .unwrap();
+    yaml
+}
+
+/// Pure pursuit along the traced centre line laps a loop of two hairpins round a thin wall's
+/// tips twice without touching it, from the start and from seeded spawns. Once on its path it
+/// tracks with the speed's lookahead: the longer lookahead that joins a path from off it, left
+/// on, cut inside the hairpin and into the tip (as on f1tenth_gym's berlin).
+#[test]
+fn pure_pursuit_laps_hairpins_round_a_thin_walls_tips_without_contact() {
+    let dir = std::env::temp_dir().join(format!("agvrl-thin-wall-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let yaml = thin_wall_loop(&dir);
+    for (seed, spawn) in [(0, SpawnMode::Line), (1, SpawnMode::Random), (2, SpawnMode::Random)] {
+        let cfg = EnvConfig {
+            track: Some(TrackSetting::Path(yaml.clone())),
+            spawn,
+            ..EnvConfig::default()
+        };
+        let run = drive(&mut pure_pursuit(), &cfg, seed, 2);
+        let lap_m = run.track.lap_length_m();
+        assert!(
+            (20.0..24.0).contains(&lap_m),
+            "lap {lap_m} m: not the loop round the wall"
+        );
+        assert_eq!(run.contact_s, None, "seed {seed}: {:?}", run.lap_s);
+        assert_eq!(run.lap_s.len(), 2, "seed {seed}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -15,7 +15,10 @@ const SEARCH_AHEAD_M: f64 = 4.0;
 /// Lookahead per metre of the rear axle's distance from the path, when that exceeds the
 /// speed's lookahead: a car off the path (at the start, on the centre line, of a raceline that
 /// runs near a wall) joins it at about `atan(1/5)` = 11 degrees, so it does not cross it at a
-/// steep angle and overshoot towards the wall behind it.
+/// steep angle and overshoot towards the wall behind it. Along a raceline this holds all the
+/// way; along the centre line, which keeps clear of the walls, only until the car first joins
+/// it: there a longer lookahead in a tight bend cuts across its inside (berlin's hairpin round
+/// a thin wall's tip).
 const JOIN_LOOKAHEAD_PER_M: f64 = 5.0;
 
 /// Settings of [`PurePursuit`] (a TOML table; unknown keys are an error). The defaults are tuned
@@ -132,6 +135,9 @@ pub struct PurePursuit {
     path: Option<RacePath>,
     /// Index of the path point nearest the rear axle at the last control.
     nearest_idx: Option<usize>,
+    /// Whether the car has joined the centre line since the last reset (see
+    /// [`JOIN_LOOKAHEAD_PER_M`]); a raceline is never joined for good.
+    joined: bool,
 }
 
 impl PurePursuit {
@@ -153,6 +159,7 @@ impl PurePursuit {
             fitted: None,
             path,
             nearest_idx: None,
+            joined: false,
         })
     }
 
@@ -221,6 +228,7 @@ fn goal_point(path: &RacePath, c: [f64; 2], from: usize, ld: f64) -> ([f64; 2], 
 impl Driver for PurePursuit {
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         self.nearest_idx = None;
+        self.joined = false;
         if self.from_map {
             // The settings and limits were validated in `new`, so a track's path builds unless
             // the track is degenerate; then the car stands still.
@@ -260,10 +268,12 @@ impl Driver for PurePursuit {
         let measured = measured_speed_mps(frame);
         let p = path.points()[i];
         let off_m = (p[0] - c[0]).hypot(p[1] - c[1]);
-        let ld = self
-            .settings
-            .lookahead_m(measured.unwrap_or(path.speeds_mps()[i]))
-            .max(JOIN_LOOKAHEAD_PER_M * off_m);
+        let tracking_ld = self.settings.lookahead_m(measured.unwrap_or(path.speeds_mps()[i]));
+        self.joined |= self.from_map && JOIN_LOOKAHEAD_PER_M * off_m <= tracking_ld;
+        let ld = match self.joined {
+            true => tracking_ld,
+            false => tracking_ld.max(JOIN_LOOKAHEAD_PER_M * off_m),
+        };
         let (g, j) = goal_point(path, c, i, ld);
         let (dx, dy) = (g[0] - c[0], g[1] - c[1]);
         let d = dx.hypot(dy).max(1e-6);
