@@ -269,10 +269,12 @@ impl Driver for PurePursuit {
         let p = path.points()[i];
         let off_m = (p[0] - c[0]).hypot(p[1] - c[1]);
         let tracking_ld = self.settings.lookahead_m(measured.unwrap_or(path.speeds_mps()[i]));
-        self.joined |= self.from_map && JOIN_LOOKAHEAD_PER_M * off_m <= tracking_ld;
-        let ld = match self.joined {
-            true => tracking_ld,
-            false => tracking_ld.max(JOIN_LOOKAHEAD_PER_M * off_m),
+        let join_ld = JOIN_LOOKAHEAD_PER_M * off_m;
+        self.joined |= self.from_map && join_ld <= tracking_ld;
+        let ld = if self.joined {
+            tracking_ld
+        } else {
+            tracking_ld.max(join_ld)
         };
         let (g, j) = goal_point(path, c, i, ld);
         let (dx, dy) = (g[0] - c[0], g[1] - c[1]);
