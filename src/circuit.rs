@@ -64,6 +64,7 @@ pub fn circuit(a: CircuitArgs) -> Result<()> {
         }
     );
     println!("walls={}", track.walls.len());
+    println!("pockets={}", info.pockets.len());
     println!("yaml={}", yaml.display());
     if let Some(p) = &a.plot {
         let scene = Scene::from_map(&track)?;

@@ -1,6 +1,6 @@
 //! Generated circuits: closed and drivable, spread over their settings, walled on both edges, the
 //! same per seed, written as map files that load back, settings validated, a circuit scene built
-//! from its seed.
+//! from its seed, dead-end pockets walled round beside an unchanged track.
 
 use super::*;
 use agvrl_sim::scene::write_map;
@@ -354,6 +354,106 @@ fn a_written_circuit_loads_back_as_generated() {
             }
         }
     }
+}
+
+/// Points of a pocket's floor (given as its corners: mouth outer, end outer, end inner, mouth
+/// inner) at fractions `u` along it and `v` across it, from the outer side.
+fn on_floor(q: &[[f32; 2]; 4], u: f64, v: f64) -> [f64; 2] {
+    let q = q.map(|p| p.map(f64::from));
+    std::array::from_fn(|a| q[0][a] + u * (q[1][a] - q[0][a]) + v * (q[3][a] - q[0][a]))
+}
+
+/// With `pocket_share = 1`, sharp corners get dead-end pockets and the track stays as drawn
+/// without them (the same centre line, width and name but for the pockets' setting). Each
+/// pocket's floor is open ground: no wall stands on it but along its inner side. Its outer
+/// side, its end and its inner side are walled wherever they leave the track band, so a car
+/// that drives in meets a wall. No wall stands within half the width of the centre line, and
+/// the map written from the circuit holds the floors as free space.
+#[test]
+fn pockets_are_dead_ends_walled_round_beside_an_unchanged_track() {
+    let plain = CircuitSettings::default();
+    let with = CircuitSettings {
+        pocket_share: 1.0,
+        ..plain
+    };
+    let (mut pockets, mut hairpins) = (0, 0);
+    for seed in 0..40 {
+        let (t, info) = MapTrack::generated(seed, &with).unwrap();
+        let (t0, info0) = MapTrack::generated(seed, &plain).unwrap();
+        assert_eq!(
+            (&t.centreline, info.width_m),
+            (&t0.centreline, info0.width_m),
+            "seed {seed}"
+        );
+        assert!(info0.pockets.is_empty() && t.crc32 != t0.crc32);
+        let p = line(&t);
+        let hw = 0.5 * info.width_m as f64;
+        for q in &p {
+            let near = t.walls.iter().map(|w| to_box(w, *q)).fold(f64::INFINITY, f64::min);
+            assert!(near >= hw - 1e-3, "seed {seed}: {q:?} is {near} m from a wall");
+        }
+        pockets += info.pockets.len();
+        hairpins += (!info.pockets.is_empty() && info.min_radius_m <= 1.5) as usize;
+        for q in &info.pockets {
+            let long = dist(on_floor(q, 0.0, 0.0), on_floor(q, 1.0, 0.0));
+            let mid = on_floor(q, 0.5, 0.5);
+            let near: Vec<&[f32; 5]> = (t.walls.iter())
+                .filter(|w| dist([w[0] as f64, w[1] as f64], mid) < long + 2.0 * hw + w[2] as f64)
+                .collect();
+            let nearest_wall = |e: [f64; 2]| near.iter().map(|w| to_box(w, e)).fold(f64::INFINITY, f64::min);
+            assert!(long > 1.0 + 2.0 * hw.min(1.0), "seed {seed}: a pocket {long} m long");
+            let (nu, nv) = ((long / 0.05) as usize, (2.0 * hw / 0.05) as usize);
+            for i in 1..nu {
+                let u = i as f64 / nu as f64;
+                // The floor, off its inner side's wall.
+                for j in 1..nv {
+                    let v = j as f64 / nv as f64;
+                    if v * 2.0 * hw < 2.0 * hw - 0.12 {
+                        let e = on_floor(q, u, v);
+                        assert!(
+                            nearest_wall(e) > 0.0,
+                            "seed {seed}: a wall on the pocket's floor at {e:?}"
+                        );
+                    }
+                }
+                // Just beyond the outer side, and on the inner side: walled, or the track (the
+                // centre line's chords cut the bend by a millimetre or two).
+                for v in [-0.03 / (2.0 * hw), 1.0] {
+                    let e = on_floor(q, u, v);
+                    let on_track = to_line(e, &p) < hw + 0.01;
+                    assert!(
+                        on_track || nearest_wall(e) <= 0.01,
+                        "seed {seed}: the pocket's side at {e:?} is open: {} m from the line, {} from a wall, half width {hw}",
+                        to_line(e, &p),
+                        nearest_wall(e)
+                    );
+                }
+            }
+            for j in 0..=nv {
+                let e = on_floor(q, 1.0 + 0.03 / long, j as f64 / nv as f64);
+                assert!(
+                    nearest_wall(e) <= 0.01,
+                    "seed {seed}: the pocket's end at {e:?} is open"
+                );
+            }
+        }
+        if seed < 2 && !info.pockets.is_empty() {
+            let d = tmpdir("circuit-pockets");
+            let back = MapTrack::load(&write_map(&t, &info, d.path()).unwrap()).unwrap();
+            for q in &info.pockets {
+                let e = on_floor(q, 0.6, 0.4);
+                let near = back.walls.iter().map(|w| to_box(w, e)).fold(f64::INFINITY, f64::min);
+                assert!(
+                    near > 0.2,
+                    "seed {seed}: the written map walls the pocket's floor at {e:?}"
+                );
+            }
+        }
+    }
+    assert!(
+        pockets >= 40 && hairpins >= 5,
+        "{pockets} pockets, {hairpins} circuits with a tight corner"
+    );
 }
 
 /// The defaults are the documented ranges; every out-of-range key is refused naming the

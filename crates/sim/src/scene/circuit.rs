@@ -10,6 +10,11 @@
 //! draw that breaks a property (a corner tighter than allowed, two stretches of track closer
 //! than a track width and half a metre, no straight to start on) is redrawn from the same
 //! generator, so a seed always gives the same circuit.
+//!
+//! On a share of the sharp corners (`pocket_share`, none by default) the corridor also runs on
+//! straight past the corner's entry and ends against a wall: a dead-end pocket, as where a
+//! mapped hall runs on past a turn (f1tenth_gym's berlin has one). Driving on into the open
+//! space ahead is then a mistake a policy must learn not to make.
 
 use super::MapTrack;
 use super::map_track::{MAX_PIXELS, MAX_SIDE_PX, WALL_HEIGHT_M};
@@ -52,6 +57,12 @@ const MAX_CORNER_RAD: f64 = 172.0 * PI / 180.0;
 const MIN_LINE_M: f64 = 0.05;
 /// Spacing of the points the self-clearance check compares, metres.
 const CLEARANCE_STEP_M: f64 = 0.25;
+/// Corners turning less than this get no pocket, radians (60 degrees).
+const POCKET_MIN_TURN_RAD: f64 = 60.0 * PI / 180.0;
+/// The range a pocket's depth past the corner's outer wall is drawn from, metres.
+const POCKET_DEPTH_M: [f64; 2] = [1.0, 4.0];
+/// Salt of the pockets' own generator: drawing them leaves the shape's draws as they were.
+const POCKET_SALT: u64 = 0x706f_636b_6574;
 /// Draws of one circuit's shape before giving up.
 const MAX_TRIES: usize = 200;
 /// The margin round the circuit in a written map image, metres.
@@ -79,6 +90,11 @@ pub struct CircuitSettings {
     /// Only circuits at most 2.5 m wide can have one (that lower bound must stay under 1.5 m);
     /// the others never do, so the share of all circuits is smaller.
     pub tight_share: f32,
+    /// The share of corners turning at least 60 degrees that get a dead-end pocket: the
+    /// corridor carried straight on past the corner's entry, one width wide, 1 to 4 m past the
+    /// corner's outer wall, closed by a wall (see the module doc). A pocket that would come
+    /// near another stretch of track or another pocket is left out.
+    pub pocket_share: f32,
     /// Metres per pixel of a map image written by [`write_map`].
     pub resolution_m: f32,
 }
@@ -94,6 +110,7 @@ impl Default for CircuitSettings {
             narrow_share: 0.4,
             min_radius_m: 1.0,
             tight_share: 0.5,
+            pocket_share: 0.0,
             resolution_m: 0.05,
         }
     }
@@ -118,7 +135,11 @@ impl CircuitSettings {
                 self.width_m
             ));
         }
-        for (key, v) in [("narrow_share", self.narrow_share), ("tight_share", self.tight_share)] {
+        for (key, v) in [
+            ("narrow_share", self.narrow_share),
+            ("tight_share", self.tight_share),
+            ("pocket_share", self.pocket_share),
+        ] {
             if !(0.0..=1.0).contains(&v) {
                 return bad(format!("circuit {key} must be in [0, 1], got {v}"));
             }
@@ -158,12 +179,16 @@ impl CircuitSettings {
         ]) {
             crc.update(&v.to_le_bytes());
         }
+        // Only when set: circuits without pockets keep the names they always had.
+        if self.pocket_share > 0.0 {
+            crc.update(&self.pocket_share.to_le_bytes());
+        }
         format!("{:08x}", crc.finalize())
     }
 }
 
 /// What a generated circuit was drawn as: for logs, and for [`write_map`]'s track width.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CircuitInfo {
     /// The seed it was generated from.
     pub seed: u64,
@@ -175,6 +200,10 @@ pub struct CircuitInfo {
     pub min_radius_m: f32,
     /// Whether the lap runs clockwise seen from above (z up).
     pub clockwise: bool,
+    /// The dead-end pockets' floors, each a rectangle's corners in order: open ground beside
+    /// the track band, walled round (see [`CircuitSettings::pocket_share`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub pockets: Vec<[[f32; 2]; 4]>,
 }
 
 /// The per-circuit draws: kept over the redraws of its shape, so that rejection does not bend
@@ -269,8 +298,14 @@ impl Piece {
     /// The wall boxes along the edge `left_m` to the left of the line (negative: the right),
     /// each on the side away from the track: a straight is one face; an arc is split into
     /// faces of at most `MAX_ARC_STEP_RAD`, inscribed in the edge on the inside of the bend and
-    /// circumscribed on the outside, so no face stands in the track.
-    fn walls(&self, left_m: f64, out: &mut Vec<[f32; 5]>) {
+    /// circumscribed on the outside, so no face stands in the track. Each face is the part
+    /// of it `clip` keeps (given its two ends), if any.
+    fn walls(
+        &self,
+        left_m: f64,
+        clip: impl Fn([f64; 2], [f64; 2]) -> Option<([f64; 2], [f64; 2])>,
+        out: &mut Vec<[f32; 5]>,
+    ) {
         let corners: Vec<[f64; 2]> = match *self {
             Self::Line { .. } => vec![self.at(0.0, left_m), self.at(1.0, left_m)],
             Self::Arc {
@@ -292,25 +327,190 @@ impl Piece {
             }
         };
         for ab in corners.windows(2) {
-            let (a, b) = (ab[0], ab[1]);
-            let len = dist(a, b);
-            if len < 1e-9 {
-                continue;
+            if let Some((a, b)) = clip(ab[0], ab[1]) {
+                // Away from the track: left of the face for the left wall, right for the right.
+                wall_face(a, b, left_m > 0.0, out);
             }
-            let d = scale(sub(b, a), 1.0 / len);
-            // Away from the track: left of the face for the left wall, right for the right one.
-            let away = scale([-d[1], d[0]], left_m.signum());
-            let c = add(scale(add(a, b), 0.5), scale(away, 0.5 * WALL_DEPTH_M));
-            out.push([
-                c[0] as f32,
-                c[1] as f32,
-                // A millimetre longer at each end: no ray slips between two faces at a corner.
-                (0.5 * len + 1e-3) as f32,
-                (0.5 * WALL_DEPTH_M) as f32,
-                d[1].atan2(d[0]) as f32,
-            ]);
         }
     }
+}
+
+/// A wall box whose face runs from `a` to `b`, `WALL_DEPTH_M` deep on the face's left or right.
+fn wall_face(a: [f64; 2], b: [f64; 2], on_left: bool, out: &mut Vec<[f32; 5]>) {
+    let len = dist(a, b);
+    if len < 1e-9 {
+        return;
+    }
+    let d = scale(sub(b, a), 1.0 / len);
+    let away = scale([-d[1], d[0]], if on_left { 1.0 } else { -1.0 });
+    let c = add(scale(add(a, b), 0.5), scale(away, 0.5 * WALL_DEPTH_M));
+    out.push([
+        c[0] as f32,
+        c[1] as f32,
+        // A millimetre longer at each end: no ray slips between two faces at a corner.
+        (0.5 * len + 1e-3) as f32,
+        (0.5 * WALL_DEPTH_M) as f32,
+        d[1].atan2(d[0]) as f32,
+    ]);
+}
+
+/// A dead-end pocket at a corner: the corridor carried straight on from where the corner's arc
+/// starts, `length_m` long, closed at its end. In its own frame x runs along the entry's
+/// heading and y towards the corner's inside; the floor is `[0, length_m] x [-w/2, w/2]`.
+#[derive(Clone, Copy, Debug)]
+struct Pocket {
+    /// The index of the corner's arc among the pieces.
+    piece: usize,
+    /// The arc's start on the centre line, and the heading there.
+    at: [f64; 2],
+    dir: [f64; 2],
+    /// +1 for a left corner, -1 for a right one.
+    side: f64,
+    half_width_m: f64,
+    length_m: f64,
+    /// Where the corner's outer wall crosses the pocket's inner side, along x: the inner wall
+    /// starts there.
+    inner_from_m: f64,
+}
+
+impl Pocket {
+    /// A point of the pocket's frame in the plane.
+    fn world(&self, x: f64, y: f64) -> [f64; 2] {
+        let left = [-self.dir[1], self.dir[0]];
+        add(self.at, add(scale(self.dir, x), scale(left, self.side * y)))
+    }
+
+    /// A point of the plane in the pocket's frame.
+    fn local(&self, p: [f64; 2]) -> [f64; 2] {
+        let q = sub(p, self.at);
+        let left = [-self.dir[1], self.dir[0]];
+        [
+            q[0] * self.dir[0] + q[1] * self.dir[1],
+            self.side * (q[0] * left[0] + q[1] * left[1]),
+        ]
+    }
+
+    /// The part of the corner's outer wall face `a`-`b` off the floor: the outer wall runs
+    /// onto the floor from the mouth and leaves it across the inner side, nowhere else.
+    fn clip(&self, a: [f64; 2], b: [f64; 2]) -> Option<([f64; 2], [f64; 2])> {
+        let h = self.half_width_m;
+        let on = |p: [f64; 2]| {
+            let [x, y] = self.local(p);
+            x > -1e-3 && y < h
+        };
+        // Where the face crosses the inner side, when it leaves the floor that way.
+        let across = |inside: [f64; 2], outside: [f64; 2]| {
+            let (yi, yo) = (self.local(inside)[1], self.local(outside)[1]);
+            (yo >= h).then(|| add(inside, scale(sub(outside, inside), (h - yi) / (yo - yi))))
+        };
+        match (on(a), on(b)) {
+            (true, true) => None,
+            (false, false) => Some((a, b)),
+            (true, false) => Some((across(a, b).unwrap_or(a), b)),
+            (false, true) => Some((a, across(b, a).unwrap_or(b))),
+        }
+    }
+
+    /// The floor's corners, in order round it.
+    fn floor(&self) -> [[f32; 2]; 4] {
+        let (l, h) = (self.length_m, self.half_width_m);
+        [(0.0, -h), (l, -h), (l, h), (0.0, h)].map(|(x, y)| self.world(x, y).map(|v| v as f32))
+    }
+
+    /// Its three walls: the outer side on from the entry's outer wall, the end, and the inner
+    /// side from where it meets the corner's outer wall. Every box stands off the floor but
+    /// the inner side's, which stands on it: off it lies the corner's own track.
+    fn walls(&self, out: &mut Vec<[f32; 5]>) {
+        let (l, h, d) = (self.length_m, self.half_width_m, WALL_DEPTH_M);
+        // Faces that run along +x or +y in the frame have the floor on their inside's side;
+        // a right corner mirrors the frame, so the box's side flips with it.
+        let away = self.side < 0.0;
+        wall_face(self.world(0.0, -h), self.world(l, -h), away, out);
+        wall_face(self.world(l, -h - d), self.world(l, h), away, out);
+        wall_face(self.world(self.inner_from_m, h), self.world(l + d, h), away, out);
+    }
+}
+
+/// The pockets of a circuit (see [`CircuitSettings::pocket_share`]): on each corner turning
+/// at least `POCKET_MIN_TURN_RAD` whose outer wall crosses the pocket's inner side on the arc,
+/// with chance `share`, unless its new floor or walls would come within a wall's depth and a
+/// sampling step of another stretch's track band or of an earlier pocket.
+fn pockets(pieces: &[Piece], width_m: f64, share: f64, seed: u64) -> Vec<Pocket> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let h = 0.5 * width_m;
+    let pts = sampled(pieces, CLEARANCE_STEP_M);
+    let lap: f64 = pieces.iter().map(Piece::length_m).sum();
+    let mut s0 = 0.0;
+    let mut out: Vec<(Pocket, Vec<[f64; 2]>)> = Vec::new();
+    for (i, p) in pieces.iter().enumerate() {
+        let s_start = s0;
+        s0 += p.length_m();
+        // Both draws on every corner: whether one corner gets a pocket never moves another's.
+        let (chance, depth) = (
+            rng.random::<f64>(),
+            uniform(&mut rng, POCKET_DEPTH_M[0], POCKET_DEPTH_M[1]),
+        );
+        let Piece::Arc {
+            radius_m: r,
+            turn_rad,
+            start_rad,
+            ..
+        } = *p
+        else {
+            continue;
+        };
+        // The outer wall (radius r + h round the centre, which sits r to the inside) crosses
+        // the line y = h at the angle `cross` into the corner.
+        let cross = ((r - h) / (r + h)).acos();
+        if chance >= share || turn_rad.abs() < POCKET_MIN_TURN_RAD.max(cross + MAX_ARC_STEP_RAD) {
+            continue;
+        }
+        let a = p.at(0.0, 0.0);
+        let inner_from_m = (2.0 * r * width_m).sqrt();
+        let pocket = Pocket {
+            piece: i,
+            at: a,
+            // The tangent where the arc starts, turning the arc's way.
+            dir: scale([-start_rad.sin(), start_rad.cos()], turn_rad.signum()),
+            side: turn_rad.signum(),
+            half_width_m: h,
+            length_m: inner_from_m + depth,
+            inner_from_m,
+        };
+        // The new ground: the floor and its walls, beyond the corner's outer wall.
+        let step = CLEARANCE_STEP_M;
+        let (nx, ny) = (
+            ((pocket.length_m + 0.1) / step).ceil() as usize,
+            ((width_m + 0.2) / step).ceil() as usize,
+        );
+        let centre = [0.0, r];
+        let new: Vec<[f64; 2]> = (0..=nx)
+            .flat_map(|ix| (0..=ny).map(move |iy| [ix as f64 * step, -h - 0.1 + iy as f64 * step]))
+            .filter(|q| dist(*q, centre) > r + h)
+            .map(|[x, y]| pocket.world(x, y))
+            .collect();
+        // Stretches other than the corner and the way into it, whose band a wall and a step
+        // beyond the pocket's floor may not reach.
+        let reach = h + WALL_DEPTH_M + step;
+        let (from, to) = (s_start - 2.0 * (width_m + GAP_M), s0);
+        let near_corner = |s: f64| (s - from).rem_euclid(lap) <= to - from;
+        let around = pocket.length_m + width_m + reach;
+        let others: Vec<[f64; 2]> = pts
+            .iter()
+            .filter(|&&(c, s)| !near_corner(s) && dist(c, a) < around)
+            .map(|&(c, _)| c)
+            .collect();
+        let crowded = new.iter().any(|q| {
+            others.iter().any(|c| dist(*c, *q) < reach)
+                || out
+                    .iter()
+                    .any(|(_, other)| other.iter().any(|o| dist(*o, *q) < 2.0 * WALL_DEPTH_M + step))
+        });
+        if !crowded {
+            out.push((pocket, new));
+        }
+    }
+    out.into_iter().map(|(k, _)| k).collect()
 }
 
 fn add(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
@@ -391,10 +591,20 @@ impl MapTrack {
                 }
             };
             let (pieces, centreline) = start_and_centre(pieces);
+            let pockets = match s.pocket_share > 0.0 {
+                true => pockets(&pieces, width_m, s.pocket_share as f64, seed ^ POCKET_SALT),
+                false => Vec::new(),
+            };
             let mut walls = Vec::with_capacity(4 * centreline.len());
-            for p in &pieces {
-                p.walls(0.5 * width_m, &mut walls);
-                p.walls(-0.5 * width_m, &mut walls);
+            for (i, p) in pieces.iter().enumerate() {
+                let pocket = pockets.iter().find(|k| k.piece == i);
+                for left_m in [0.5 * width_m, -0.5 * width_m] {
+                    let outer = pocket.filter(|k| k.side * left_m < 0.0);
+                    p.walls(left_m, |a, b| outer.map_or(Some((a, b)), |k| k.clip(a, b)), &mut walls);
+                }
+            }
+            for k in &pockets {
+                k.walls(&mut walls);
             }
             let min_radius = pieces
                 .iter()
@@ -419,6 +629,7 @@ impl MapTrack {
                 width_m: width_m as f32,
                 min_radius_m: min_radius as f32,
                 clockwise,
+                pockets: pockets.iter().map(Pocket::floor).collect(),
             };
             return Ok((track, info));
         }
@@ -665,15 +876,8 @@ fn clear_of_itself(pieces: &[Piece], width_m: f64) -> bool {
     let step = CLEARANCE_STEP_M;
     let gap = width_m + GAP_M;
     let (near, along) = (gap + step, PI * gap - step);
-    let mut pts: Vec<([f64; 2], f64)> = Vec::new();
-    let mut s0 = 0.0;
-    for p in pieces {
-        let l = p.length_m();
-        let n = (l / step).ceil().max(1.0) as usize;
-        pts.extend((0..n).map(|k| (p.at(k as f64 / n as f64, 0.0), s0 + l * k as f64 / n as f64)));
-        s0 += l;
-    }
-    let lap = s0;
+    let pts = sampled(pieces, step);
+    let lap: f64 = pieces.iter().map(Piece::length_m).sum();
     // Points bucketed in cells `near` a side: a close pair lies in neighbouring cells.
     let cell = |p: [f64; 2]| ((p[0] / near).floor() as i64, (p[1] / near).floor() as i64);
     let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
@@ -693,6 +897,19 @@ fn clear_of_itself(pieces: &[Piece], width_m: f64) -> bool {
             })
         })
     })
+}
+
+/// Points of the centre line at most `step` apart, each with its distance along the lap.
+fn sampled(pieces: &[Piece], step: f64) -> Vec<([f64; 2], f64)> {
+    let mut pts = Vec::new();
+    let mut s0 = 0.0;
+    for p in pieces {
+        let l = p.length_m();
+        let n = (l / step).ceil().max(1.0) as usize;
+        pts.extend((0..n).map(|k| (p.at(k as f64 / n as f64, 0.0), s0 + l * k as f64 / n as f64)));
+        s0 += l;
+    }
+    pts
 }
 
 /// The pieces rotated so that the lap starts `START_INTO_STRAIGHT_M` into its longest
@@ -750,11 +967,18 @@ pub fn write_map(track: &MapTrack, info: &CircuitInfo, dir: &Path) -> Result<Pat
     let res = track.resolution_m as f64;
     let half_w = 0.5 * info.width_m as f64;
     let line: Vec<[f64; 2]> = track.centreline.iter().map(|p| [p[0] as f64, p[1] as f64]).collect();
+    let pockets: Vec<[[f64; 2]; 4]> = info.pockets.iter().map(|q| q.map(|p| p.map(f64::from))).collect();
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for p in &line {
         for a in 0..2 {
             lo[a] = lo[a].min(p[a] - half_w - IMAGE_MARGIN_M);
             hi[a] = hi[a].max(p[a] + half_w + IMAGE_MARGIN_M);
+        }
+    }
+    for p in pockets.iter().flatten() {
+        for a in 0..2 {
+            lo[a] = lo[a].min(p[a] - IMAGE_MARGIN_M);
+            hi[a] = hi[a].max(p[a] + IMAGE_MARGIN_M);
         }
     }
     // The origin on the pixel grid of the world, so that two maps of one circuit line up.
@@ -789,6 +1013,34 @@ pub fn write_map(track: &MapTrack, info: &CircuitInfo, dir: &Path) -> Result<Pat
                 let u = ((ap[0] * ab[0] + ap[1] * ab[1]) / len2).clamp(0.0, 1.0);
                 if dist(p, add(a, scale(ab, u))) <= half_w {
                     // Image rows run from the top.
+                    px[(h - 1 - r) * w + c] = 254;
+                }
+            }
+        }
+    }
+    // And where it lies on a pocket's floor: inside its four sides.
+    for q in &pockets {
+        let (mut qlo, mut qhi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in q {
+            for a in 0..2 {
+                qlo[a] = qlo[a].min(p[a]);
+                qhi[a] = qhi[a].max(p[a]);
+            }
+        }
+        let c0 = ((qlo[0] - origin[0]) / res).floor().max(0.0) as usize;
+        let c1 = (((qhi[0] - origin[0]) / res).ceil() as usize).min(w);
+        let r0 = ((qlo[1] - origin[1]) / res).floor().max(0.0) as usize;
+        let r1 = (((qhi[1] - origin[1]) / res).ceil() as usize).min(h);
+        for r in r0..r1 {
+            let y = origin[1] + (r as f64 + 0.5) * res;
+            for c in c0..c1 {
+                let p = [origin[0] + (c as f64 + 0.5) * res, y];
+                let side = |k: usize| {
+                    let (a, b) = (q[k], q[(k + 1) % 4]);
+                    (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+                };
+                let s: [f64; 4] = std::array::from_fn(side);
+                if s.iter().all(|v| *v >= 0.0) || s.iter().all(|v| *v <= 0.0) {
                     px[(h - 1 - r) * w + c] = 254;
                 }
             }
