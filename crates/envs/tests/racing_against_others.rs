@@ -1,6 +1,6 @@
 //! Races of several cars: seeded grids, fault for contacts, crashed cars, passes and the figures
 //! counting them, the position and rear-end terms, races on generated circuits, cars driven by
-//! controls.
+//! controls, the safety filter keeping a car off the one ahead.
 
 use super::*;
 use agvrl_envs::api::{MultiStep, Track};
@@ -117,6 +117,64 @@ fn a_car_that_drives_into_the_one_ahead_is_at_fault_and_pays_for_it() {
     assert_eq!((s.at_fault[back] >= 1, s.at_fault[front]), (true, 0), "{s:?}");
     assert!(paid < 0.0 && front_paid == 0.0, "back paid {paid}, front {front_paid}");
     assert!(s.time_lost_s[back] > 0.0, "{s:?}");
+}
+
+/// Behind the safety filter set for racing (0.3 m clearance, 0.5 s of scan points, brakes), the
+/// car sent at full throttle straight at the stopped one 2 m ahead never hits it with its front:
+/// the filter sees a car as it sees a wall, and stops short of it.
+#[test]
+fn behind_the_safety_filter_a_car_sent_at_the_one_ahead_stops_short_of_it() {
+    let cfg = EnvConfig {
+        race: Some(RaceSettings {
+            cars: 2,
+            start_behind_share: 1.0,
+            ..RaceSettings::default()
+        }),
+        max_steps: 200,
+        // The map-track rules (contact ends an episode), under which races on circuits run.
+        racing: Some(agvrl_envs::task::RacingRulesSetting {
+            end_below_m: Some(0.0),
+            ..Default::default()
+        }),
+        sim: agvrl_sim::SimSettings {
+            brake_mps2: 4.0,
+            ..Default::default()
+        },
+        safety_filter: agvrl_envs::task::SafetyFilterConfig {
+            enabled: true,
+            clearance_m: 0.3,
+            memory_s: 0.5,
+            ..Default::default()
+        },
+        ..EnvConfig::default()
+    };
+    let mut env = make_race("racing-duel", &cfg).unwrap();
+    // The filter drives car 0's controls (the learner's, in training and in `agvrl race`),
+    // which starts 2 m behind.
+    let (front, back) = (1, 0);
+    env.reset(Some(0)).unwrap();
+    let d = distances(&env.step(&vec![vec![-1.0, 0.0]; 2]).unwrap());
+    assert!(d[front] - d[back] > 1.5, "{d:?}");
+    let mut last = None;
+    for _ in 0..199 {
+        // Full throttle, steered at the other car's middle.
+        let (p, q) = (env.sim().car(back).pose2(), env.sim().car(front).pose2());
+        let alpha = (q.y_m - p.y_m).atan2(q.x_m - p.x_m) - p.yaw_rad;
+        let steer = (alpha.sin().atan2(alpha.cos()) / 0.36).clamp(-1.0, 1.0);
+        let mut a = vec![vec![-1.0, 0.0]; 2];
+        a[back] = vec![1.0, steer];
+        let st = env.step(&a).unwrap();
+        let over = st.summary.is_some();
+        last = Some(st);
+        if over {
+            break;
+        }
+    }
+    let s = last.unwrap().summary.expect("the race ended");
+    let end = &s.distance_m;
+    assert_eq!((s.at_fault[back], s.crashed[back]), (0, false), "{s:?}");
+    // It closed in before it stopped, rather than standing still from the start.
+    assert!(end[back] - d[back] > 0.5, "the car behind moved from {d:?} to {end:?}");
 }
 
 /// A car steered into the wall crashes: its episode ends with the crash penalty, it stands
