@@ -422,8 +422,8 @@ impl Pocket {
     /// the inner side's, which stands on it: off it lies the corner's own track.
     fn walls(&self, out: &mut Vec<[f32; 5]>) {
         let (l, h, d) = (self.length_m, self.half_width_m, WALL_DEPTH_M);
-        // Faces that run along +x or +y in the frame have the floor on their inside's side;
-        // a right corner mirrors the frame, so the box's side flips with it.
+        // Each face runs along +x or +y of the frame with its box on the frame's right; a right
+        // corner's frame is mirrored, which puts that on the plane's left.
         let away = self.side < 0.0;
         wall_face(self.world(0.0, -h), self.world(l, -h), away, out);
         wall_face(self.world(l, -h - d), self.world(l, h), away, out);
@@ -445,7 +445,7 @@ fn pockets(pieces: &[Piece], width_m: f64, share: f64, seed: u64) -> Vec<Pocket>
     for (i, p) in pieces.iter().enumerate() {
         let s_start = s0;
         s0 += p.length_m();
-        // Both draws on every corner: whether one corner gets a pocket never moves another's.
+        // Both draws on every piece: whether one corner gets a pocket never moves another's.
         let (chance, depth) = (
             rng.random::<f64>(),
             uniform(&mut rng, POCKET_DEPTH_M[0], POCKET_DEPTH_M[1]),
@@ -466,6 +466,7 @@ fn pockets(pieces: &[Piece], width_m: f64, share: f64, seed: u64) -> Vec<Pocket>
             continue;
         }
         let a = p.at(0.0, 0.0);
+        // x^2 + (h - r)^2 = (r + h)^2 on the outer wall's circle.
         let inner_from_m = (2.0 * r * width_m).sqrt();
         let pocket = Pocket {
             piece: i,
