@@ -995,57 +995,54 @@ pub fn write_map(track: &MapTrack, info: &CircuitInfo, dir: &Path) -> Result<Pat
         )));
     }
     let (w, h) = (w as usize, h as usize);
-    // Free where a pixel's centre lies within half the width of the centre line: each segment
-    // paints the pixels of its capsule.
+    // Free where a pixel's centre lies within half the width of the centre line, or on a
+    // pocket's floor: each segment's capsule and each floor paints the pixels of its box.
     let mut px = vec![0u8; w * h];
-    for i in 0..line.len() {
-        let (a, b) = (line[i], line[(i + 1) % line.len()]);
-        let ab = sub(b, a);
-        let len2 = (ab[0] * ab[0] + ab[1] * ab[1]).max(1e-18);
-        let c0 = (((a[0].min(b[0]) - half_w - origin[0]) / res).floor().max(0.0)) as usize;
-        let c1 = (((a[0].max(b[0]) + half_w - origin[0]) / res).ceil() as usize).min(w);
-        let r0 = (((a[1].min(b[1]) - half_w - origin[1]) / res).floor().max(0.0)) as usize;
-        let r1 = (((a[1].max(b[1]) + half_w - origin[1]) / res).ceil() as usize).min(h);
+    let mut paint = |lo: [f64; 2], hi: [f64; 2], inside: &dyn Fn([f64; 2]) -> bool| {
+        let c0 = ((lo[0] - origin[0]) / res).floor().max(0.0) as usize;
+        let c1 = (((hi[0] - origin[0]) / res).ceil() as usize).min(w);
+        let r0 = ((lo[1] - origin[1]) / res).floor().max(0.0) as usize;
+        let r1 = (((hi[1] - origin[1]) / res).ceil() as usize).min(h);
         for r in r0..r1 {
             let y = origin[1] + (r as f64 + 0.5) * res;
             for c in c0..c1 {
-                let p = [origin[0] + (c as f64 + 0.5) * res, y];
-                let ap = sub(p, a);
-                let u = ((ap[0] * ab[0] + ap[1] * ab[1]) / len2).clamp(0.0, 1.0);
-                if dist(p, add(a, scale(ab, u))) <= half_w {
+                if inside([origin[0] + (c as f64 + 0.5) * res, y]) {
                     // Image rows run from the top.
                     px[(h - 1 - r) * w + c] = 254;
                 }
             }
         }
+    };
+    for i in 0..line.len() {
+        let (a, b) = (line[i], line[(i + 1) % line.len()]);
+        let ab = sub(b, a);
+        let len2 = (ab[0] * ab[0] + ab[1] * ab[1]).max(1e-18);
+        let near = |p: [f64; 2]| {
+            let ap = sub(p, a);
+            let u = ((ap[0] * ab[0] + ap[1] * ab[1]) / len2).clamp(0.0, 1.0);
+            dist(p, add(a, scale(ab, u))) <= half_w
+        };
+        let lo = [a[0].min(b[0]) - half_w, a[1].min(b[1]) - half_w];
+        let hi = [a[0].max(b[0]) + half_w, a[1].max(b[1]) + half_w];
+        paint(lo, hi, &near);
     }
-    // And where it lies on a pocket's floor: inside its four sides.
     for q in &pockets {
-        let (mut qlo, mut qhi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         for p in q {
             for a in 0..2 {
-                qlo[a] = qlo[a].min(p[a]);
-                qhi[a] = qhi[a].max(p[a]);
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
             }
         }
-        let c0 = ((qlo[0] - origin[0]) / res).floor().max(0.0) as usize;
-        let c1 = (((qhi[0] - origin[0]) / res).ceil() as usize).min(w);
-        let r0 = ((qlo[1] - origin[1]) / res).floor().max(0.0) as usize;
-        let r1 = (((qhi[1] - origin[1]) / res).ceil() as usize).min(h);
-        for r in r0..r1 {
-            let y = origin[1] + (r as f64 + 0.5) * res;
-            for c in c0..c1 {
-                let p = [origin[0] + (c as f64 + 0.5) * res, y];
-                let side = |k: usize| {
-                    let (a, b) = (q[k], q[(k + 1) % 4]);
-                    (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
-                };
-                let s: [f64; 4] = std::array::from_fn(side);
-                if s.iter().all(|v| *v >= 0.0) || s.iter().all(|v| *v <= 0.0) {
-                    px[(h - 1 - r) * w + c] = 254;
-                }
-            }
-        }
+        // Inside its four sides: on the same side of each.
+        let on_floor = |p: [f64; 2]| {
+            let s: [f64; 4] = std::array::from_fn(|k| {
+                let (a, b) = (q[k], q[(k + 1) % 4]);
+                (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+            });
+            s.iter().all(|v| *v >= 0.0) || s.iter().all(|v| *v <= 0.0)
+        };
+        paint(lo, hi, &on_floor);
     }
     let img = image::GrayImage::from_raw(w as u32, h as u32, px)
         .ok_or_else(|| invalid("the image buffer does not match its size".into()))?;
