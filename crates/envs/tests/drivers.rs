@@ -348,9 +348,9 @@ fn thin_wall_loop(dir: &std::path::Path) -> PathBuf {
 /// on, cut inside the hairpin and into the tip (as on f1tenth_gym's berlin).
 #[test]
 fn pure_pursuit_laps_hairpins_round_a_thin_walls_tips_without_contact() {
-    let dir = std::env::temp_dir().join(format!("agvrl-thin-wall-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let yaml = thin_wall_loop(&dir);
+    // Removed with its files when the guard drops, the test failing or not.
+    let dir = tempfile::Builder::new().prefix("agvrl-thin-wall-").tempdir().unwrap();
+    let yaml = thin_wall_loop(dir.path());
     for (seed, spawn) in [(0, SpawnMode::Line), (1, SpawnMode::Random), (2, SpawnMode::Random)] {
         let cfg = EnvConfig {
             track: Some(TrackSetting::Path(yaml.clone())),
@@ -366,5 +366,4 @@ fn pure_pursuit_laps_hairpins_round_a_thin_walls_tips_without_contact() {
         assert_eq!(run.contact_s, None, "seed {seed}: {:?}", run.lap_s);
         assert_eq!(run.lap_s.len(), 2, "seed {seed}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
