@@ -99,6 +99,7 @@ impl Tally {
         }
         f.encounters += s.encounters[i] as u64;
         f.passes += s.passes[i] as u64;
+        f.races_with_pass += usize::from(s.passes[i] > 0);
         f.at_fault_incidents += s.at_fault_incidents(i) as u64;
         f.contacts += s.contacts[i] as u64;
         f.at_fault_contacts += s.at_fault[i] as u64;
@@ -411,5 +412,40 @@ fn name(p: &std::path::Path) -> String {
             .map_or("policy.agvrl".into(), |d| d.to_string_lossy().into_owned()),
         Some(f) => f.to_string(),
         None => p.display().to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Tally;
+
+    fn summary(passes: [u32; 2]) -> agvrl_envs::RaceSummary {
+        agvrl_envs::RaceSummary {
+            order: vec![0, 1],
+            laps: vec![0, 0],
+            best_lap_s: vec![None, None],
+            lap_times_s: vec![vec![], vec![]],
+            distance_m: vec![10.0, 5.0],
+            covered_m: vec![10.0, 5.0],
+            start_place: vec![2, 1],
+            encounters: vec![passes[0], 0],
+            passes: passes.to_vec(),
+            contacts: vec![0, 0],
+            at_fault: vec![0, 0],
+            time_lost_s: vec![0.0, 0.0],
+            crashed: vec![false, false],
+        }
+    }
+
+    /// A race with two passes counts once among the races with a pass; one without, not at all.
+    #[test]
+    fn a_race_with_passes_counts_once_among_races_with_a_pass() {
+        let mut t = Tally::default();
+        for p in [[2, 0], [0, 0], [1, 0]] {
+            t.add(&summary(p), 0);
+        }
+        let f = t.figures(0, "p".into());
+        assert_eq!((f.races, f.passes, f.races_with_pass), (3, 3, 2));
+        assert_eq!(f.races_with_pass_share(), Some(2.0 / 3.0));
     }
 }

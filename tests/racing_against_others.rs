@@ -88,6 +88,8 @@ fn self_play_trains_a_duel_policy_that_races_the_single_car_one() {
             "encounters",
             "passes",
             "pass_success",
+            "races_with_pass",
+            "races_with_pass_share",
             "at_fault_incidents",
             "at_fault_share",
             "wins_from_behind",

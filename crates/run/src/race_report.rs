@@ -61,6 +61,9 @@ pub struct CarFigures {
     pub encounters: u64,
     /// Passes made.
     pub passes: u64,
+    /// Races in which it made at least one pass.
+    #[serde(default)]
+    pub races_with_pass: usize,
     /// Contacts its front caused, and its own crashes.
     pub at_fault_incidents: u64,
     /// Races started behind another car.
@@ -90,6 +93,11 @@ impl CarFigures {
         share(self.at_fault_incidents, self.passes + self.at_fault_incidents)
     }
 
+    /// Races with at least one pass, per race.
+    pub fn races_with_pass_share(&self) -> Option<f64> {
+        share(self.races_with_pass as u64, self.races as u64)
+    }
+
     /// Wins per start behind.
     pub fn win_rate_from_behind(&self) -> Option<f64> {
         share(self.wins_from_behind as u64, self.starts_behind as u64)
@@ -105,7 +113,7 @@ impl CarFigures {
         let n = self.races.max(1) as f64;
         let opt = |v: Option<f64>| v.map_or("none".to_string(), |v| format!("{v:.2}"));
         format!(
-            "{prefix}car={} policy={} races={} wins={} win_rate={:.2} mean_place={:.2} laps_per_race={:.2} mean_lap_s={} best_lap_s={} encounters={} passes={} pass_success={} at_fault_incidents={} at_fault_share={} starts_behind={} wins_from_behind={} win_rate_from_behind={} contacts_per_race={:.2} at_fault_per_race={:.2} time_lost_s_per_race={:.2} crashes={} covered_km={:.2} crashes_per_km={}",
+            "{prefix}car={} policy={} races={} wins={} win_rate={:.2} mean_place={:.2} laps_per_race={:.2} mean_lap_s={} best_lap_s={} encounters={} passes={} pass_success={} races_with_pass={} races_with_pass_share={} at_fault_incidents={} at_fault_share={} starts_behind={} wins_from_behind={} win_rate_from_behind={} contacts_per_race={:.2} at_fault_per_race={:.2} time_lost_s_per_race={:.2} crashes={} covered_km={:.2} crashes_per_km={}",
             self.car,
             self.policy,
             self.races,
@@ -118,6 +126,8 @@ impl CarFigures {
             self.encounters,
             self.passes,
             opt(self.pass_success()),
+            self.races_with_pass,
+            opt(self.races_with_pass_share()),
             self.at_fault_incidents,
             opt(self.at_fault_share()),
             self.starts_behind,

@@ -143,6 +143,7 @@ fn race() -> agvrl_run::RaceReport {
         best_lap_s: Some(39.5),
         encounters: 4,
         passes: 3,
+        races_with_pass: 2,
         at_fault_incidents: 1,
         starts_behind: 4,
         wins_from_behind: 3,
@@ -157,6 +158,7 @@ fn race() -> agvrl_run::RaceReport {
         policy: "pure-pursuit@0.75".into(),
         encounters: 0,
         passes: 0,
+        races_with_pass: 0,
         at_fault_incidents: 0,
         starts_behind: 0,
         crashes: 1,
@@ -196,6 +198,8 @@ fn race_report_round_trips_and_prints_its_shares() {
     let l = lines[1];
     for kv in [
         "pass_success=0.75",
+        "races_with_pass=2",
+        "races_with_pass_share=0.50",
         "at_fault_share=0.25",
         "win_rate_from_behind=0.75",
         "contacts_per_race=0.50",
@@ -207,6 +211,7 @@ fn race_report_round_trips_and_prints_its_shares() {
     let o = lines[2];
     for kv in [
         "pass_success=none",
+        "races_with_pass_share=0.00",
         "at_fault_share=none",
         "win_rate_from_behind=none",
         "crashes_per_km=4.000",
