@@ -275,6 +275,8 @@ def car_line(c):
         f"laps_per_race={c['laps_per_race']:.2f} mean_lap_s={opt(c['mean_lap_s'])} "
         f"best_lap_s={opt(c['best_lap_s'])} encounters={c['encounters']} passes={c['passes']} "
         f"pass_success={opt(share(c['passes'], c['encounters']))} "
+        f"races_with_pass={c['races_with_pass']} "
+        f"races_with_pass_share={opt(share(c['races_with_pass'], c['races']))} "
         f"at_fault_incidents={c['at_fault_incidents']} "
         f"at_fault_share={opt(share(c['at_fault_incidents'], c['passes'] + c['at_fault_incidents']))} "
         f"starts_behind={c['starts_behind']} wins_from_behind={c['wins_from_behind']} "
