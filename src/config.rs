@@ -5,3 +5,6 @@ pub use agvrl_run::RunConfig;
 
 /// The default job, also embedded so the binary works outside a checkout.
 pub const DEFAULT_TOML: &str = include_str!("../configs/default.toml");
+
+/// What `agvrl train --track MAP.yaml` trains without `--config`: the per-track recipe.
+pub const TRACK_TOML: &str = include_str!("../configs/racing-track.toml");

@@ -1,7 +1,7 @@
 //! `agvrl train`: run configurations resolved from flags, training into a run directory,
 //! checkpoints, progress, and the evaluation at the end (`crate::eval`).
 
-use crate::config::{DEFAULT_TOML, RunConfig};
+use crate::config::{DEFAULT_TOML, RunConfig, TRACK_TOML};
 use crate::eval::{Driver, Summary, Watch, evaluate};
 use crate::plots::{self};
 use crate::selfplay::{Pool, SelfPlayEnv};
@@ -132,7 +132,8 @@ pub struct TrainArgs {
     #[arg(long, value_name = "KEY=VALUE")]
     pub set: Vec<String>,
     /// Race on the track of a ROS map file (its YAML; a centre-line CSV beside it, or traced):
-    /// `--set env_config.track=PATH`, loaded into the run config and policy file.
+    /// `--set env_config.track=PATH`, loaded into the run config and policy file. Without
+    /// --config this trains the per-track recipe, configs/racing-track.toml (built in).
     #[arg(long, value_name = "MAP.yaml")]
     pub track: Option<PathBuf>,
     /// Progress output: a bar on stderr (bar), none, or JSON lines on stdout (json: one
@@ -177,6 +178,10 @@ fn resolve(a: &TrainArgs) -> Result<RunConfig> {
         Some(p) => (
             std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?,
             p.display().to_string(),
+        ),
+        None if a.track.is_some() => (
+            TRACK_TOML.to_string(),
+            "configs/racing-track.toml (built in)".to_string(),
         ),
         None => (DEFAULT_TOML.to_string(), "configs/default.toml (built in)".to_string()),
     };
@@ -365,11 +370,27 @@ pub fn train(a: TrainArgs) -> Result<()> {
     if a.progress == ProgressMode::Json {
         stop_with_parent(&STOP);
     }
-    let (dir, report) = train_run(cfg, a.out.clone(), a.compute(), &STOP, a.progress)?;
+    let (dir, report, attempts) = match cfg.attempts {
+        1 => {
+            let (dir, report) = train_run(cfg, a.out.clone(), a.compute(), &STOP, a.progress)?;
+            (dir, report, Vec::new())
+        }
+        _ => train_attempts(cfg, a.out.clone(), a.compute(), &STOP, a.progress)?,
+    };
     if a.progress == ProgressMode::Json {
         println!("{}", done_json(&dir, &report));
     } else {
         println!("run_dir={}", dir.display());
+        if let Some(k) = kept_attempt(&attempts) {
+            let kept = &attempts[k];
+            println!(
+                "attempts={} kept_seed={} validation_lapped={}/{}",
+                attempts.len(),
+                kept.seed,
+                kept.lapped,
+                kept.episodes
+            );
+        }
         print!("{}", report.text());
     }
     Ok(())
@@ -408,8 +429,143 @@ fn done_json(dir: &std::path::Path, report: &RunReport) -> String {
 
 /// Train `cfg` into a new run directory (`out`, or runs/<date-time>-<env>-<algo>), stopping
 /// early, with a complete run directory, once `stop` is set. Returns the directory and its
-/// evaluation.
+/// evaluation. With `attempts` above 1, see [`train_attempts`].
 pub fn train_run(
+    cfg: RunConfig,
+    out: Option<PathBuf>,
+    compute: Compute,
+    stop: &AtomicBool,
+    progress: ProgressMode,
+) -> Result<(PathBuf, RunReport)> {
+    if cfg.attempts > 1 {
+        let (dir, report, _) = train_attempts(cfg, out, compute, stop, progress)?;
+        return Ok((dir, report));
+    }
+    train_once(cfg, out, compute, stop, progress)
+}
+
+/// One run of [`train_attempts`]: its seed, and how its validation episodes ended.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Attempt {
+    pub seed: u64,
+    pub train_s: f64,
+    /// Validation episodes lapped without a crash, of `episodes`.
+    pub lapped: usize,
+    pub episodes: usize,
+    pub ended: Vec<&'static str>,
+}
+
+impl Attempt {
+    fn validated(&self) -> bool {
+        self.lapped == self.episodes
+    }
+}
+
+/// The attempt a run of several keeps: the first whose validation episodes all lapped, else the
+/// one that lapped most, the earliest of equals.
+fn kept_attempt(attempts: &[Attempt]) -> Option<usize> {
+    attempts.iter().position(Attempt::validated).or_else(|| {
+        let most = attempts.iter().map(|a| a.lapped).max()?;
+        attempts.iter().position(|a| a.lapped == most)
+    })
+}
+
+/// `attempts.csv`: one line per attempt, the kept one marked.
+fn attempts_csv(attempts: &[Attempt], kept: usize) -> String {
+    let mut out = String::from("attempt,seed,train_s,validation_lapped,validation_episodes,validation_ended,kept\n");
+    for (k, a) in attempts.iter().enumerate() {
+        let _ = writeln!(
+            out,
+            "{},{},{:.1},{},{},{},{}",
+            k + 1,
+            a.seed,
+            a.train_s,
+            a.lapped,
+            a.episodes,
+            a.ended.join(" "),
+            k == kept
+        );
+    }
+    out
+}
+
+/// Train `cfg` at seeds `seed`, `seed + 1`, ... (at most `attempts` runs) until a run's policy
+/// laps every validation episode ([`agvrl_run::Seeds::validation`]) without a crash. The kept
+/// run ([`kept_attempt`]) fills the run directory; the others stay in its `attempts/`, and
+/// `attempts.csv` lists them all.
+pub fn train_attempts(
+    cfg: RunConfig,
+    out: Option<PathBuf>,
+    compute: Compute,
+    stop: &AtomicBool,
+    progress: ProgressMode,
+) -> Result<(PathBuf, RunReport, Vec<Attempt>)> {
+    cfg.validate()?;
+    let run = match out {
+        Some(out) => RunDir::create(out)?,
+        None => RunDir::create_unique(default_run_path(&cfg))?,
+    };
+    let tried = run.file("attempts");
+    let mut attempts = Vec::new();
+    let mut runs = Vec::new();
+    for k in 0..cfg.attempts {
+        let mut c = cfg.clone();
+        c.seed = cfg.seed + u64::from(k);
+        eprintln!("attempt {} of {} (seed {})", k + 1, cfg.attempts, c.seed);
+        let (dir, report) = train_once(
+            c.clone(),
+            Some(tried.join(format!("seed-{}", c.seed))),
+            compute,
+            stop,
+            progress,
+        )?;
+        let mut policy = Policy::load(&dir.join(files::POLICY))?;
+        let v = evaluate(
+            Driver::Policy(&mut policy),
+            c.eval_env_id(),
+            &c.eval_env_config(),
+            c.eval_episodes,
+            c.seeds().validation(),
+            &mut |_| Ok(()),
+        )?;
+        let a = Attempt {
+            seed: c.seed,
+            train_s: report.train_s,
+            lapped: v.lapped,
+            episodes: v.episodes,
+            ended: v.ended,
+        };
+        eprintln!(
+            "attempt {}: {}/{} validation episodes lapped without a crash ({})",
+            k + 1,
+            a.lapped,
+            a.episodes,
+            a.ended.join(",")
+        );
+        let done = a.validated() || report.interrupted || stop.load(Ordering::SeqCst);
+        attempts.push(a);
+        runs.push((dir, report));
+        if done {
+            break;
+        }
+    }
+    let kept = kept_attempt(&attempts).context("no attempt trained")?;
+    let (dir, report) = runs.swap_remove(kept);
+    for entry in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
+        let from = entry?.path();
+        let to = run.file(&from.file_name().unwrap_or_default().to_string_lossy());
+        std::fs::rename(&from, &to).with_context(|| format!("moving {} to {}", from.display(), to.display()))?;
+    }
+    std::fs::remove_dir(&dir).with_context(|| format!("removing {}", dir.display()))?;
+    // Nothing left of the other attempts when the first was kept.
+    let _ = std::fs::remove_dir(&tried);
+    write_atomic(&run.file("attempts.csv"), attempts_csv(&attempts, kept).as_bytes())?;
+    let dir = run.finish()?;
+    Ok((dir, report, attempts))
+}
+
+/// [`train_run`] for one seed.
+fn train_once(
     cfg: RunConfig,
     out: Option<PathBuf>,
     compute: Compute,
@@ -771,6 +927,28 @@ fn run_title(cfg: &RunConfig) -> String {
 mod tests {
     use super::*;
     use agvrl_envs::task::ImageChannels;
+
+    #[test]
+    fn the_first_attempt_to_lap_every_validation_episode_is_kept_else_the_one_that_lapped_most() {
+        let a = |seed, lapped| Attempt {
+            seed,
+            train_s: 1.0,
+            lapped,
+            episodes: 3,
+            ended: vec!["time_limit"; 3],
+        };
+        assert_eq!(kept_attempt(&[]), None);
+        assert_eq!(kept_attempt(&[a(0, 3)]), Some(0));
+        assert_eq!(kept_attempt(&[a(0, 2), a(1, 3), a(2, 3)]), Some(1));
+        // None lapped all: the most laps, the earliest of equals.
+        assert_eq!(kept_attempt(&[a(0, 1), a(1, 2), a(2, 2), a(3, 0)]), Some(1));
+        assert_eq!(kept_attempt(&[a(0, 0), a(1, 0)]), Some(0));
+        let csv = attempts_csv(&[a(5, 1), a(6, 3)], 1);
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines.len(), 3, "{csv}");
+        assert_eq!(lines[1], "1,5,1.0,1,3,time_limit time_limit time_limit,false");
+        assert_eq!(lines[2], "2,6,1.0,3,3,time_limit time_limit time_limit,true");
+    }
 
     #[test]
     fn metrics_csv_keeps_an_older_runs_rows_under_the_new_header() {

@@ -243,3 +243,60 @@ fn net_path_burn_trains_either_learner_through_burn_and_the_cpu_default_is_the_h
         }
     }
 }
+
+/// `agvrl train --track` without `--config` trains the per-track recipe (gSDE, `attempts`): runs
+/// that fail their validation episodes (here 30 steps: none can lap) are trained again at the
+/// next seed, the first of equals is kept in the run directory and the others stay in its
+/// `attempts/`, every one listed in `attempts.csv`.
+#[test]
+fn attempts_train_the_next_seed_and_keep_the_run_that_lapped_most() {
+    let d = tmp("attempts");
+    let out = d.path().join("run");
+    let mut args = vec![
+        "train",
+        "--track",
+        "assets/tracks/bean.yaml",
+        "--seed",
+        "5",
+        "--steps",
+        "128",
+        "--n-envs",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    for s in [
+        "ppo.n_steps=64",
+        "ppo.batch_size=64",
+        "ppo.net_arch=[16]",
+        "attempts=2",
+        "eval_episodes=1",
+        "eval_max_steps=30",
+    ] {
+        args.extend(["--set", s]);
+    }
+    let o = agvrl(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert_eq!(key(&text, "attempts"), "2 kept_seed=5 validation_lapped=0/1", "{text}");
+    let cfg = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    for line in ["seed = 5", "attempts = 2", "use_sde = true"] {
+        assert!(cfg.lines().any(|l| l == line), "{line} missing in the kept config");
+    }
+    for f in [
+        "policy.agvrl",
+        "checkpoint.ckpt",
+        "eval.json",
+        "attempts/seed-6/policy.agvrl",
+    ] {
+        assert!(out.join(f).is_file(), "missing {f}");
+    }
+    assert!(!out.join("attempts/seed-5").exists());
+    let other = std::fs::read_to_string(out.join("attempts/seed-6/config.toml")).unwrap();
+    assert!(other.lines().any(|l| l == "seed = 6"));
+    let csv = std::fs::read_to_string(out.join("attempts.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 2, "{csv}");
+    assert_eq!((rows[0][1], rows[0][3], rows[0][6]), ("5", "0", "true"), "{csv}");
+    assert_eq!((rows[1][1], rows[1][3], rows[1][6]), ("6", "0", "false"), "{csv}");
+}

@@ -76,6 +76,12 @@ pub struct RunConfig {
     /// this run's seed, then fine-tunes from it, in one command.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub init_from: Option<std::path::PathBuf>,
+    /// Runs to train at most, at seeds `seed`, `seed + 1`, ... (map tracks only): a run is kept
+    /// once its policy laps every one of `eval_episodes` validation episodes without a crash
+    /// (episodes of their own seeds, not the evaluation's); when none does, the one that lapped
+    /// most. The kept run's config names its seed, so it trains again alone.
+    #[serde(skip_serializing_if = "is_one")]
+    pub attempts: u32,
     /// Deterministic episodes evaluated after training.
     pub eval_episodes: usize,
     /// Time limit of evaluation episodes, control steps (default: the training limit).
@@ -86,6 +92,10 @@ pub struct RunConfig {
     pub ppo: PpoConfig,
     /// SAC settings (used when algo = "sac").
     pub sac: SacConfig,
+}
+
+fn is_one(n: &u32) -> bool {
+    *n == 1
 }
 
 fn is_config_file(p: &Path) -> bool {
@@ -158,6 +168,7 @@ impl Default for RunConfig {
             sim2real_envs: Vec::new(),
             train_safety_filter: None,
             init_from: None,
+            attempts: 1,
             eval_episodes: 3,
             eval_max_steps: None,
             env_config: EnvConfig::default(),
@@ -302,6 +313,23 @@ impl RunConfig {
         }
         if self.n_envs == 0 || self.threads == 0 || self.steps == 0 {
             return Err(RunError::Config("steps, n_envs and threads must be at least 1".into()));
+        }
+        if self.attempts == 0 {
+            return Err(RunError::Config("attempts must be at least 1".into()));
+        }
+        if self.attempts > 1 && (multi || self.env_config.track.is_none() || self.eval_episodes == 0) {
+            return Err(RunError::Config(format!(
+                "attempts = {}: retrying seeds needs a single car on a map track (env_config.track) \
+                 and eval_episodes >= 1 to validate each run on",
+                self.attempts
+            )));
+        }
+        if self.attempts > 1 && self.init_config().is_some() {
+            return Err(RunError::Config(
+                "attempts: a two-stage training (init_from a run config) trains its first stage once; \
+                 train the first stage, then fine-tune from its run directory with attempts"
+                    .into(),
+            ));
         }
         if self.procedural_layouts > self.n_envs {
             return Err(RunError::Config(format!(

@@ -35,6 +35,11 @@ impl Seeds {
     pub fn eval_command(self) -> u64 {
         self.run + 2_000_000
     }
+
+    /// Base of the validation episodes that decide whether a run of several `attempts` is kept.
+    pub fn validation(self) -> u64 {
+        self.run + 3_000_000
+    }
 }
 
 #[cfg(test)]
@@ -45,7 +50,7 @@ mod tests {
     fn a_run_s_uses_of_its_seed_never_share_a_base() {
         for run in [0, 1, 7, 999_999] {
             let s = Seeds::of(run);
-            let bases = [s.training(), s.run_evaluation(), s.eval_command()];
+            let bases = [s.training(), s.run_evaluation(), s.eval_command(), s.validation()];
             // 1,000 episodes from each base stay apart.
             for (i, a) in bases.iter().enumerate() {
                 for b in &bases[i + 1..] {
@@ -56,5 +61,6 @@ mod tests {
         }
         assert_eq!(Seeds::of(3).run_evaluation(), 1_000_003);
         assert_eq!(Seeds::of(3).eval_command(), 2_000_003);
+        assert_eq!(Seeds::of(3).validation(), 3_000_003);
     }
 }

@@ -244,3 +244,41 @@ fn a_track_set_over_generated_circuits_races_on_the_map() {
         assert!(plain.env_config.circuit.is_some());
     }
 }
+
+/// `attempts` retries seeds on a single car's map track only, validated on at least one
+/// episode; the key is absent from a config that trains once, so those files stay as they were.
+#[test]
+fn attempts_retry_seeds_only_on_a_map_track() {
+    let bean = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tracks/bean.yaml");
+    let on_bean = [agvrl_run::track_set(&bean)];
+    let c = RunConfig::from_toml_with("attempts = 4\n", "a.toml", &on_bean).unwrap();
+    assert_eq!(c.attempts, 4);
+    assert!(c.to_toml().unwrap().contains("attempts = 4"));
+    let once = RunConfig::from_toml("env = \"racing-oval\"\n", "a.toml").unwrap();
+    assert_eq!(once.attempts, 1);
+    assert!(!once.to_toml().unwrap().contains("attempts"));
+    for (text, sets, says) in [
+        ("attempts = 0\n", &on_bean[..], "attempts must be at least 1"),
+        ("attempts = 3\n", &[][..], "needs a single car on a map track"),
+        ("attempts = 3\neval_episodes = 0\n", &on_bean[..], "eval_episodes >= 1"),
+        (
+            "env = \"racing-duel\"\nattempts = 3\n",
+            &on_bean[..],
+            "needs a single car",
+        ),
+    ] {
+        let e = RunConfig::from_toml_with(text, "a.toml", sets).unwrap_err().to_string();
+        assert!(e.contains(says), "{text}: {e}");
+    }
+    let dir = tempfile::Builder::new()
+        .prefix("agvrl-run-attempts-")
+        .tempdir()
+        .unwrap();
+    let first = dir.path().join("first.toml");
+    std::fs::write(&first, "env = \"racing-oval\"\n").unwrap();
+    let text = format!("attempts = 3\ninit_from = \"{}\"\n", first.display());
+    let e = RunConfig::from_toml_with(&text, "a.toml", &on_bean)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("a two-stage training"), "{e}");
+}
