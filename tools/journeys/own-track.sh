@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Journey (b), as docs/racing.md's "Your own track" tells it, on the shipped bean map: the
-# reference lap of pure pursuit, the generalist, the default job trained on the track (300k
-# steps, seed 0), which must lap, and every driver's lap times.
+# reference lap of pure pursuit, the generalist, the per-track recipe trained on the track (300k
+# steps a run, from seed 0), which must lap, and every driver's lap times.
 #   tools/journeys/own-track.sh [AGVRL_BINARY]
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/../.." && pwd)
