@@ -687,7 +687,8 @@ impl<E: Env> Ppo<E> {
     /// observation lacked the inputs at `added` (indices into this env's observation). Those
     /// inputs get zero weights, so the policy starts out acting and valuing exactly as the
     /// checkpoint's; so do critic observation values the checkpoint's critic did not read. The
-    /// optimiser, counters and schedule start afresh.
+    /// optimiser, counters and schedule start afresh. A warm start may switch gSDE on or off:
+    /// the mean action is the checkpoint's, its exploration starts afresh at `log_std_init`.
     pub fn warm_start(&mut self, path: &Path, added: &[usize]) -> Result<()> {
         let new_space = self.env.observation_space().clone();
         let keep: Vec<usize> = (0..new_space.dim()).filter(|i| !added.contains(i)).collect();
@@ -698,12 +699,10 @@ impl<E: Env> Ppo<E> {
         let spaces = (&old_space, self.env.action_space());
         let (h, mut r) = checkpoint::read::<Header>(path, Algorithm::Ppo, spaces)?;
         let plain = |c: &PpoConfig| c.image.is_none() && !c.normalize_obs;
-        let same = h.config.net_arch == self.cfg.net_arch
-            && h.config.activation_fn == self.cfg.activation_fn
-            && h.config.use_sde == self.cfg.use_sde;
+        let same = h.config.net_arch == self.cfg.net_arch && h.config.activation_fn == self.cfg.activation_fn;
         if !same || !plain(&h.config) || !plain(&self.cfg) {
             return Err(RlError::Mismatch {
-                what: "network (a warm start needs the same layers, activation and gSDE, and no image or observation normaliser)",
+                what: "network (a warm start needs the same layers and activation, and no image or observation normaliser)",
                 file: format!("{:?} {:?}", h.config.net_arch, h.config.activation_fn),
                 env: format!("{:?} {:?}", self.cfg.net_arch, self.cfg.activation_fn),
             });
@@ -711,7 +710,25 @@ impl<E: Env> Ppo<E> {
         let mut shapes = self.params.shapes.clone();
         let old_rows = keep.len() + h.critic_obs_dim;
         shapes[0][1] = old_rows;
+        let log_std = Layout::of(&self.cfg).log_std;
+        let sde_changed = h.config.use_sde != self.cfg.use_sde;
+        if sde_changed {
+            let Some(&latent) = self.cfg.net_arch.last() else {
+                return Err(RlError::Mismatch {
+                    what: "gSDE (a warm start switches it only with hidden layers)",
+                    file: format!("use_sde = {}", h.config.use_sde),
+                    env: format!("use_sde = {}", self.cfg.use_sde),
+                });
+            };
+            // gSDE's log std has a row per latent feature, the plain one a single row.
+            shapes[log_std][1] = if h.config.use_sde { latent } else { 1 };
+        }
         let mut old = r.params(&shapes)?;
+        if sde_changed {
+            // Switching gSDE starts exploration afresh at log_std_init; the mean is the run's.
+            old.shapes[log_std] = self.params.shapes[log_std];
+            old.data[log_std] = self.params.data[log_std].clone();
+        }
         let [members, rows, cols] = self.params.shapes[0];
         // Where each old input row goes: the observation's kept inputs, then the critic's.
         let to: Vec<Option<usize>> = keep

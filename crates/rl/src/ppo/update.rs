@@ -698,6 +698,53 @@ mod tests {
         std::fs::remove_file(&path).unwrap();
     }
 
+    /// A warm start may switch gSDE on (or off): every weight is the checkpoint's, so the mean
+    /// action is too, and the log std is the new learner's own, at `log_std_init`, in its shape.
+    #[test]
+    fn a_warm_start_switching_gsde_keeps_the_weights_and_starts_exploration_afresh() {
+        use super::super::{Ppo, PpoConfig};
+        let plain = PpoConfig {
+            net_arch: vec![8, 8],
+            n_steps: 8,
+            batch_size: 8,
+            log_std_init: 0.5,
+            ..PpoConfig::default()
+        };
+        let sde = PpoConfig {
+            use_sde: true,
+            log_std_init: -1.5,
+            ..plain.clone()
+        };
+        let dev = crate::default_device();
+        let learner =
+            |cfg: &PpoConfig, seed| Ppo::new(cfg.clone(), VecEnv::new(vec![Shape(3)], 1).unwrap(), &dev, seed).unwrap();
+        let path = std::env::temp_dir().join(format!("agvrl-warm-start-sde-{}.ckpt", std::process::id()));
+        for (from_cfg, to_cfg) in [(&plain, &sde), (&sde, &plain)] {
+            let from = learner(from_cfg, 1);
+            from.save_checkpoint(&path).unwrap();
+            let mut to = learner(to_cfg, 2);
+            let fresh = to.params.clone();
+            to.warm_start(&path, &[]).unwrap();
+            let log_std = Layout::of(to_cfg).log_std;
+            assert_eq!(to.params.shapes, fresh.shapes);
+            for (k, data) in to.params.data.iter().enumerate() {
+                let expected = if k == log_std {
+                    &fresh.data[k]
+                } else {
+                    &from.params.data[k]
+                };
+                assert_eq!(data, expected, "parameter {k}, use_sde {}", to_cfg.use_sde);
+            }
+            let obs = [0.3, -0.7, 0.9];
+            let (a, b) = (
+                from.policy(&dev).act(&obs, true).unwrap(),
+                to.policy(&dev).act(&obs, true).unwrap(),
+            );
+            assert!(a.iter().zip(&b).all(|(p, q)| (p - q).abs() < 1e-6), "{a:?} {b:?}");
+        }
+        std::fs::remove_file(&path).unwrap();
+    }
+
     /// The host networks' outputs and gradients against the same networks through Burn's
     /// autodiff (tanh there is `2 sigmoid(2x) - 1` on libm's `expf`), for both activations,
     /// with and without gSDE's latent, and with the NatureCNN (1 and 3 channels, a vector part
