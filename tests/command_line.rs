@@ -150,6 +150,7 @@ fn help_says_the_defaults_a_user_must_know_and_bad_choices_list_the_valid_ones()
         "one gradient step per env step",
         "8 in",
         "configs/default.toml",
+        "configs/racing-track.toml",
         "- cuda:    CUDA GPU",
     ] {
         assert!(h.contains(line), "train --help lacks '{line}':\n{h}");
