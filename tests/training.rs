@@ -6,34 +6,23 @@ use crate::{agvrl, json_lines, key, stderr, stdout, tmp};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// The flags of a PPO run of 128 steps on one env, a 16-unit network, into `out`.
+fn tiny_run(out: &Path) -> Vec<&str> {
+    let mut args = vec!["--steps", "128", "--n-envs", "1", "--out", out.to_str().unwrap()];
+    for s in ["ppo.n_steps=64", "ppo.batch_size=64", "ppo.net_arch=[16]"] {
+        args.extend(["--set", s]);
+    }
+    args
+}
+
 #[test]
 fn init_from_fine_tunes_a_run_with_added_observation_parts_and_refuses_lost_ones() {
     let d = tmp("init-from");
     let (base, tuned) = (d.path().join("base"), d.path().join("tuned"));
     let train = |out: &Path, sets: &[&str]| {
-        let mut args = vec![
-            "train",
-            "--env",
-            "search-outdoor-20",
-            "--algo",
-            "ppo",
-            "--steps",
-            "128",
-            "--n-envs",
-            "1",
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        for s in [
-            "ppo.n_steps=64",
-            "ppo.batch_size=64",
-            "ppo.net_arch=[16]",
-            "eval_episodes=1",
-            "eval_max_steps=20",
-        ]
-        .iter()
-        .chain(sets)
-        {
+        let mut args = vec!["train", "--env", "search-outdoor-20", "--algo", "ppo"];
+        args.extend(tiny_run(out));
+        for s in ["eval_episodes=1", "eval_max_steps=20"].iter().chain(sets) {
             args.extend(["--set", s]);
         }
         agvrl(&args)
@@ -252,27 +241,9 @@ fn net_path_burn_trains_either_learner_through_burn_and_the_cpu_default_is_the_h
 fn attempts_train_the_next_seed_and_keep_the_run_that_lapped_most() {
     let d = tmp("attempts");
     let out = d.path().join("run");
-    let mut args = vec![
-        "train",
-        "--track",
-        "assets/tracks/bean.yaml",
-        "--seed",
-        "5",
-        "--steps",
-        "128",
-        "--n-envs",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    for s in [
-        "ppo.n_steps=64",
-        "ppo.batch_size=64",
-        "ppo.net_arch=[16]",
-        "attempts=2",
-        "eval_episodes=1",
-        "eval_max_steps=30",
-    ] {
+    let mut args = vec!["train", "--track", "assets/tracks/bean.yaml", "--seed", "5"];
+    args.extend(tiny_run(&out));
+    for s in ["attempts=2", "eval_episodes=1", "eval_max_steps=30"] {
         args.extend(["--set", s]);
     }
     let o = agvrl(&args);
