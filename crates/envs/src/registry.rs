@@ -380,6 +380,7 @@ pub fn make_task(id: &str, cfg: &EnvConfig, steering_limit_rad: f64) -> Result<B
     cfg.observation.explored.validate()?;
     cfg.observation.arcs.validate()?;
     cfg.observation.rear.validate()?;
+    cfg.observation.past_scans.validate()?;
     if spec.task == TaskKind::Racing && !cfg.observation.explored.is_empty() {
         return Err(EnvError::Config(format!(
             "observation.explored is a search observation; {id} is a racing env"

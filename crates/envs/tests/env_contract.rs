@@ -145,3 +145,28 @@ fn rear_lengths_widen_a_search_observation_and_a_racing_env_refuses_them() {
     let e = make("racing-oval", &rear).err().unwrap().to_string();
     assert!(e.contains("observation.rear is a search observation"), "{e}");
 }
+
+/// The past scans of a racing env are its own earlier ranges, pooled: the env hands every frame
+/// to the task's history before the policy observes it.
+#[test]
+fn past_scans_repeat_the_ranges_seen_every_steps_before() {
+    let cfg: EnvConfig = toml::from_str("[observation.past_scans]\nn = 2\nevery = 3\npool = 4\n").unwrap();
+    let mut env = make("racing-oval", &cfg).unwrap();
+    let n_rays = 100;
+    assert_eq!(env.observation_space().dim(), n_rays + 4 + 2 * 25);
+    let pooled = |obs: &[f32]| -> Vec<f32> {
+        obs[..n_rays]
+            .chunks(4)
+            .map(|c| c.iter().cloned().fold(f32::MAX, f32::min))
+            .collect()
+    };
+    let (first, _) = env.reset(Some(0)).unwrap();
+    let mut seen = vec![first];
+    for t in 1..=10usize {
+        let obs = env.step(&[0.6, 0.3]).unwrap().obs;
+        let back = |k: usize| pooled(&seen[t.saturating_sub(k)]);
+        assert_eq!(obs[n_rays + 4..], [back(3), back(6)].concat(), "step {t}");
+        seen.push(obs);
+    }
+    assert_ne!(pooled(&seen[0]), pooled(&seen[10]), "the car should have moved");
+}

@@ -15,7 +15,7 @@ mod termination;
 use crate::api::{BoxSpace, Control, MapInfo, RewardTerms, SensorFrame, SensorNeeds, TerminationCause};
 pub use action::ActionMapping;
 pub use explored::{ExploredMemory, ExploredObs};
-pub use observation::{ArcObs, ImageChannels, ImageObs, ObsConfig, RangeScale, RearObs};
+pub use observation::{ArcObs, ImageChannels, ImageObs, ObsConfig, PastScans, RangeScale, RearObs, ScanHistory};
 use serde::{Deserialize, Serialize};
 pub use termination::{common_termination, min_range_ahead_m, min_range_m, min_static_range_m, terminate};
 

@@ -48,6 +48,9 @@ pub struct ObsConfig {
     /// (search only; left out of the settings when off).
     #[serde(skip_serializing_if = "RearObs::is_empty")]
     pub rear: RearObs,
+    /// The scans of a few steps before, pooled (left out of the settings when off).
+    #[serde(skip_serializing_if = "PastScans::is_empty")]
+    pub past_scans: PastScans,
     /// Camera channels appended after everything else (needs the vehicle camera).
     pub image: ImageObs,
 }
@@ -407,6 +410,113 @@ impl RearObs {
     }
 }
 
+/// The scans of earlier steps (`[env_config.observation.past_scans]`): those `every`, 2 x
+/// `every`, ... `n` x `every` control steps before the current one, each pooled to its nearest
+/// return over `pool` neighbouring rays and divided by range_max, in the car's frame of their
+/// time. Memory for a driver that has lost sight of a wall it is turning round. At an episode's
+/// start every past scan is the first one.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PastScans {
+    /// Past scans (0: off).
+    pub n: usize,
+    /// Control steps between them.
+    pub every: usize,
+    /// Neighbouring rays pooled into one value (the last group may hold fewer).
+    pub pool: usize,
+}
+
+impl Default for PastScans {
+    fn default() -> Self {
+        Self {
+            n: 0,
+            every: 5,
+            pool: 4,
+        }
+    }
+}
+
+impl PastScans {
+    /// Values appended for a LiDAR of `n_rays` rays.
+    pub fn len(&self, n_rays: usize) -> usize {
+        self.n * n_rays.div_ceil(self.pool.max(1))
+    }
+
+    /// Whether it is off.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// An error for settings that cannot work.
+    pub fn validate(&self) -> Result<(), agvrl_sim::InvalidSetting> {
+        if self.n <= 8 && (1..=100).contains(&self.every) && self.pool >= 1 {
+            Ok(())
+        } else {
+            Err(agvrl_sim::InvalidSetting::new(
+                "observation.past_scans",
+                format!("observation.past_scans needs n <= 8, every in [1, 100] and pool >= 1; got {self:?}"),
+            ))
+        }
+    }
+
+    fn pooled(&self, scan: Option<&LaserScan>) -> Vec<f32> {
+        let Some(scan) = scan else { return vec![] };
+        scan.ranges
+            .chunks(self.pool.max(1))
+            .map(|c| (c.iter().fold(f32::INFINITY, |m, r| m.min(*r)) / scan.range_max).clamp(0.0, 1.0))
+            .collect()
+    }
+}
+
+/// The pooled scans [`PastScans`] reads, oldest first, as a task keeps them.
+#[derive(Clone, Debug, Default)]
+pub struct ScanHistory {
+    cfg: PastScans,
+    scans: std::collections::VecDeque<Vec<f32>>,
+}
+
+impl ScanHistory {
+    /// An empty history for `cfg`.
+    pub fn new(cfg: PastScans) -> Self {
+        Self {
+            cfg,
+            scans: Default::default(),
+        }
+    }
+
+    /// Start an episode: every past scan is this frame's.
+    pub fn reset(&mut self, frame: &SensorFrame) {
+        self.scans.clear();
+        if self.cfg.is_empty() {
+            return;
+        }
+        let now = self.cfg.pooled(frame.scan.as_ref());
+        self.scans
+            .extend(std::iter::repeat_n(now, self.cfg.n * self.cfg.every + 1));
+    }
+
+    /// Take in the frame of a step.
+    pub fn push(&mut self, frame: &SensorFrame) {
+        if self.cfg.is_empty() {
+            return;
+        }
+        if self.scans.len() > self.cfg.n * self.cfg.every {
+            self.scans.pop_front();
+        }
+        self.scans.push_back(self.cfg.pooled(frame.scan.as_ref()));
+    }
+
+    fn append(&self, width: usize, out: &mut Vec<f32>) {
+        let last = self.scans.len().wrapping_sub(1);
+        for k in 1..=self.cfg.n {
+            match self.scans.get(last.wrapping_sub(k * self.cfg.every)) {
+                Some(s) if s.len() * self.cfg.n == width => out.extend(s),
+                _ => out.extend(std::iter::repeat_n(1.0, width / self.cfg.n)),
+            }
+        }
+    }
+}
+
 impl Default for ObsConfig {
     /// Normalised ranges plus speed, yaw rate, steering and throttle.
     fn default() -> Self {
@@ -419,6 +529,7 @@ impl Default for ObsConfig {
             explored: ExploredObs::default(),
             arcs: ArcObs::default(),
             rear: RearObs::default(),
+            past_scans: PastScans::default(),
             image: ImageObs::default(),
         }
     }
@@ -436,6 +547,7 @@ impl ObsConfig {
             explored: ExploredObs::default(),
             arcs: ArcObs::default(),
             rear: RearObs::default(),
+            past_scans: PastScans::default(),
             image: ImageObs::default(),
         }
     }
@@ -477,6 +589,7 @@ impl ObsConfig {
             }
         }
         let n01 = self.explored.len() + self.arcs.len() + self.rear.len() + self.image.len();
+        let n01 = n01 + self.past_scans.len(n_rays);
         s.low.extend(std::iter::repeat_n(0.0, n01));
         s.high.extend(std::iter::repeat_n(1.0, n01));
         s
@@ -497,6 +610,7 @@ impl ObsConfig {
         parts.extend(self.explored.layout());
         parts.push(("arcs", self.arcs.len()));
         parts.push(("rear", self.rear.len()));
+        parts.push(("past_scans", self.past_scans.len(n_rays)));
         parts.push(("image", self.image.len()));
         parts.retain(|p| p.1 > 0);
         parts
@@ -530,13 +644,14 @@ impl ObsConfig {
 
     /// Build the observation (the frame's needs were checked by the env); `explored` is the
     /// task's memory when `self.explored` is on, `rear` its reverse lengths (over `max_m`) when
-    /// `self.rear` is.
+    /// `self.rear` is, `past` its scan history when `self.past_scans` is.
     pub fn observe(
         &self,
         frame: &SensorFrame,
         steering_limit_rad: f64,
         explored: Option<&ExploredMemory>,
         rear: Option<&[f32]>,
+        past: Option<&ScanHistory>,
     ) -> Vec<f32> {
         let mut out = Vec::new();
         if let Some(scan) = &frame.scan {
@@ -573,6 +688,14 @@ impl ObsConfig {
             match rear.filter(|r| r.len() == self.rear.len()) {
                 Some(r) => out.extend(r),
                 None => out.extend(std::iter::repeat_n(0.0, self.rear.len())),
+            }
+        }
+        if !self.past_scans.is_empty() {
+            let n_rays = frame.scan.as_ref().map_or(0, |s| s.ranges.len());
+            let width = self.past_scans.len(n_rays);
+            match past {
+                Some(h) => h.append(width, &mut out),
+                None => out.extend(std::iter::repeat_n(1.0, width)),
             }
         }
         if !self.image.is_empty() {
@@ -688,7 +811,7 @@ mod tests {
             }),
             ..SensorFrame::default()
         };
-        let obs = cfg.observe(&frame, 0.36, None, None);
+        let obs = cfg.observe(&frame, 0.36, None, None, None);
         assert_eq!(obs.len(), cfg.space(n_rays, 12.0).dim());
         let tail = &obs[obs.len() - 5..];
         assert!(tail.iter().all(|v| (0.0..=1.0).contains(v)), "{tail:?}");
@@ -701,7 +824,7 @@ mod tests {
         if let Some(s) = open.scan.as_mut() {
             s.hit.iter_mut().for_each(|h| *h = false);
         }
-        let obs = cfg.observe(&open, 0.36, None, None);
+        let obs = cfg.observe(&open, 0.36, None, None, None);
         assert!(obs[obs.len() - 5..].iter().all(|v| *v == 1.0));
         assert!(
             ArcObs {
@@ -712,6 +835,60 @@ mod tests {
             .is_err()
         );
     }
+    #[test]
+    fn past_scans_are_the_pooled_scans_every_steps_back_and_the_first_at_the_start() {
+        let past = PastScans {
+            n: 2,
+            every: 3,
+            pool: 4,
+        };
+        past.validate().unwrap();
+        let cfg = ObsConfig {
+            speed: false,
+            yaw_rate: false,
+            steering: false,
+            throttle: false,
+            past_scans: past,
+            ..ObsConfig::default()
+        };
+        // Step t's scan: 10 rays, ray k at (t + k) % 10 + 1 metres of range_max 20.
+        let frame = |t: usize| SensorFrame {
+            scan: Some(LaserScan {
+                range_max: 20.0,
+                ranges: (0..10).map(|k| ((t + k) % 10 + 1) as f32).collect(),
+                ..LaserScan::default()
+            }),
+            ..SensorFrame::default()
+        };
+        // Nearest return of each group of 4 rays (the last group holds 2), over range_max.
+        let pooled = |t: usize| -> Vec<f32> {
+            let r: Vec<f32> = (0..10).map(|k| ((t + k) % 10 + 1) as f32).collect();
+            r.chunks(4)
+                .map(|c| c.iter().cloned().fold(f32::MAX, f32::min) / 20.0)
+                .collect()
+        };
+        assert_eq!(past.len(10), 6);
+        assert_eq!(cfg.layout(10), vec![("ranges", 10), ("past_scans", 6)]);
+        assert_eq!(cfg.space(10, 20.0).dim(), 16);
+        let mut history = ScanHistory::new(past);
+        history.reset(&frame(0));
+        let obs = cfg.observe(&frame(0), 0.36, None, None, Some(&history));
+        assert_eq!(obs[10..], [pooled(0), pooled(0)].concat());
+        for t in 1..=8 {
+            history.push(&frame(t));
+            let obs = cfg.observe(&frame(t), 0.36, None, None, Some(&history));
+            assert_eq!(obs.len(), 16);
+            let back = |k: usize| pooled(t.saturating_sub(k));
+            assert_eq!(obs[10..], [back(3), back(6)].concat(), "step {t}");
+        }
+        assert!(PastScans { every: 0, ..past }.validate().is_err());
+        let before = ObsConfig {
+            past_scans: PastScans::default(),
+            ..cfg
+        };
+        assert_eq!(cfg.inputs_added_since(&before, 10), Ok((10..16).collect()));
+    }
+
     #[test]
     fn inputs_added_since_finds_new_parts_and_refuses_lost_or_resized_ones() {
         let before = ObsConfig {

@@ -4,7 +4,7 @@
 //! the centre line pays).
 
 use super::reward::{self, RacingPay, RacingReward};
-use super::{CommonConfig, Intervention, Outcome, SafetyFilter, Task, min_static_range_m, terminate};
+use super::{CommonConfig, Intervention, Outcome, SafetyFilter, ScanHistory, Task, min_static_range_m, terminate};
 use crate::api::{BoxSpace, Control, EnvError, MapInfo, RacingInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -183,6 +183,7 @@ pub struct Racing {
     started_s: f64,
     filter: SafetyFilter,
     correction: Option<Vec<f32>>,
+    past: ScanHistory,
 }
 
 impl Racing {
@@ -203,6 +204,7 @@ impl Racing {
                 cfg.common.action_mapping == crate::task::ActionMapping::ScaledReverse,
             ),
             correction: None,
+            past: ScanHistory::new(cfg.common.observation.past_scans),
         }
     }
 }
@@ -234,6 +236,7 @@ impl Task for Racing {
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         self.filter.reset();
         self.correction = None;
+        self.past.reset(frame);
         self.info = RacingInfo::default();
         self.progress_m = 0.0;
         self.lap_start_s = frame.stamp_s;
@@ -250,10 +253,11 @@ impl Task for Racing {
         self.cfg
             .common
             .observation
-            .observe(frame, self.steering_limit, None, None)
+            .observe(frame, self.steering_limit, None, None, Some(&self.past))
     }
 
     fn evaluate(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) -> Outcome {
+        self.past.push(frame);
         // Another car close by ends nothing (self-play would learn never to close in): only
         // the walls count.
         let d = min_static_range_m(frame);

@@ -4,7 +4,7 @@
 use super::explored::ExploredMemory;
 use super::reward::{self, SafeShaping, SearchReward};
 use super::safety::ObstacleMemory;
-use super::{CommonConfig, Intervention, Outcome, SafetyFilter, Task, min_range_ahead_m, terminate};
+use super::{CommonConfig, Intervention, Outcome, SafetyFilter, ScanHistory, Task, min_range_ahead_m, terminate};
 use crate::api::{BoxSpace, Control, MapInfo, SearchInfo, SensorFrame, SensorNeeds};
 use serde::{Deserialize, Serialize};
 
@@ -76,6 +76,7 @@ pub struct Search {
     /// (kept as the safety filter keeps its own, under `safety_filter`'s geometry), and the
     /// reverse lengths of the last frame.
     rear: Option<(ObstacleMemory, Vec<f32>)>,
+    past: ScanHistory,
 }
 
 /// The free cells of a map that coverage counts, indexed by position.
@@ -178,6 +179,7 @@ impl Search {
             explored: (!cfg.common.observation.explored.is_empty())
                 .then(|| ExploredMemory::new(cfg.common.observation.explored)),
             rear: (!cfg.common.observation.rear.is_empty()).then(|| (ObstacleMemory::new(true), vec![])),
+            past: ScanHistory::new(cfg.common.observation.past_scans),
         }
     }
 
@@ -299,6 +301,7 @@ impl Task for Search {
             memory.reset();
         }
         self.look_behind(frame);
+        self.past.reset(frame);
         self.grid = map.map(CoverageGrid::new).unwrap_or_default();
         self.start_s = frame.stamp_s;
         self.last_new_cell_s = frame.stamp_s;
@@ -320,6 +323,7 @@ impl Task for Search {
             self.steering_limit,
             self.explored.as_ref(),
             self.rear.as_ref().map(|(_, l)| l.as_slice()),
+            Some(&self.past),
         )
     }
 
@@ -340,6 +344,7 @@ impl Task for Search {
             m.visit(frame);
         }
         self.look_behind(frame);
+        self.past.push(frame);
         let new_cells = self.n_covered - covered_before;
         let mut terms = reward::search(
             self.cfg.reward,
