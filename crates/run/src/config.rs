@@ -76,10 +76,10 @@ pub struct RunConfig {
     /// this run's seed, then fine-tunes from it, in one command.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub init_from: Option<std::path::PathBuf>,
-    /// Runs to train at most, at seeds `seed`, `seed + 1`, ... (map tracks only): a run is kept
-    /// once its policy laps every one of `eval_episodes` validation episodes without a crash
-    /// (episodes of their own seeds, not the evaluation's); when none does, the one that lapped
-    /// most. The kept run's config names its seed, so it trains again alone.
+    /// Runs to train at most, at seeds `seed`, `seed + 1`, ... (a single car on a map track or
+    /// on generated circuits): a run is kept once its policy laps every one of `eval_episodes`
+    /// validation episodes without a crash (episodes of their own seeds, not the evaluation's);
+    /// when none does, the one that lapped most. The kept run's config names its seed, so it trains again alone.
     #[serde(skip_serializing_if = "is_one")]
     pub attempts: u32,
     /// Deterministic episodes evaluated after training.
@@ -317,10 +317,14 @@ impl RunConfig {
         if self.attempts == 0 {
             return Err(RunError::Config("attempts must be at least 1".into()));
         }
-        if self.attempts > 1 && (multi || self.env_config.track.is_none() || self.eval_episodes == 0) {
+        // Laps are what a run is validated on: a single car on a map track or on generated
+        // circuits.
+        let laps = self.env_config.track.is_some() || self.env == "racing-circuit";
+        if self.attempts > 1 && (multi || !laps || self.eval_episodes == 0) {
             return Err(RunError::Config(format!(
                 "attempts = {}: retrying seeds needs a single car on a map track (env_config.track) \
-                 and eval_episodes >= 1 to validate each run on",
+                 or on generated circuits (racing-circuit), and eval_episodes >= 1 to validate each \
+                 run on",
                 self.attempts
             )));
         }

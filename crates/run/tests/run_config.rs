@@ -245,21 +245,28 @@ fn a_track_set_over_generated_circuits_races_on_the_map() {
     }
 }
 
-/// `attempts` retries seeds on a single car's map track only, validated on at least one
-/// episode; the key is absent from a config that trains once, so those files stay as they were.
+/// `attempts` retries seeds for a single car on a map track or generated circuits only,
+/// validated on at least one episode; the key is absent from a config that trains once, so those files stay as they were.
 #[test]
-fn attempts_retry_seeds_only_on_a_map_track() {
+fn attempts_retry_seeds_only_for_one_car_on_a_map_track_or_circuits() {
     let bean = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tracks/bean.yaml");
     let on_bean = [agvrl_run::track_set(&bean)];
     let c = RunConfig::from_toml_with("attempts = 4\n", "a.toml", &on_bean).unwrap();
     assert_eq!(c.attempts, 4);
     assert!(c.to_toml().unwrap().contains("attempts = 4"));
+    let circuits = RunConfig::from_toml("env = \"racing-circuit\"\nattempts = 2\n", "a.toml").unwrap();
+    assert_eq!(circuits.attempts, 2);
     let once = RunConfig::from_toml("env = \"racing-oval\"\n", "a.toml").unwrap();
     assert_eq!(once.attempts, 1);
     assert!(!once.to_toml().unwrap().contains("attempts"));
     for (text, sets, says) in [
         ("attempts = 0\n", &on_bean[..], "attempts must be at least 1"),
         ("attempts = 3\n", &[][..], "needs a single car on a map track"),
+        (
+            "env = \"search-outdoor-20\"\nattempts = 3\n",
+            &[][..],
+            "or on generated circuits",
+        ),
         ("attempts = 3\neval_episodes = 0\n", &on_bean[..], "eval_episodes >= 1"),
         (
             "env = \"racing-duel\"\nattempts = 3\n",
