@@ -370,6 +370,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
     if a.progress == ProgressMode::Json {
         stop_with_parent(&STOP);
     }
+    let share = cfg.attempts_lapped_share;
     let (dir, report, attempts) = match cfg.attempts {
         1 => {
             let (dir, report) = train_run(cfg, a.out.clone(), a.compute(), &STOP, a.progress)?;
@@ -381,7 +382,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
         println!("{}", done_json(&dir, &report));
     } else {
         println!("run_dir={}", dir.display());
-        if let Some(k) = kept_attempt(&attempts) {
+        if let Some(k) = kept_attempt(&attempts, share) {
             let kept = &attempts[k];
             println!(
                 "attempts={} kept_seed={} validation_lapped={}/{}",
@@ -456,15 +457,16 @@ pub struct Attempt {
 }
 
 impl Attempt {
-    fn validated(&self) -> bool {
-        self.lapped == self.episodes
+    /// Whether it lapped at least `share` of its validation episodes.
+    fn validated(&self, share: f64) -> bool {
+        self.lapped as f64 >= share * self.episodes as f64 - 1e-9
     }
 }
 
-/// The attempt a run of several keeps: the first whose validation episodes all lapped, else the
-/// one that lapped most, the earliest of equals.
-fn kept_attempt(attempts: &[Attempt]) -> Option<usize> {
-    attempts.iter().position(Attempt::validated).or_else(|| {
+/// The attempt a run of several keeps: the first that lapped at least `share` of its validation
+/// episodes, else the one that lapped most, the earliest of equals.
+fn kept_attempt(attempts: &[Attempt], share: f64) -> Option<usize> {
+    attempts.iter().position(|a| a.validated(share)).or_else(|| {
         let most = attempts.iter().map(|a| a.lapped).max()?;
         attempts.iter().position(|a| a.lapped == most)
     })
@@ -490,9 +492,9 @@ fn attempts_csv(attempts: &[Attempt], kept: usize) -> String {
 }
 
 /// Train `cfg` at seeds `seed`, `seed + 1`, ... (at most `attempts` runs) until a run's policy
-/// laps every validation episode ([`agvrl_run::Seeds::validation`]) without a crash. The kept
-/// run ([`kept_attempt`]) fills the run directory; the others stay in its `attempts/`, and
-/// `attempts.csv` lists them all.
+/// laps `attempts_lapped_share` of the validation episodes ([`agvrl_run::Seeds::validation`])
+/// without a crash. The kept run ([`kept_attempt`]) fills the run directory; the others stay in
+/// its `attempts/`, and `attempts.csv` lists them all.
 pub fn train_attempts(
     cfg: RunConfig,
     out: Option<PathBuf>,
@@ -542,14 +544,14 @@ pub fn train_attempts(
             a.episodes,
             a.ended.join(",")
         );
-        let done = a.validated() || report.interrupted || stop.load(Ordering::SeqCst);
+        let done = a.validated(cfg.attempts_lapped_share) || report.interrupted || stop.load(Ordering::SeqCst);
         attempts.push(a);
         runs.push((dir, report));
         if done {
             break;
         }
     }
-    let kept = kept_attempt(&attempts).context("no attempt trained")?;
+    let kept = kept_attempt(&attempts, cfg.attempts_lapped_share).context("no attempt trained")?;
     let (dir, report) = runs.swap_remove(kept);
     for entry in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
         let from = entry?.path();
@@ -929,7 +931,7 @@ mod tests {
     use agvrl_envs::task::ImageChannels;
 
     #[test]
-    fn the_first_attempt_to_lap_every_validation_episode_is_kept_else_the_one_that_lapped_most() {
+    fn the_first_attempt_to_lap_its_share_of_validation_episodes_is_kept_else_the_one_that_lapped_most() {
         let a = |seed, lapped| Attempt {
             seed,
             train_s: 1.0,
@@ -937,12 +939,15 @@ mod tests {
             episodes: 3,
             ended: vec!["time_limit"; 3],
         };
-        assert_eq!(kept_attempt(&[]), None);
-        assert_eq!(kept_attempt(&[a(0, 3)]), Some(0));
-        assert_eq!(kept_attempt(&[a(0, 2), a(1, 3), a(2, 3)]), Some(1));
+        assert_eq!(kept_attempt(&[], 1.0), None);
+        assert_eq!(kept_attempt(&[a(0, 3)], 1.0), Some(0));
+        assert_eq!(kept_attempt(&[a(0, 2), a(1, 3), a(2, 3)], 1.0), Some(1));
         // None lapped all: the most laps, the earliest of equals.
-        assert_eq!(kept_attempt(&[a(0, 1), a(1, 2), a(2, 2), a(3, 0)]), Some(1));
-        assert_eq!(kept_attempt(&[a(0, 0), a(1, 0)]), Some(0));
+        assert_eq!(kept_attempt(&[a(0, 1), a(1, 2), a(2, 2), a(3, 0)], 1.0), Some(1));
+        assert_eq!(kept_attempt(&[a(0, 0), a(1, 0)], 1.0), Some(0));
+        // Two of three is enough at a share of 2/3, not at 0.7.
+        assert_eq!(kept_attempt(&[a(0, 1), a(1, 2), a(2, 3)], 2.0 / 3.0), Some(1));
+        assert_eq!(kept_attempt(&[a(0, 1), a(1, 2), a(2, 3)], 0.7), Some(2));
         let csv = attempts_csv(&[a(5, 1), a(6, 3)], 1);
         let lines: Vec<&str> = csv.lines().collect();
         assert_eq!(lines.len(), 3, "{csv}");

@@ -256,11 +256,18 @@ fn attempts_retry_seeds_only_for_one_car_on_a_map_track_or_circuits() {
     assert!(c.to_toml().unwrap().contains("attempts = 4"));
     let circuits = RunConfig::from_toml("env = \"racing-circuit\"\nattempts = 2\n", "a.toml").unwrap();
     assert_eq!(circuits.attempts, 2);
+    assert_eq!(circuits.attempts_lapped_share, 1.0);
+    assert!(!circuits.to_toml().unwrap().contains("attempts_lapped_share"));
     let once = RunConfig::from_toml("env = \"racing-oval\"\n", "a.toml").unwrap();
     assert_eq!(once.attempts, 1);
     assert!(!once.to_toml().unwrap().contains("attempts"));
     for (text, sets, says) in [
         ("attempts = 0\n", &on_bean[..], "attempts must be at least 1"),
+        (
+            "attempts_lapped_share = 0.0\n",
+            &on_bean[..],
+            "attempts_lapped_share must be in (0, 1]",
+        ),
         ("attempts = 3\n", &[][..], "needs a single car on a map track"),
         (
             "env = \"search-outdoor-20\"\nattempts = 3\n",
