@@ -191,6 +191,38 @@ fn generated_circuits_are_closed_and_drivable() {
     }
 }
 
+/// With `wall_gap_m = 0.2` the walls of two stretches may stand back to back: hairpins turn
+/// round a tip 0.1 m wider than the half width, tighter than the default gap allows, while no
+/// two stretches come closer than the width and 0.2 m (the independent checks of the
+/// closed-and-drivable test).
+#[test]
+fn thin_walls_let_hairpins_turn_round_a_thin_tip_and_stretches_come_no_closer() {
+    let s = CircuitSettings {
+        wall_gap_m: 0.2,
+        min_radius_m: 0.6,
+        tight_share: 1.0,
+        ..CircuitSettings::default()
+    };
+    let mut thin_tips = 0;
+    for seed in 0..60 {
+        let (t, info) = MapTrack::generated(seed, &s).unwrap();
+        t.validate().unwrap();
+        let p = line(&t);
+        let w = info.width_m as f64;
+        let floor = (0.6f64).max(0.5 * (w + 0.2));
+        let r = min_radius(&p);
+        assert!(r >= 0.97 * floor, "seed {seed}: a corner of {r} m, under {floor} m");
+        let c = w + 0.2;
+        let (d, a, b) = closest_far_pair(&p, PI * c, c);
+        assert!(
+            d >= c - 1e-3,
+            "seed {seed}: stretches at {a:?} and {b:?} are {d} m apart, under {c} m"
+        );
+        thin_tips += usize::from(r < 0.97 * 0.5 * (w + GAP_M));
+    }
+    assert!(thin_tips >= 10, "{thin_tips} of 60 circuits turn round a thin tip");
+}
+
 /// Over 200 seeds the circuits cover their settings: at least 30 % with a corner of 1.5 m
 /// or less and 30 % at most 2 m wide, hairpins on a fifth or more, both directions (as
 /// the info says, by the line's signed area), and laps in every quarter of the range.
@@ -469,9 +501,10 @@ fn circuit_settings_default_to_the_documented_ranges_and_refuse_bad_keys() {
             s.narrow_share,
             s.min_radius_m,
             s.tight_share,
-            s.resolution_m
+            s.resolution_m,
+            s.wall_gap_m
         ),
-        ([50.0, 500.0], [1.5, 3.5], 0.4, 1.0, 0.5, 0.05)
+        ([50.0, 500.0], [1.5, 3.5], 0.4, 1.0, 0.5, 0.05, 0.5)
     );
     s.validate().unwrap();
     let bad = [
@@ -500,6 +533,14 @@ fn circuit_settings_default_to_the_documented_ranges_and_refuse_bad_keys() {
         ("min_radius_m", CircuitSettings { min_radius_m: 0.0, ..s }),
         ("tight_share", CircuitSettings { tight_share: -0.1, ..s }),
         ("resolution_m", CircuitSettings { resolution_m: 0.0, ..s }),
+        ("wall_gap_m", CircuitSettings { wall_gap_m: 0.1, ..s }),
+        (
+            "wall_gap_m",
+            CircuitSettings {
+                wall_gap_m: f32::NAN,
+                ..s
+            },
+        ),
         // A 30 m lap cannot hold the corners of a 3.5 m wide track.
         (
             "length_m[0]",

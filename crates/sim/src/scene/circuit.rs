@@ -8,8 +8,9 @@
 //! chicanes, and on a share of narrow circuits a V-shaped spike whose tip is a hairpin), scaled
 //! until the filleted lap has the drawn length, every corner rounded with a circular arc. A
 //! draw that breaks a property (a corner tighter than allowed, two stretches of track closer
-//! than a track width and half a metre, no straight to start on) is redrawn from the same
-//! generator, so a seed always gives the same circuit.
+//! than a track width and the wall gap, half a metre by default, no straight to start on) is
+//! redrawn from the same generator, so a seed always gives the same circuit. With the gap at
+//! 0.2 m (`wall_gap_m`) two stretches may share one thin wall, as in mapped halls.
 //!
 //! On a share of the sharp corners (`pocket_share`, none by default) the corridor also runs on
 //! straight past the corner's entry and ends against a wall: a dead-end pocket, as where a
@@ -39,10 +40,11 @@ const HAIRPIN_MAX_RADIUS_M: f64 = 1.5;
 /// The range a hairpin's turn is drawn from, degrees. Past 170 degrees the legs run so nearly
 /// parallel that they would have to be a track width apart all along.
 const HAIRPIN_TURN_DEG: [f64; 2] = [150.0, 170.0];
-/// The gap between two stretches of track, beyond the width, metres: with 0.1 m walls each
-/// side, 0.3 m of open ground stays between them. Half of it is also the least a corner's
-/// radius exceeds half the width by, so the inner wall never folds.
+/// The default gap between two stretches of track, beyond the width, metres: with 0.1 m walls
+/// each side, 0.3 m of open ground stays between them (`CircuitSettings::wall_gap_m`).
 const GAP_M: f64 = 0.5;
+/// The least gap: the two stretches' walls back to back, one wall 0.2 m thick.
+const MIN_GAP_M: f64 = 2.0 * WALL_DEPTH_M;
 /// How far into the longest straight the lap starts, metres (at most half the straight).
 const START_INTO_STRAIGHT_M: f64 = 3.0;
 /// The shortest straight a lap may start on, metres: a car and a little room behind it.
@@ -82,13 +84,13 @@ pub struct CircuitSettings {
     /// ones; when `width_m` lies on one side of 2.0 m, both draw from `width_m`.
     pub narrow_share: f32,
     /// The smallest centre-line radius of any corner, metres. Every corner's radius is also at
-    /// least half the width plus 0.25 m, so the inner wall never folds and the two legs of a
-    /// hairpin stay a width and half a metre apart.
+    /// least half the width plus half `wall_gap_m`, so the inner wall never folds and the two
+    /// legs of a hairpin stay a width and the gap apart.
     pub min_radius_m: f32,
     /// The share of circuits with at least one hairpin: a corner turning 150 to 170 degrees
-    /// with a centre-line radius drawn in `[max(min_radius_m, width / 2 + 0.25), 1.5]` metres.
-    /// Only circuits at most 2.5 m wide can have one (that lower bound must stay under 1.5 m);
-    /// the others never do, so the share of all circuits is smaller.
+    /// with a centre-line radius drawn in `[max(min_radius_m, (width + wall_gap_m) / 2), 1.5]`
+    /// metres. Only circuits narrow enough for that lower bound to stay under 1.5 m (2.5 m
+    /// with the default gap) can have one, so the share of all circuits is smaller.
     pub tight_share: f32,
     /// The share of corners turning at least 60 degrees that get a dead-end pocket: the
     /// corridor carried straight on past the corner's entry, one width wide, 1 to 4 m past the
@@ -97,6 +99,16 @@ pub struct CircuitSettings {
     pub pocket_share: f32,
     /// Metres per pixel of a map image written by [`write_map`].
     pub resolution_m: f32,
+    /// How far apart the walls of two stretches of track stay, beyond the width (centre lines
+    /// at least the width plus this apart), metres, at least 0.2. 0.5 (the default) leaves
+    /// 0.3 m of open ground between two 0.1 m walls; 0.2 puts the walls back to back: one
+    /// thin wall between stretches and round a hairpin's tip, as in mapped halls.
+    #[serde(skip_serializing_if = "is_default_gap")]
+    pub wall_gap_m: f32,
+}
+
+fn is_default_gap(g: &f32) -> bool {
+    *g == GAP_M as f32
 }
 
 impl Default for CircuitSettings {
@@ -112,6 +124,7 @@ impl Default for CircuitSettings {
             tight_share: 0.5,
             pocket_share: 0.0,
             resolution_m: 0.05,
+            wall_gap_m: GAP_M as f32,
         }
     }
 }
@@ -150,12 +163,19 @@ impl CircuitSettings {
                 self.min_radius_m
             ));
         }
+        let g = self.wall_gap_m;
+        if !(g.is_finite() && (MIN_GAP_M as f32..=5.0).contains(&g)) {
+            return bad(format!(
+                "circuit wall_gap_m must be in [{MIN_GAP_M}, 5] metres (two walls back to back at \
+                 least), got {g}"
+            ));
+        }
         // The widest circuit's tightest corner: a lap must hold a handful of them.
-        let r = self.min_radius_m.max(0.5 * w1 + 0.5 * GAP_M as f32);
+        let r = self.min_radius_m.max(0.5 * (w1 + g));
         if l0 < 20.0 * r {
             return bad(format!(
                 "circuit length_m[0] must be at least 20 times the tightest corner's radius \
-                 (max(min_radius_m, width_m[1] / 2 + 0.25) = {r} m), got {l0}"
+                 (max(min_radius_m, (width_m[1] + wall_gap_m) / 2) = {r} m), got {l0}"
             ));
         }
         if !(self.resolution_m.is_finite() && (0.01..=0.5).contains(&self.resolution_m)) {
@@ -179,9 +199,13 @@ impl CircuitSettings {
         ]) {
             crc.update(&v.to_le_bytes());
         }
-        // Only when set: circuits without pockets keep the names they always had.
+        // Only when set: circuits without pockets or with the default gap keep the names they
+        // always had.
         if self.pocket_share > 0.0 {
             crc.update(&self.pocket_share.to_le_bytes());
+        }
+        if !is_default_gap(&self.wall_gap_m) {
+            crc.update(&self.wall_gap_m.to_le_bytes());
         }
         format!("{:08x}", crc.finalize())
     }
@@ -213,6 +237,8 @@ struct Plan {
     width_m: f64,
     /// The smallest radius any corner may take, metres.
     min_radius_m: f64,
+    /// Least distance between two stretches' walls, beyond the width, metres.
+    gap_m: f64,
     clockwise: bool,
     hairpin: bool,
 }
@@ -435,7 +461,7 @@ impl Pocket {
 /// at least `POCKET_MIN_TURN_RAD` whose outer wall crosses the pocket's inner side on the arc,
 /// with chance `share`, unless its new floor or walls would come within a wall's depth and a
 /// sampling step of another stretch's track band or of an earlier pocket.
-fn pockets(pieces: &[Piece], width_m: f64, share: f64, seed: u64) -> Vec<Pocket> {
+fn pockets(pieces: &[Piece], width_m: f64, gap_m: f64, share: f64, seed: u64) -> Vec<Pocket> {
     let mut rng = StdRng::seed_from_u64(seed);
     let h = 0.5 * width_m;
     let pts = sampled(pieces, CLEARANCE_STEP_M);
@@ -493,7 +519,7 @@ fn pockets(pieces: &[Piece], width_m: f64, share: f64, seed: u64) -> Vec<Pocket>
         // Stretches other than the corner and the way into it, whose band a wall and a step
         // beyond the pocket's floor may not reach.
         let reach = h + WALL_DEPTH_M + step;
-        let (from, to) = (s_start - 2.0 * (width_m + GAP_M), s0);
+        let (from, to) = (s_start - 2.0 * (width_m + gap_m), s0);
         let near_corner = |s: f64| (s - from).rem_euclid(lap) <= to - from;
         let around = pocket.length_m + width_m + reach;
         let others: Vec<[f64; 2]> = pts
@@ -572,13 +598,15 @@ impl MapTrack {
             true => uniform(&mut rng, s.width_m[0] as f64, split as f64),
             false => uniform(&mut rng, split as f64, s.width_m[1] as f64),
         };
-        let min_radius_m = (s.min_radius_m as f64).max(0.5 * (width_m + GAP_M));
+        let gap_m = s.wall_gap_m as f64;
+        let min_radius_m = (s.min_radius_m as f64).max(0.5 * (width_m + gap_m));
         let clockwise = rng.random_bool(0.5);
         let tight = rng.random::<f32>() < s.tight_share;
         let plan = Plan {
             length_m,
             width_m,
             min_radius_m,
+            gap_m,
             clockwise,
             hairpin: tight && min_radius_m <= HAIRPIN_MAX_RADIUS_M,
         };
@@ -593,7 +621,7 @@ impl MapTrack {
             };
             let (pieces, centreline) = start_and_centre(pieces);
             let pockets = match s.pocket_share > 0.0 {
-                true => pockets(&pieces, width_m, s.pocket_share as f64, seed ^ POCKET_SALT),
+                true => pockets(&pieces, width_m, gap_m, s.pocket_share as f64, seed ^ POCKET_SALT),
                 false => Vec::new(),
             };
             let mut walls = Vec::with_capacity(4 * centreline.len());
@@ -759,7 +787,7 @@ fn draw_shape(rng: &mut StdRng, plan: &Plan) -> Result<Vec<Piece>, Reject> {
             if longest < MIN_START_STRAIGHT_M {
                 return Err("no straight to start on");
             }
-            if !clear_of_itself(&pieces, plan.width_m) {
+            if !clear_of_itself(&pieces, plan.width_m, plan.gap_m) {
                 return Err("two stretches of track closer than the width and the gap");
             }
             return Ok(pieces);
@@ -870,12 +898,13 @@ fn fillet(poly: &[Corner], r_min: f64) -> Result<Vec<Piece>, Option<usize>> {
 }
 
 /// Whether every two points of the line more than pi (w + gap) apart along the lap (the shorter
-/// way round) are at least w + gap apart in the plane: no two stretches of track touch or share
-/// a wall. Points `CLEARANCE_STEP_M` apart are compared with both bounds moved by the step, so
-/// the check holds for the continuous line, not only for the points.
-fn clear_of_itself(pieces: &[Piece], width_m: f64) -> bool {
+/// way round) are at least w + gap apart in the plane: no two stretches of track touch or come
+/// closer than the gap between their walls. Points `CLEARANCE_STEP_M` apart are compared with
+/// both bounds moved by the step, so the check holds for the continuous line, not only for the
+/// points.
+fn clear_of_itself(pieces: &[Piece], width_m: f64, gap_m: f64) -> bool {
     let step = CLEARANCE_STEP_M;
-    let gap = width_m + GAP_M;
+    let gap = width_m + gap_m;
     let (near, along) = (gap + step, PI * gap - step);
     let pts = sampled(pieces, step);
     let lap: f64 = pieces.iter().map(Piece::length_m).sum();
@@ -1085,6 +1114,7 @@ mod tests {
             length_m,
             width_m,
             min_radius_m: (0.5 * (width_m + GAP_M)).max(1.0),
+            gap_m: GAP_M,
             clockwise,
             hairpin,
         }
@@ -1170,10 +1200,14 @@ mod tests {
     #[test]
     fn the_self_clearance_check_refuses_stretches_too_close() {
         let w = 2.0;
-        assert!(clear_of_itself(&stadium(20.0, w + GAP_M + 2.0 * CLEARANCE_STEP_M), w));
-        assert!(!clear_of_itself(&stadium(20.0, w + GAP_M - 0.05), w));
+        assert!(clear_of_itself(
+            &stadium(20.0, w + GAP_M + 2.0 * CLEARANCE_STEP_M),
+            w,
+            GAP_M
+        ));
+        assert!(!clear_of_itself(&stadium(20.0, w + GAP_M - 0.05), w, GAP_M));
         // Straights exactly a width and the gap apart meet the property, but the check's step
         // margin refuses them: it errs on the safe side.
-        assert!(!clear_of_itself(&stadium(20.0, w + GAP_M), w));
+        assert!(!clear_of_itself(&stadium(20.0, w + GAP_M), w, GAP_M));
     }
 }
