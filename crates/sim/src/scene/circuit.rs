@@ -10,7 +10,8 @@
 //! draw that breaks a property (a corner tighter than allowed, two stretches of track closer
 //! than a track width and the wall gap, half a metre by default, no straight to start on) is
 //! redrawn from the same generator, so a seed always gives the same circuit. With the gap at
-//! 0.2 m (`wall_gap_m`) two stretches may share one thin wall, as in mapped halls.
+//! 0.2 m (`wall_gap_m`) two stretches' walls may stand back to back, and a hairpin may turn
+//! round a thin tip, as in mapped halls.
 //!
 //! On a share of the sharp corners (`pocket_share`, none by default) the corridor also runs on
 //! straight past the corner's entry and ends against a wall: a dead-end pocket, as where a
@@ -101,8 +102,9 @@ pub struct CircuitSettings {
     pub resolution_m: f32,
     /// How far apart the walls of two stretches of track stay, beyond the width (centre lines
     /// at least the width plus this apart), metres, at least 0.2. 0.5 (the default) leaves
-    /// 0.3 m of open ground between two 0.1 m walls; 0.2 puts the walls back to back: one
-    /// thin wall between stretches and round a hairpin's tip, as in mapped halls.
+    /// 0.3 m of open ground between two 0.1 m walls; at 0.2 the walls may stand back to back,
+    /// and with `min_radius_m` at most half the width plus 0.1 m a hairpin turns round a tip
+    /// 0.1 m wide, as in mapped halls.
     #[serde(skip_serializing_if = "is_default_gap")]
     pub wall_gap_m: f32,
 }
