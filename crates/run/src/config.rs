@@ -77,9 +77,10 @@ pub struct RunConfig {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub init_from: Option<std::path::PathBuf>,
     /// Runs to train at most, at seeds `seed`, `seed + 1`, ... (a single car on a map track or
-    /// on generated circuits): a run is kept once its policy laps every one of `eval_episodes`
-    /// validation episodes without a crash (episodes of their own seeds, not the evaluation's);
-    /// when none does, the one that lapped most. The kept run's config names its seed, so it trains again alone.
+    /// on generated circuits): a run is kept once its policy laps `attempts_lapped_share` of
+    /// `eval_episodes` validation episodes without a crash (episodes of their own seeds, not
+    /// the evaluation's); when none does, the one that lapped most. The kept run's config names
+    /// its seed, so it trains again alone.
     #[serde(skip_serializing_if = "is_one")]
     pub attempts: u32,
     /// The share of the validation episodes an attempt must lap to be kept (1: every one); a

@@ -246,7 +246,8 @@ fn a_track_set_over_generated_circuits_races_on_the_map() {
 }
 
 /// `attempts` retries seeds for a single car on a map track or generated circuits only,
-/// validated on at least one episode; the key is absent from a config that trains once, so those files stay as they were.
+/// validated on at least one episode; the key is absent from a config that trains once, so
+/// those files stay as they were.
 #[test]
 fn attempts_retry_seeds_only_for_one_car_on_a_map_track_or_circuits() {
     let bean = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tracks/bean.yaml");
