@@ -18,6 +18,7 @@ pub mod api;
 pub mod check;
 pub mod drivers;
 pub mod heldout;
+pub mod pass_advice;
 pub mod pendulum;
 pub mod race_env;
 pub mod race_figures;

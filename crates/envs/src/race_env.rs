@@ -58,6 +58,18 @@ pub struct RaceSettings {
     /// `Info::critic_obs`, beside the observation the policy acts on (an asymmetric
     /// actor-critic: the policy still sees only what the car senses).
     pub critic_sees_opponents: bool,
+    /// Training only: report, as each policy-driven car's corrected action, the passing advice
+    /// ([`crate::pass_advice`]): a line that keeps this lateral gap, metres, between its body
+    /// and a car it closes on, from a second before the bodies would overlap, or following
+    /// where no such line fits; for PPO's correction term (`ppo.correction_coef`). The advice
+    /// is worked out from both cars' places on the track and never applied. 0: off (and not
+    /// written, so settings saved before it read and write the same).
+    #[serde(skip_serializing_if = "is_off")]
+    pub pass_advice_margin_m: f32,
+}
+
+fn is_off(v: &f32) -> bool {
+    *v == 0.0
 }
 
 impl Default for RaceSettings {
@@ -75,6 +87,7 @@ impl Default for RaceSettings {
             start_behind_share: 0.0,
             start_behind_m: 2.0,
             critic_sees_opponents: false,
+            pass_advice_margin_m: 0.0,
         }
     }
 }
@@ -108,6 +121,12 @@ impl RaceSettings {
             return bad(format!(
                 "grid_gap_m must be at least 0.6 (a car's length), got {}",
                 self.grid_gap_m
+            ));
+        }
+        if !(self.pass_advice_margin_m >= 0.0 && self.pass_advice_margin_m.is_finite()) {
+            return bad(format!(
+                "pass_advice_margin_m must be >= 0, got {}",
+                self.pass_advice_margin_m
             ));
         }
         if !(self.grid_offset_m >= 0.0 && self.grid_offset_m.is_finite()) {
@@ -203,6 +222,8 @@ pub struct RaceEnv {
     /// Where the car's body ends behind and ahead of its base along x, metres: the contact
     /// point's place along the car says whose front hit.
     body_x_m: (f32, f32),
+    /// Half the body's width, metres (the passing advice's gap).
+    body_half_width_m: f32,
     steps: u64,
     ready: bool,
 }
@@ -237,6 +258,7 @@ impl RaceEnv {
         let body_x_m = model
             .body_bounds_m()
             .map_or((0.0, model.wheelbase_m), |(lo, hi)| (lo[0], hi[0]));
+        let body_half_width_m = model.body_bounds_m().map_or(0.0, |(lo, hi)| 0.5 * (hi[1] - lo[1]));
         Ok(Self {
             sim,
             map,
@@ -255,6 +277,7 @@ impl RaceEnv {
             new_layout_each_race: false,
             end_below_m,
             body_x_m,
+            body_half_width_m,
             steps: 0,
             ready: false,
         })
@@ -387,6 +410,64 @@ impl RaceEnv {
         let x = (p[0] - pose.x_m) * c + (p[1] - pose.y_m) * s;
         let (rear, front) = self.body_x_m;
         (x - rear) / (front - rear).max(1e-3)
+    }
+
+    /// The control [`crate::pass_advice`] asks car `i` for instead of `control`, against the
+    /// running car nearest ahead of it along the track; None when it asks nothing.
+    fn pass_advice(&self, i: usize, control: Control, limit: f64) -> Option<Control> {
+        use crate::pass_advice::{Advice, Body, Pair, advise};
+        let p = self.sim.car(i).pose2();
+        let lap = self.track.lap_length_m();
+        let s = self.track.centreline_s(p.x_m, p.y_m);
+        let half_width_m = self.track.clearance_at_m(s)?;
+        let speed = self.sim.car(i).forward_speed_mps();
+        let (ahead_m, j) = (0..self.racers.len())
+            .filter(|&j| j != i && !self.racers[j].crashed)
+            .map(|j| {
+                let q = self.sim.car(j).pose2();
+                let d = (self.track.centreline_s(q.x_m, q.y_m) - s).rem_euclid(lap);
+                (if d > 0.5 * lap { d - lap } else { d }, j)
+            })
+            .filter(|(d, _)| *d > 0.0)
+            .min_by(|a, b| a.0.total_cmp(&b.0))?;
+        let q = self.sim.car(j).pose2();
+        let pair = Pair {
+            ahead_m,
+            offset_m: self.track.lateral_offset_m(p.x_m, p.y_m),
+            other_offset_m: self.track.lateral_offset_m(q.x_m, q.y_m),
+            speed_mps: speed,
+            other_speed_mps: self.sim.car(j).forward_speed_mps(),
+            half_width_m,
+        };
+        let body = Body {
+            length_m: self.body_x_m.1 - self.body_x_m.0,
+            half_width_m: self.body_half_width_m,
+        };
+        let car = crate::drivers::CarLimits::of(self.sim.vehicle(), 0.0);
+        Some(match advise(&pair, &body, self.settings.pass_advice_margin_m)? {
+            Advice::Line(offset_m) => {
+                // Pure pursuit of the point on that line a lookahead down the track.
+                const LOOKAHEAD_M: f32 = 0.6;
+                let ([cx, cy], [dx, dy]) = self.track.centreline_at(s + LOOKAHEAD_M);
+                let (tx, ty) = (cx + offset_m * dy, cy - offset_m * dx);
+                let (sn, cs) = p.yaw_rad.sin_cos();
+                let rear = car.rear_axle_x_m as f32;
+                let (ax, ay) = (p.x_m + rear * cs, p.y_m + rear * sn);
+                let alpha = (ty - ay).atan2(tx - ax) - p.yaw_rad;
+                let d = (tx - ax).hypot(ty - ay).max(1e-3);
+                let curvature = 2.0 * f64::from(alpha.sin()) / f64::from(d);
+                Control {
+                    steering_rad: (car.wheelbase_m * curvature).atan().clamp(-limit, limit),
+                    ..control
+                }
+            }
+            Advice::Follow(v) => Control {
+                throttle: control
+                    .throttle
+                    .min(car.throttle(f64::from(v), Some(f64::from(speed)), 1.0)),
+                ..control
+            },
+        })
     }
 
     fn positions(&self) -> Vec<usize> {
@@ -617,6 +698,11 @@ impl RaceEnv {
             space.clamp(&mut a);
             controls[i] = self.tasks[i].control(&a, limit, &self.frames[i]);
             corrected[i] = self.tasks[i].corrected_action();
+            if corrected[i].is_none() && self.settings.pass_advice_margin_m > 0.0 {
+                corrected[i] = self
+                    .pass_advice(i, controls[i], limit)
+                    .and_then(|c| self.tasks[i].action_of(c, limit));
+            }
         }
         let speed_before: Vec<f64> = (0..n).map(|i| self.sim.car(i).forward_speed_mps() as f64).collect();
         let distance_before: Vec<f64> = self.racers.iter().map(|r| r.distance_m).collect();

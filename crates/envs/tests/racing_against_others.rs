@@ -565,3 +565,73 @@ fn the_critic_sees_the_other_cars_gap_offset_and_speed() {
     assert!((c0[1].abs() - 0.4).abs() < 0.15, "{c0:?}");
     assert!((c0[2] - v1 / 2.0).abs() < 0.05 && v1 > 0.5, "{c0:?} {v1}");
 }
+
+/// With `pass_advice_margin_m`, a car closing on a stopped one ahead while running to its
+/// left is advised, as its corrected action, to steer further left (the side it is on, where
+/// the lane has room), and only once within the advice's horizon; the advice is never applied:
+/// the race runs the same, step for step, without it.
+#[test]
+fn passing_advice_steers_a_closing_car_away_from_the_one_ahead_and_is_never_applied() {
+    let run = |margin_m: f32| {
+        let cfg = EnvConfig {
+            race: Some(RaceSettings {
+                cars: 2,
+                start_behind_share: 1.0,
+                pass_advice_margin_m: margin_m,
+                ..RaceSettings::default()
+            }),
+            max_steps: 120,
+            racing: Some(agvrl_envs::task::RacingRulesSetting {
+                end_below_m: Some(0.0),
+                ..Default::default()
+            }),
+            ..EnvConfig::default()
+        };
+        let mut env = make_race("racing-duel", &cfg).unwrap();
+        env.reset(Some(0)).unwrap();
+        let mut steps = vec![];
+        for _ in 0..120 {
+            // Car 0 (2 m behind) at full throttle along a line 0.2 m left of the centre line,
+            // where car 1 stands.
+            let a = vec![vec![1.0, steer_along(&env, 0, 0.2)], vec![-1.0, 0.0]];
+            let gap_m = {
+                let (p, q) = (env.sim().car(0).pose2(), env.sim().car(1).pose2());
+                ((q.x_m - p.x_m).powi(2) + (q.y_m - p.y_m).powi(2)).sqrt()
+            };
+            let speed = env.sim().car(0).forward_speed_mps();
+            let st = env.step(&a).unwrap();
+            let over = st.over();
+            steps.push((a[0].clone(), gap_m, speed, st));
+            if over {
+                break;
+            }
+        }
+        steps
+    };
+    let (advised, plain) = (run(0.25), run(0.0));
+    assert_eq!(advised.len(), plain.len());
+    for (x, y) in advised.iter().zip(&plain) {
+        let (sx, sy) = (x.3.agents[0].as_ref().unwrap(), y.3.agents[0].as_ref().unwrap());
+        assert_eq!(
+            (&sx.obs, sx.reward),
+            (&sy.obs, sy.reward),
+            "the advice changed the race"
+        );
+        assert_eq!(sy.info.corrected_action, None, "no advice when it is off");
+    }
+    let first = advised
+        .iter()
+        .position(|(_, _, _, st)| st.agents[0].as_ref().unwrap().info.corrected_action.is_some())
+        .expect("advice while closing in");
+    let (a, gap_m, speed, st) = &advised[first];
+    let c = st.agents[0].as_ref().unwrap().info.corrected_action.clone().unwrap();
+    assert!(first > 0, "not from the start, 2 m behind");
+    // Base to base: within a car's length (0.6 m at most) and a horizon's travel.
+    let reach = 0.6 + agvrl_envs::pass_advice::HORIZON_S * speed;
+    assert!(*gap_m < reach, "advised {gap_m} m behind at {speed} m/s");
+    assert_eq!(c[0], a[0], "room to the left: steer, keep the throttle");
+    assert!(
+        c[1] > a[1] + 0.05,
+        "steer left, away from the car ahead: {a:?} -> {c:?}"
+    );
+}

@@ -59,6 +59,11 @@ pub trait Task: Send {
     fn corrected_action(&self) -> Option<Vec<f32>> {
         None
     }
+    /// The action that maps to `control`, where the task can say (advice from outside the
+    /// task, e.g. a race's passing advice, is reported as an action).
+    fn action_of(&self, _control: Control, _steering_limit_rad: f64) -> Option<Vec<f32>> {
+        None
+    }
     /// Start an episode from its first frame.
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>);
     /// The observation of a frame, once `reset` or `evaluate` has taken it in (the memories
@@ -83,6 +88,9 @@ impl<T: Task + ?Sized> Task for Box<T> {
     }
     fn corrected_action(&self) -> Option<Vec<f32>> {
         (**self).corrected_action()
+    }
+    fn action_of(&self, control: Control, steering_limit_rad: f64) -> Option<Vec<f32>> {
+        (**self).action_of(control, steering_limit_rad)
     }
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         (**self).reset(frame, map)

@@ -233,6 +233,10 @@ impl Task for Racing {
         self.correction.clone()
     }
 
+    fn action_of(&self, control: Control, steering_limit_rad: f64) -> Option<Vec<f32>> {
+        Some(self.cfg.common.action_of(control, steering_limit_rad))
+    }
+
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         self.filter.reset();
         self.correction = None;
