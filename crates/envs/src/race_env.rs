@@ -443,8 +443,10 @@ impl RaceEnv {
             length_m: self.body_x_m.1 - self.body_x_m.0,
             half_width_m: self.body_half_width_m,
         };
+        let advice = advise(&pair, &body, self.settings.pass_advice_margin_m)?;
+        // Only on an advised step: building the limits walks the car's wheels.
         let car = crate::drivers::CarLimits::of(self.sim.vehicle(), 0.0);
-        Some(match advise(&pair, &body, self.settings.pass_advice_margin_m)? {
+        Some(match advice {
             Advice::Line(offset_m) => {
                 // Pure pursuit of the point on that line a lookahead down the track.
                 const LOOKAHEAD_M: f32 = 0.6;
