@@ -67,16 +67,17 @@ enum Cmd {
 pub enum BackendArg {
     /// burn-flex.
     Flex,
-    /// burn-ndarray.
+    /// burn-ndarray (the `ndarray` feature).
     Ndarray,
 }
 
-impl From<BackendArg> for agvrl_rl::CpuBackend {
-    fn from(b: BackendArg) -> Self {
-        match b {
-            BackendArg::Flex => Self::Flex,
-            BackendArg::Ndarray => Self::NdArray,
-        }
+impl BackendArg {
+    /// The backend, or why this build lacks it.
+    fn backend(self) -> agvrl_rl::Result<agvrl_rl::CpuBackend> {
+        agvrl_rl::CpuBackend::parse(match self {
+            Self::Flex => "flex",
+            Self::Ndarray => "ndarray",
+        })
     }
 }
 
@@ -120,7 +121,7 @@ fn run(cli: Cli) -> Result<()> {
             learning,
             only,
             backend,
-        }) => bench::run(quick, learning, only, backend.into()),
+        }) => bench::run(quick, learning, only, backend.backend()?),
     }
 }
 

@@ -24,7 +24,7 @@ pub enum DeviceArg {
     /// burn-flex on the CPU.
     #[default]
     Flex,
-    /// burn-ndarray on the CPU (agvrl-rl's `ndarray` feature).
+    /// burn-ndarray on the CPU (the `ndarray` feature).
     Ndarray,
     /// CUDA GPU (the `cuda` feature).
     Cuda,

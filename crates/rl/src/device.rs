@@ -10,7 +10,7 @@ pub enum CpuBackend {
     /// burn-flex: pure-Rust, the faster one in our measurements (see `bench`), the default.
     #[default]
     Flex,
-    /// burn-ndarray (deprecated upstream, kept selectable; the `ndarray` feature).
+    /// burn-ndarray (deprecated upstream; only with the `ndarray` feature, off by default).
     #[cfg(feature = "ndarray")]
     NdArray,
 }
@@ -24,7 +24,9 @@ impl CpuBackend {
             "ndarray" => Ok(Self::NdArray),
             #[cfg(not(feature = "ndarray"))]
             "ndarray" => Err(RlError::Config(
-                "CPU backend 'ndarray' needs agvrl-rl's 'ndarray' feature (this build has flex only)".into(),
+                "CPU backend 'ndarray' is not in this build (flex only): build with \
+                 `--features ndarray`"
+                    .into(),
             )),
             _ => Err(RlError::Config(format!("unknown CPU backend '{s}' (flex, ndarray)"))),
         }
@@ -150,8 +152,8 @@ fn cpu_ndarray() -> Option<Device> {
     None
 }
 
-/// A device by name: `flex` or `ndarray` (CPU, always built), `cuda` or `wgpu` (GPU, with the
-/// cargo feature of the same name).
+/// A device by name: `flex` (CPU, always built), `ndarray` (CPU), `cuda` or `wgpu` (GPU), each
+/// of the last three with the cargo feature of the same name.
 pub fn device_by_name(name: &str) -> Result<Device> {
     name.parse::<DeviceChoice>()?.device()
 }
@@ -206,6 +208,11 @@ mod tests {
         assert!(device_by_name("flex").is_ok());
         #[cfg(feature = "ndarray")]
         assert!(device_by_name("ndarray").is_ok());
+        #[cfg(not(feature = "ndarray"))]
+        {
+            let e = device_by_name("ndarray").unwrap_err().to_string();
+            assert!(e.contains("--features ndarray"), "{e}");
+        }
         let e = device_by_name("tpu").unwrap_err().to_string();
         assert!(e.contains("tpu") && e.contains("flex"), "{e}");
         assert_eq!(NetPath::for_device(&default_device()), NetPath::Host);

@@ -39,7 +39,18 @@ fn policy_round_trip_gives_the_same_actions() {
     assert_eq!(xa, xb);
     assert_eq!(xa.len(), 2);
     assert!(xa.iter().all(|v| (-2.0..=2.0).contains(v)));
-    // The ndarray backend reads the same file and agrees to float tolerance.
+}
+
+/// The ndarray backend (built with `--features ndarray`) reads the same file and agrees to float
+/// tolerance.
+#[cfg(feature = "ndarray")]
+#[test]
+fn a_policy_file_acts_alike_on_the_ndarray_backend() {
+    let sac = small_sac(0);
+    let path = tmp("sac-ndarray.policy");
+    sac.save_policy(&path).unwrap();
+    let obs = [0.3, -0.2, -0.5, 0.9];
+    let xa = Policy::load(&path).unwrap().act(&obs, true).unwrap();
     let mut c = Policy::load_on(&path, &agvrl_rl::CpuBackend::NdArray.device()).unwrap();
     let xc = c.act(&obs, true).unwrap();
     assert!(xa.iter().zip(&xc).all(|(p, q)| (p - q).abs() < 1e-4), "{xa:?} {xc:?}");
