@@ -165,4 +165,23 @@ fn help_says_the_defaults_a_user_must_know_and_bad_choices_list_the_valid_ones()
     let o = agvrl(&["train", "--device", "tpu"]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("flex, ndarray, cuda, wgpu"), "{}", stderr(&o));
+    // burn-ndarray (deprecated upstream) is not in the README's build; one line says how to add it,
+    // before a run directory is made.
+    let d = tmp("ndarray");
+    let run = d.path().join("run");
+    let o = agvrl(&[
+        "train",
+        "--device",
+        "ndarray",
+        "--steps",
+        "64",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert_eq!(
+        stderr(&o).trim(),
+        "error: config: CPU backend 'ndarray' is not in this build (flex only): build with `--features ndarray`"
+    );
+    assert!(!run.exists());
 }
