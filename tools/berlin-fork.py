@@ -1,14 +1,15 @@
 #!/usr/bin/env python3
 """What XTENTH-CAR's shipped LiDAR sees at berlin's fork, from f1tenth_gym's map image.
 
-    tools/berlin-fork.py MAPS/berlin.yaml
+    tools/berlin-fork.py MAPS/berlin.yaml [FOV_DEG]
 
 berlin (f1tenth_gym 4fdb9c7) runs north up a 4 m channel; the way on turns left (west) between
 two thin walls and round the upper one's tip at x = -4.1 m, and straight ahead lies a dead-end
 bay. For poses heading north in the channel this prints whether a full-lock left turn started
 there clears the walls (the car's body swept along the arc) and what the 90-degree, 100-ray,
 12 m scan shows: how many rays reach past the upper wall's tip (the way on) and the free length
-straight ahead. Occupancy is the map's own rule (occupied above occupied_thresh).
+straight ahead. FOV_DEG (default 90, the shipped scan) widens the scan at the same 0.9-degree
+spacing. Occupancy is the map's own rule (occupied above occupied_thresh).
 """
 
 import math
@@ -21,7 +22,7 @@ WHEELBASE_M = 0.33  # assets/vehicles/xtenth_car.urdf
 MAX_STEER_RAD = 0.36  # assets/vehicles/xtenth_car.toml
 LIDAR_AHEAD_M = 0.33  # the scan's origin ahead of the rear axle
 HALF_WIDTH_M = 0.2
-FOV_DEG, N_RAYS, RANGE_M = 90.0, 100, 12.0
+RAY_SPACING_DEG, RANGE_M = 90.0 / 99, 12.0
 WAY_ON_X_M = -4.3  # west of the upper thin wall's tip
 LOWER_WALL = ((-3.8, -7.0), (-1.6, -5.7))  # the lower thin wall, its root to its tip
 
@@ -48,9 +49,11 @@ def load(yaml_path):
 
 
 def main():
-    if len(sys.argv) != 2:
-        sys.exit("usage: tools/berlin-fork.py MAPS/berlin.yaml")
+    if len(sys.argv) not in (2, 3):
+        sys.exit("usage: tools/berlin-fork.py MAPS/berlin.yaml [FOV_DEG]")
     occupied = load(sys.argv[1])
+    fov = float(sys.argv[2]) if len(sys.argv) == 3 else 90.0
+    n_rays = round(fov / RAY_SPACING_DEG) + 1
     radius = WHEELBASE_M / math.tan(MAX_STEER_RAD)
 
     def cast(x, y, a):
@@ -83,7 +86,7 @@ def main():
                 return False
         return True
 
-    print(f"turning_radius_m={radius:.2f}")
+    print(f"turning_radius_m={radius:.2f} fov_deg={fov:g} rays={n_rays}")
     for x in (-1.5, -1.0, -0.5):
         ys = [round(-7.5 + 0.1 * i, 1) for i in range(31)]
         free = [y for y in ys if not body_hits(x, y, math.pi / 2)]
@@ -99,8 +102,8 @@ def main():
         for y in free[::5]:
             lx, ly = x, y + LIDAR_AHEAD_M
             past_tip = 0
-            for k in range(N_RAYS):
-                a = math.pi / 2 + math.radians(-FOV_DEG / 2 + FOV_DEG * k / (N_RAYS - 1))
+            for k in range(n_rays):
+                a = math.pi / 2 + math.radians(-fov / 2 + fov * k / (n_rays - 1))
                 if lx + cast(lx, ly, a) * math.cos(a) < WAY_ON_X_M:
                     past_tip += 1
             print(f"  y={y} rays_past_tip={past_tip} ahead_m={cast(lx, ly, math.pi / 2):.1f}")
