@@ -181,7 +181,7 @@ fn help_says_the_defaults_a_user_must_know_and_bad_choices_list_the_valid_ones()
     assert!(!o.status.success());
     assert_eq!(
         stderr(&o).trim(),
-        "error: config: CPU backend 'ndarray' is not in this build (flex only): build with `--features ndarray`"
+        "error: config: device 'ndarray' needs a build with the 'ndarray' feature: cargo build --release --features ndarray"
     );
     assert!(!run.exists());
 }

@@ -124,7 +124,11 @@ def test_train_rejects_bad_configs_before_starting(workdir):
         agvrl.train({"env": "pendulum"}, out=workdir / "b", stepz=3)
     with pytest.raises(ValueError, match="cannot read"):
         agvrl.train(workdir / "missing.toml")
+    # A device this wheel was built without (the default wheel has flex only).
+    with pytest.raises(ValueError, match="--features ndarray"):
+        agvrl.train({"env": "pendulum"}, out=workdir / "c", device="ndarray")
     assert not (workdir / "a").exists() and not (workdir / "b").exists()
+    assert not (workdir / "c").exists()
 
 
 def test_train_takes_a_config_file(root, workdir):

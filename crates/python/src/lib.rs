@@ -632,6 +632,7 @@ fn train(
         let stop = Arc::new(AtomicBool::new(false));
         let device: agvrl_rl::DeviceChoice = device
             .parse()
+            .and_then(|d: agvrl_rl::DeviceChoice| d.check_built().map(|()| d))
             .map_err(|e: agvrl_rl::RlError| PyValueError::new_err(e.to_string()))?;
         let flag = stop.clone();
         let worker = std::thread::Builder::new()

@@ -23,11 +23,7 @@ impl CpuBackend {
             #[cfg(feature = "ndarray")]
             "ndarray" => Ok(Self::NdArray),
             #[cfg(not(feature = "ndarray"))]
-            "ndarray" => Err(RlError::Config(
-                "CPU backend 'ndarray' is not in this build (flex only): build with \
-                 `--features ndarray`"
-                    .into(),
-            )),
+            "ndarray" => Err(missing("ndarray")),
             _ => Err(RlError::Config(format!("unknown CPU backend '{s}' (flex, ndarray)"))),
         }
     }
@@ -88,6 +84,28 @@ impl std::str::FromStr for DeviceChoice {
 }
 
 impl DeviceChoice {
+    /// Whether this build carries the device's backend, without opening the device: what a
+    /// caller checks before it starts anything.
+    pub fn check_built(self) -> Result<()> {
+        let built = match self {
+            Self::Flex => true,
+            Self::NdArray => cfg!(feature = "ndarray"),
+            Self::Cuda => cfg!(feature = "cuda"),
+            Self::Wgpu => cfg!(feature = "wgpu"),
+        };
+        if built { Ok(()) } else { Err(missing(self.name())) }
+    }
+
+    /// Its name, as `from_str` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Flex => "flex",
+            Self::NdArray => "ndarray",
+            Self::Cuda => "cuda",
+            Self::Wgpu => "wgpu",
+        }
+    }
+
     /// The device, or why this build has none of this kind.
     pub fn device(self) -> Result<Device> {
         match self {
@@ -158,7 +176,6 @@ pub fn device_by_name(name: &str) -> Result<Device> {
     name.parse::<DeviceChoice>()?.device()
 }
 
-#[cfg(not(all(feature = "cuda", feature = "wgpu")))]
 fn missing(name: &str) -> RlError {
     RlError::Config(format!(
         "device '{name}' needs a build with the '{name}' feature: cargo build --release --features {name}"
@@ -212,7 +229,10 @@ mod tests {
         {
             let e = device_by_name("ndarray").unwrap_err().to_string();
             assert!(e.contains("--features ndarray"), "{e}");
+            let e = DeviceChoice::NdArray.check_built().unwrap_err().to_string();
+            assert!(e.contains("--features ndarray"), "{e}");
         }
+        assert!(DeviceChoice::Flex.check_built().is_ok());
         let e = device_by_name("tpu").unwrap_err().to_string();
         assert!(e.contains("tpu") && e.contains("flex"), "{e}");
         assert_eq!(NetPath::for_device(&default_device()), NetPath::Host);
