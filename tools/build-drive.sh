@@ -6,6 +6,7 @@
 #
 # DRIVE_PROFILE=deploy-check builds the same binary in the profile CI checks (fat LTO over 16
 # codegen units instead of one: minutes sooner cold, a binary a little larger).
+# DRIVE_SETUP_ONLY=1 installs what the build needs and stops (CI then builds in the background).
 #
 # aarch64 is cross-built with Debian's rustc/cargo (rustc-web, with the arm64 std) and
 # aarch64-linux-gnu-gcc, into its own target directory beside the x86_64 one; the packages are
@@ -67,6 +68,8 @@ case "$arch" in
     exit 2
     ;;
 esac
+
+[ -z "${DRIVE_SETUP_ONLY:-}" ] || exit 0
 
 start=$(date +%s)
 CARGO_TARGET_DIR="$target_dir" "${cargo[@]}" build --locked --profile "$profile" -p agvrl-deploy --bin agvrl-drive --target "$triple" >&2
