@@ -76,6 +76,15 @@ fn fuzz_regressions_replay_without_panic() {
         ("asset_files", agvrl_sim::fuzz::asset_file),
         ("map_file", agvrl_sim::fuzz::map_file),
     ];
+    // What the bodies write to the temp folder, they remove.
+    let leftovers = || -> std::collections::BTreeSet<std::ffi::OsString> {
+        std::fs::read_dir(std::env::temp_dir())
+            .unwrap()
+            .filter_map(|e| Some(e.ok()?.file_name()))
+            .filter(|n| n.to_string_lossy().starts_with("agvrl-fuzz"))
+            .collect()
+    };
+    let before = leftovers();
     let mut replayed = 0;
     for (target, body) in targets {
         for kind in ["seeds", "regressions"] {
@@ -91,6 +100,8 @@ fn fuzz_regressions_replay_without_panic() {
         }
     }
     assert!(replayed >= 36, "the seeds are missing: {replayed} inputs");
+    let left: Vec<_> = leftovers().difference(&before).cloned().collect();
+    assert!(left.is_empty(), "the replays left {left:?} in the temp folder");
     // Seeds the decoders refuse would leave the fuzzer at the first check.
     for entry in std::fs::read_dir(root.join("seeds/policy_file")).unwrap() {
         let path = entry.unwrap().path();

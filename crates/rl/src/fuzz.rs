@@ -37,6 +37,7 @@ pub fn checkpoint(data: &[u8]) {
     } else {
         Sac::load_checkpoint(&path, env(), &device).map(|l| l.policy_data())
     };
+    let _ = std::fs::remove_file(&path);
     if let Ok(p) = policy {
         p.to_bytes().expect("a loaded learner's policy encodes");
     }

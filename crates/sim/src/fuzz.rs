@@ -6,21 +6,20 @@ use crate::assets::{AssetSource, embedded_files};
 use crate::urdf::UrdfModel;
 use crate::{Control, SceneSource, Sim, SimConfig, SimSettings};
 use rapier3d::prelude::Vector;
-use std::path::PathBuf;
-use std::sync::OnceLock;
 
-/// A private copy of the built-in assets, where a fuzzed file replaces one of them.
-fn assets_dir() -> &'static PathBuf {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("agvrl-fuzz-assets-{}", std::process::id()));
-        for (rel, text) in embedded_files() {
-            let path = dir.join(rel);
-            std::fs::create_dir_all(path.parent().expect("a file in a folder")).expect("temp dir");
-            std::fs::write(&path, text).expect("temp dir");
-        }
-        dir
-    })
+/// A private copy of the built-in assets, where a fuzzed file replaces one of them; one per
+/// input, removed when dropped, so replays leave nothing in the temp folder.
+fn assets_dir() -> tempfile::TempDir {
+    let dir = tempfile::Builder::new()
+        .prefix("agvrl-fuzz-assets-")
+        .tempdir()
+        .expect("temp dir");
+    for (rel, text) in embedded_files() {
+        let path = dir.path().join(rel);
+        std::fs::create_dir_all(path.parent().expect("a file in a folder")).expect("temp dir");
+        std::fs::write(&path, text).expect("temp dir");
+    }
+    dir
 }
 
 /// `asset_files`: byte 0 picks the file, the rest is its text, loaded as a user's file is:
@@ -36,7 +35,8 @@ pub fn asset_file(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(body) else {
         return;
     };
-    let dir = assets_dir();
+    let assets = assets_dir();
+    let dir = assets.path();
     let mut cfg = SimConfig::default();
     match which % 4 {
         0 => {
@@ -62,7 +62,7 @@ pub fn asset_file(data: &[u8]) {
             cfg.settings = vehicle(&path);
         }
         _ => {
-            let src = AssetSource::Dir(dir.clone());
+            let src = AssetSource::Dir(dir.to_path_buf());
             if let Ok(model) = UrdfModel::parse(&src, "objects/fuzz.urdf", text) {
                 let _ = model.collision_shapes(&src, Vector::new(1.0, 1.0, 1.0), |_| true);
             }
@@ -112,7 +112,8 @@ pub fn map_file(data: &[u8]) {
     let (Some(yaml), Some(csv)) = (take(&mut rest), take(&mut rest)) else {
         return;
     };
-    let dir = assets_dir().join("map");
+    let assets = assets_dir();
+    let dir = assets.path().join("map");
     std::fs::create_dir_all(&dir).expect("temp dir");
     std::fs::write(dir.join("map.yaml"), yaml).expect("temp dir");
     let csv_path = dir.join("map.csv");
