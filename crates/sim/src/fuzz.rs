@@ -116,11 +116,8 @@ pub fn map_file(data: &[u8]) {
     let dir = assets.path().join("map");
     std::fs::create_dir_all(&dir).expect("temp dir");
     std::fs::write(dir.join("map.yaml"), yaml).expect("temp dir");
-    let csv_path = dir.join("map.csv");
-    if csv.is_empty() {
-        let _ = std::fs::remove_file(&csv_path);
-    } else {
-        std::fs::write(&csv_path, csv).expect("temp dir");
+    if !csv.is_empty() {
+        std::fs::write(dir.join("map.csv"), csv).expect("temp dir");
     }
     for name in ["map.pgm", "map.png"] {
         std::fs::write(dir.join(name), rest).expect("temp dir");
