@@ -217,3 +217,70 @@ fn a_stalled_car_is_truncated_after_the_stall_limit() {
         "ended after {ended_s} s, limit {limit_s} s"
     );
 }
+
+/// The stall clock stands still while the safety filter brakes the car: a car that drives at a
+/// wall and is held short of it by the filter is not stalled, while the same car driving at the
+/// same wall behind a filter that only advises (nothing is braked on its behalf) crashes, and a car
+/// that holds itself still is stalled at the limit (above).
+#[test]
+fn a_car_the_filter_holds_short_of_a_wall_is_not_stalled() {
+    let run = |advisory: bool| {
+        let sim = agvrl_sim::SimConfig {
+            settings: agvrl_sim::SimSettings {
+                brake_mps2: 4.0,
+                ..Default::default()
+            },
+            ..agvrl_sim::SimConfig::default()
+        };
+        let mut v = SimVehicle::new(sim, SpawnMode::Fixed, Randomisation::default()).unwrap();
+        let rules = RacingRules {
+            stall_after_s: 1.0,
+            ..RacingRules::map_track()
+        };
+        let mut common = agvrl_envs::task::CommonConfig::default();
+        common.safety_filter = agvrl_envs::task::SafetyFilterConfig {
+            enabled: true,
+            advisory,
+            ..Default::default()
+        }
+        .on_drive(4.0);
+        let limit = v.steering_limit_rad();
+        let mut task = Racing::new(
+            RacingConfig {
+                rules,
+                common,
+                ..RacingConfig::default()
+            },
+            limit,
+        );
+        let first = v.reset(0).unwrap();
+        task.reset(&first, v.map());
+        // On the oval's +x straight, facing the outer wall (x = 5 m) head on, 0.3 m short of it.
+        let front = v.sim().vehicle().body_bounds_m().map_or(0.0, |(_, hi)| hi[0]);
+        let pose = agvrl_sim::PlanarPose {
+            x_m: 5.0 - front - 0.3,
+            y_m: 0.0,
+            yaw_rad: 0.0,
+        };
+        v.sim_mut().reset(pose).unwrap();
+        v.actuate(Control::default()).unwrap();
+        let mut frame = v.sense().unwrap();
+        task.reset(&frame, v.map());
+        let dt = v.control_period_s();
+        // Full throttle, straight on, for three times the stall limit.
+        for step in 1..=(3.0 / dt) as usize {
+            let c = task.control(&[1.0, 0.0], limit, &frame);
+            v.actuate(c).unwrap();
+            frame = v.sense().unwrap();
+            let out = task.evaluate(&frame, v.map());
+            if out.termination.is_some() || out.truncate {
+                return Some((step as f64 * dt, out));
+            }
+            assert!(advisory || task.intervention() == agvrl_envs::task::Intervention::Braked);
+        }
+        None
+    };
+    assert!(run(false).is_none(), "a car the filter holds was ended: {:?}", run(false));
+    let (ended_s, out) = run(true).expect("driving at the wall ends the episode");
+    assert_eq!(out.termination, Some(TerminationCause::Contact), "after {ended_s} s: {out:?}");
+}

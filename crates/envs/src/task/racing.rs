@@ -53,7 +53,9 @@ pub struct RacingRules {
     /// Charged once when the episode ends by a crash (<= 0).
     pub crash_penalty: f64,
     /// The episode ends, truncated, when the car has gained no ground along the centre line
-    /// (beyond its best so far, by [`STALL_GAIN_M`]) for this long, seconds. 0: never.
+    /// (beyond its best so far, by [`STALL_GAIN_M`]) for this long, seconds. 0: never. The clock
+    /// stands still while the safety filter brakes or reverses the car: its recovery from a dead
+    /// end is not a stall.
     pub stall_after_s: f64,
     /// The episode ends, truncated, after this many laps' time at the car's top speed (a time
     /// limit that scales with the track, for episodes on circuits of any length). 0: none (the
@@ -181,6 +183,7 @@ pub struct Racing {
     best_progress_m: f64,
     advanced_s: f64,
     started_s: f64,
+    last_stamp_s: f64,
     filter: SafetyFilter,
     correction: Option<Vec<f32>>,
     past: ScanHistory,
@@ -199,6 +202,7 @@ impl Racing {
             best_progress_m: 0.0,
             advanced_s: 0.0,
             started_s: 0.0,
+            last_stamp_s: 0.0,
             filter: SafetyFilter::new(
                 cfg.common.safety_filter,
                 cfg.common.action_mapping == crate::task::ActionMapping::ScaledReverse,
@@ -247,6 +251,7 @@ impl Task for Racing {
         self.best_progress_m = 0.0;
         self.advanced_s = frame.stamp_s;
         self.started_s = frame.stamp_s;
+        self.last_stamp_s = frame.stamp_s;
         self.last_s = match (map.and_then(|m| m.track.as_ref()), &frame.gps) {
             (Some(t), Some(g)) => Some(t.centreline_s(g.position_m[0] as f32, g.position_m[1] as f32)),
             _ => None,
@@ -299,6 +304,10 @@ impl Task for Racing {
             if self.progress_m >= self.best_progress_m + STALL_GAIN_M {
                 self.best_progress_m = self.progress_m;
                 self.advanced_s = frame.stamp_s;
+            } else if !self.cfg.common.safety_filter.advisory
+                && matches!(self.filter.last_intervention(), Intervention::Braked | Intervention::Reversed)
+            {
+                self.advanced_s += frame.stamp_s - self.last_stamp_s;
             }
             let elapsed_s = frame.stamp_s - self.started_s;
             truncate = (rules.stall_after_s > 0.0 && frame.stamp_s - self.advanced_s > rules.stall_after_s)
@@ -307,6 +316,7 @@ impl Task for Racing {
             self.info.progress_laps = self.progress_m / lap;
             racing = Some(self.info.clone());
         }
+        self.last_stamp_s = frame.stamp_s;
         Outcome {
             terms,
             termination,
