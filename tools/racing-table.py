@@ -4,12 +4,14 @@ held-out episodes of each track, under the map-track rules (contact ends an epis
 episode 1.5 laps' time at the car's top speed from the start line.
 
     tools/racing-table.py --agvrl target/release/agvrl --policy FILE [--episodes 3]
-        [--circuits 100] [--seed 0] [--track NAME=MAP.yaml ...] [--csv-dir DIR]
+        [--circuits 100] [--seed 0] [--track NAME=MAP.yaml ...] [--set KEY=VALUE ...] [--csv-dir DIR]
 
 Rows: `circuits` (racing-circuit, one generated held-out circuit per episode, --circuits
 episodes), the oval, and every --track. Per row and driver it prints the episodes lapped
 without a crash, the crashes, the mean first lap over the lapped episodes, and the policy's
 first lap over pure pursuit's on the episodes both lapped (the mean of the per-episode ratios).
+Every --set goes to every driver: the classical racers drive the policy's car only when they get
+its settings (the generalist's braking drive: --set env_config.brake_mps2=4).
 The per-episode CSVs (`eval --episodes-csv`) stay in --csv-dir.
 """
 
@@ -29,9 +31,11 @@ RULES = [
 DRIVERS = ["policy", "pure-pursuit", "follow-the-gap"]
 
 
-def run(agvrl, driver, policy, env, track, episodes, seed, csv_path):
+def run(agvrl, driver, policy, env, track, episodes, seed, csv_path, sets):
     cmd = [agvrl, "eval", "--episodes", str(episodes), "--seed", str(seed), "--env", env]
     cmd += ["--episodes-csv", csv_path] + RULES
+    for s in sets:
+        cmd += ["--set", s]
     cmd += ["--policy", policy] if driver == "policy" else ["--racer", driver]
     if track:
         cmd += ["--track", track]
@@ -54,6 +58,7 @@ def main():
     ap.add_argument("--circuits", type=int, default=100, help="held-out generated circuits (0: no row)")
     ap.add_argument("--seed", type=int, default=0, help="seed base of the episodes")
     ap.add_argument("--track", action="append", default=[], metavar="NAME=MAP.yaml")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="to every driver")
     ap.add_argument("--csv-dir", default=None)
     args = ap.parse_args()
     out = args.csv_dir or tempfile.mkdtemp(prefix="racing-table-")
@@ -72,7 +77,7 @@ def main():
     for name, env, track, n in rows:
         got = {}
         for d in DRIVERS:
-            got[d] = run(args.agvrl, d, args.policy, env, track, n, args.seed, os.path.join(out, f"{name}-{d}.csv"))
+            got[d] = run(args.agvrl, d, args.policy, env, track, n, args.seed, os.path.join(out, f"{name}-{d}.csv"), args.set)
         for d in DRIVERS:
             eps = got[d]
             ok = [e for e in eps if lapped(e)]
