@@ -237,13 +237,15 @@ fn a_car_the_filter_holds_short_of_a_wall_is_not_stalled() {
             stall_after_s: 1.0,
             ..RacingRules::map_track()
         };
-        let mut common = agvrl_envs::task::CommonConfig::default();
-        common.safety_filter = agvrl_envs::task::SafetyFilterConfig {
-            enabled: true,
-            advisory,
+        let common = agvrl_envs::task::CommonConfig {
+            safety_filter: agvrl_envs::task::SafetyFilterConfig {
+                enabled: true,
+                advisory,
+                ..Default::default()
+            }
+            .on_drive(4.0),
             ..Default::default()
-        }
-        .on_drive(4.0);
+        };
         let limit = v.steering_limit_rad();
         let mut task = Racing::new(
             RacingConfig {
@@ -280,7 +282,12 @@ fn a_car_the_filter_holds_short_of_a_wall_is_not_stalled() {
         }
         None
     };
-    assert!(run(false).is_none(), "a car the filter holds was ended: {:?}", run(false));
+    let held = run(false);
+    assert!(held.is_none(), "a car the filter holds was ended: {held:?}");
     let (ended_s, out) = run(true).expect("driving at the wall ends the episode");
-    assert_eq!(out.termination, Some(TerminationCause::Contact), "after {ended_s} s: {out:?}");
+    assert_eq!(
+        out.termination,
+        Some(TerminationCause::Contact),
+        "after {ended_s} s: {out:?}"
+    );
 }

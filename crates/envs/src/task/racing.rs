@@ -305,7 +305,10 @@ impl Task for Racing {
                 self.best_progress_m = self.progress_m;
                 self.advanced_s = frame.stamp_s;
             } else if !self.cfg.common.safety_filter.advisory
-                && matches!(self.filter.last_intervention(), Intervention::Braked | Intervention::Reversed)
+                && matches!(
+                    self.filter.last_intervention(),
+                    Intervention::Braked | Intervention::Reversed
+                )
             {
                 self.advanced_s += frame.stamp_s - self.last_stamp_s;
             }
