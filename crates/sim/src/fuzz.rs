@@ -112,9 +112,12 @@ pub fn map_file(data: &[u8]) {
     let (Some(yaml), Some(csv)) = (take(&mut rest), take(&mut rest)) else {
         return;
     };
-    let assets = assets_dir();
-    let dir = assets.path().join("map");
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    // A map file names only its own files: an empty folder of its own, no copy of the assets.
+    let folder = tempfile::Builder::new()
+        .prefix("agvrl-fuzz-map-")
+        .tempdir()
+        .expect("temp dir");
+    let dir = folder.path();
     std::fs::write(dir.join("map.yaml"), yaml).expect("temp dir");
     if !csv.is_empty() {
         std::fs::write(dir.join("map.csv"), csv).expect("temp dir");
