@@ -1,13 +1,14 @@
 //! Passing advice: how a car closing on another should pass it with a lateral gap between the
 //! two bodies, worked out from both cars' places on the track (which the policy never sees). A
 //! race env in training reports it as the corrected action
-//! (`RaceSettings::pass_advice_margin_m`), for PPO's correction term to learn; it is never
-//! applied.
+//! (`RaceSettings::pass_advice_margin_m`), for PPO's correction term to learn; there it is
+//! never applied. A passer ([`crate::passer`]) applies it.
 //!
 //! The advice sends the car along a line beside the other car before the two bodies overlap,
-//! and where no such line fits between the walls, it follows. Once the bodies overlap it says
-//! nothing: the other car is then beside the car, out of its scan, and a policy cannot learn
-//! from advice whose reason it does not see.
+//! and where no such line fits between the walls, it follows. Once the bodies overlap the
+//! training advice says nothing: the other car is then beside the car, out of its scan, and a
+//! policy cannot learn from advice whose reason it does not see. The passer's advice
+//! ([`advise_passing`]) holds the line until the car is past.
 
 /// How far ahead the advice looks: a car ahead closer than this many seconds at the closing
 /// speed counts as about to overlap.
@@ -69,35 +70,76 @@ pub fn advise(p: &Pair, body: &Body, margin_m: f32) -> Option<Advice> {
     if p.ahead_m < body.length_m || closing < 0.05 {
         return None;
     }
-    // Centre to centre beside the other car, and the farthest a centre may stand out.
-    let apart = 2.0 * body.half_width_m + margin_m;
-    let limit = p.half_width_m - body.half_width_m - WALL_MARGIN_M;
-    let side = p.offset_m - p.other_offset_m;
-    // The side the car is on; straight behind, the one with more room.
-    let right = if side.abs() < 0.05 {
-        p.other_offset_m < 0.0
-    } else {
-        side > 0.0
-    };
-    let line = |right: bool| {
-        let to = if right {
-            p.other_offset_m + apart
+    Some(decide(p, body, &Lines::of(p, body, margin_m)))
+}
+
+/// The advice a passer applies ([`crate::passer`]): as [`advise`], and on along the passing
+/// line while the bodies overlap and until the other car's base is `hold_m` behind this car's
+/// rear, so the car does not cut back across the other car's front.
+pub fn advise_passing(p: &Pair, body: &Body, margin_m: f32, hold_m: f32) -> Option<Advice> {
+    let reach = body.length_m + HORIZON_S * p.speed_mps.max(0.0);
+    if !(p.ahead_m > -(body.length_m + hold_m) && p.ahead_m < reach) {
+        return None;
+    }
+    let lines = Lines::of(p, body, margin_m);
+    if p.ahead_m < body.length_m {
+        let limit = lines.limit.max(0.0);
+        return Some(Advice::Line(lines.near.clamp(-limit, limit)));
+    }
+    if p.speed_mps - p.other_speed_mps < 0.05 {
+        return None;
+    }
+    Some(decide(p, body, &lines))
+}
+
+/// The passing lines on either side of the other car, and the farthest a centre may stand out.
+struct Lines {
+    near: f32,
+    far: f32,
+    limit: f32,
+    side: f32,
+}
+
+impl Lines {
+    fn of(p: &Pair, body: &Body, margin_m: f32) -> Self {
+        // Centre to centre beside the other car.
+        let apart = 2.0 * body.half_width_m + margin_m;
+        let side = p.offset_m - p.other_offset_m;
+        // The side the car is on; straight behind, the one with more room.
+        let right = if side.abs() < 0.05 {
+            p.other_offset_m < 0.0
         } else {
-            p.other_offset_m - apart
+            side > 0.0
         };
-        // Already wider than that: keep the line it is on.
-        if right { to.max(p.offset_m) } else { to.min(p.offset_m) }
-    };
-    let fits = |o: f32| o.abs() <= limit;
-    let (near, far) = (line(right), line(!right));
-    if fits(near) {
-        Some(Advice::Line(near))
-    } else if fits(far) && side.abs() < 2.0 * body.half_width_m {
-        Some(Advice::Line(far))
+        let line = |right: bool| {
+            let to = if right {
+                p.other_offset_m + apart
+            } else {
+                p.other_offset_m - apart
+            };
+            // Already wider than that: keep the line it is on.
+            if right { to.max(p.offset_m) } else { to.min(p.offset_m) }
+        };
+        Self {
+            near: line(right),
+            far: line(!right),
+            limit: p.half_width_m - body.half_width_m - WALL_MARGIN_M,
+            side,
+        }
+    }
+}
+
+/// The near line where it fits, else the far one from straight behind, else following.
+fn decide(p: &Pair, body: &Body, l: &Lines) -> Advice {
+    let fits = |o: f32| o.abs() <= l.limit;
+    if fits(l.near) {
+        Advice::Line(l.near)
+    } else if fits(l.far) && l.side.abs() < 2.0 * body.half_width_m {
+        Advice::Line(l.far)
     } else {
         let clear = p.ahead_m - body.length_m;
         let v = p.other_speed_mps + FOLLOW_GAIN_PER_S * (clear - FOLLOW_GAP_M);
-        Some(Advice::Follow(v.clamp(0.0, p.speed_mps)))
+        Advice::Follow(v.clamp(0.0, p.speed_mps))
     }
 }
 
@@ -173,5 +215,32 @@ mod tests {
             ..pair(1.0, 0.0, 0.0)
         };
         assert_eq!(advise(&faster, &BODY, m), None);
+    }
+
+    /// The passer's advice goes on beside the other car and past it, on the side the car is
+    /// on and inside the walls, until the other car's base is a car length and the hold behind;
+    /// before the bodies overlap it is the training advice.
+    #[test]
+    fn a_passer_holds_its_line_beside_and_just_past_the_other_car() {
+        let (m, hold) = (0.25, 0.3);
+        for ahead in [0.3, 0.0, -0.85] {
+            assert_eq!(
+                advise_passing(&pair(ahead, -0.5, 0.0), &BODY, m, hold),
+                Some(Advice::Line(-0.63)),
+                "{ahead} m ahead"
+            );
+        }
+        assert_eq!(advise_passing(&pair(-0.95, -0.5, 0.0), &BODY, m, hold), None);
+        let narrow = Pair {
+            half_width_m: 0.75,
+            ..pair(0.2, -0.3, 0.0)
+        };
+        let Some(Advice::Line(o)) = advise_passing(&narrow, &BODY, m, hold) else {
+            panic!("a line expected")
+        };
+        assert!((o + 0.46).abs() < 1e-6, "inside the walls: {o}");
+        for p in [pair(1.0, -0.1, 0.2), pair(1.0, 0.3, 0.3), pair(3.0, 0.0, 0.0)] {
+            assert_eq!(advise_passing(&p, &BODY, m, hold), advise(&p, &BODY, m), "{p:?}");
+        }
     }
 }

@@ -256,6 +256,15 @@ impl Track {
         }
     }
 
+    /// Signed distance from the centre line, metres, positive on the right of the racing
+    /// direction on every track (the oval is raced clockwise: its right is inwards).
+    pub fn offset_right_m(&self, x: f32, y: f32) -> f32 {
+        match self {
+            Self::Oval(t) => -t.lateral_offset_m(x, y),
+            Self::Path(t) => t.lateral_offset_m(x, y),
+        }
+    }
+
     /// Distance from the centre-line point at arc length `s` to the nearest wall, metres: the
     /// oval's half lane, `(outer - inner radius) / 2`; a centre line's where the map measured it
     /// (`SimVehicle` does), else None.
