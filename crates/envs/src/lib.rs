@@ -19,6 +19,7 @@ pub mod check;
 pub mod drivers;
 pub mod heldout;
 pub mod pass_advice;
+pub mod passer;
 pub mod pendulum;
 pub mod race_env;
 pub mod race_figures;

@@ -8,6 +8,7 @@ use crate::api::{
     BoxSpace, Control, EnvError, EpisodeSummary, Info, MapInfo, MultiEnv, MultiStep, RaceCarInfo, RaceSummary,
     RacingInfo, RewardTerms, SensorFrame, Step, Track, validate_action,
 };
+use crate::passer::{PasserSource, ScanTracker};
 use crate::race_figures::{CarAt, PassBook};
 use crate::sim_vehicle::{Randomisation, map_of};
 use crate::task::Task;
@@ -66,6 +67,16 @@ pub struct RaceSettings {
     /// written, so settings saved before it read and write the same).
     #[serde(skip_serializing_if = "is_off")]
     pub pass_advice_margin_m: f32,
+    /// A passer ([`crate::passer`]) drives each policy-driven car's passes, in front of its
+    /// safety filter, from the other car's place in the car's scan (`scan`) or in the
+    /// simulator (`truth`). `off`: the policy drives every step (and not written, so settings
+    /// saved before it read and write the same).
+    #[serde(skip_serializing_if = "passer_off")]
+    pub passer: PasserSource,
+}
+
+fn passer_off(v: &PasserSource) -> bool {
+    *v == PasserSource::Off
 }
 
 fn is_off(v: &f32) -> bool {
@@ -88,6 +99,7 @@ impl Default for RaceSettings {
             start_behind_m: 2.0,
             critic_sees_opponents: false,
             pass_advice_margin_m: 0.0,
+            passer: PasserSource::Off,
         }
     }
 }
@@ -196,6 +208,9 @@ struct Racer {
     len: u64,
 }
 
+/// How far down the track the training advice's line is pursued, metres.
+const TRAINING_LOOKAHEAD_M: f32 = 0.6;
+
 /// Several cars racing on one track.
 pub struct RaceEnv {
     sim: Sim,
@@ -224,6 +239,8 @@ pub struct RaceEnv {
     body_x_m: (f32, f32),
     /// Half the body's width, metres (the passing advice's gap).
     body_half_width_m: f32,
+    /// Each car's passer's view of the car ahead in its scan.
+    trackers: Vec<ScanTracker>,
     steps: u64,
     ready: bool,
 }
@@ -278,6 +295,7 @@ impl RaceEnv {
             end_below_m,
             body_x_m,
             body_half_width_m,
+            trackers: vec![ScanTracker::default(); n],
             steps: 0,
             ready: false,
         })
@@ -415,12 +433,63 @@ impl RaceEnv {
     /// The control [`crate::pass_advice`] asks car `i` for instead of `control`, against the
     /// running car nearest ahead of it along the track; None when it asks nothing.
     fn pass_advice(&self, i: usize, control: Control, limit: f64) -> Option<Control> {
-        use crate::pass_advice::{Advice, Body, Pair, advise};
+        let (pair, _) = self.pair_ahead(i, 0.0)?;
+        let advice = crate::pass_advice::advise(&pair, &self.body(), self.settings.pass_advice_margin_m)?;
+        Some(self.advised_control(i, advice, control, limit, TRAINING_LOOKAHEAD_M))
+    }
+
+    /// Car `i`'s passer's control instead of `control` (see [`crate::passer`]); None when it
+    /// leaves the policy to drive.
+    fn passer_control(&mut self, i: usize, control: Control, limit: f64) -> Option<Control> {
+        use crate::passer::{HOLD_M, LOOKAHEAD_M, MARGIN_M, drifted_offset};
+        let body = self.body();
+        let behind_m = body.length_m + HOLD_M;
+        let (mut pair, drift_mps) = match self.settings.passer {
+            PasserSource::Off => return None,
+            PasserSource::Truth => self.pair_ahead(i, -behind_m)?,
+            PasserSource::Scan => {
+                let p = self.sim.car(i).pose2();
+                let speed = self.sim.car(i).forward_speed_mps();
+                let seen = self.trackers[i].update(
+                    &self.track,
+                    p,
+                    speed,
+                    self.frames[i].scan.as_ref(),
+                    self.sim.time_s(),
+                    behind_m,
+                )?;
+                let s = self.track.centreline_s(p.x_m, p.y_m);
+                let pair = crate::pass_advice::Pair {
+                    ahead_m: seen.ahead_m,
+                    offset_m: self.track.offset_right_m(p.x_m, p.y_m),
+                    other_offset_m: seen.offset_m,
+                    speed_mps: speed,
+                    other_speed_mps: seen.speed_mps,
+                    half_width_m: self.track.clearance_at_m(s)?,
+                };
+                (pair, seen.drift_mps)
+            }
+        };
+        pair.other_offset_m = drifted_offset(&pair, drift_mps, &body);
+        let advice = crate::pass_advice::advise_passing(&pair, &body, MARGIN_M, HOLD_M)?;
+        Some(self.advised_control(i, advice, control, limit, LOOKAHEAD_M))
+    }
+
+    /// Both cars' bodies, as the passing advice sees them.
+    fn body(&self) -> crate::pass_advice::Body {
+        crate::pass_advice::Body {
+            length_m: self.body_x_m.1 - self.body_x_m.0,
+            half_width_m: self.body_half_width_m,
+        }
+    }
+
+    /// Car `i` and the running car nearest ahead of it along the track (at most `-min_ahead_m`
+    /// behind), from the simulator, with that car's drift across the track, m/s.
+    fn pair_ahead(&self, i: usize, min_ahead_m: f32) -> Option<(crate::pass_advice::Pair, f32)> {
         let p = self.sim.car(i).pose2();
         let lap = self.track.lap_length_m();
         let s = self.track.centreline_s(p.x_m, p.y_m);
         let half_width_m = self.track.clearance_at_m(s)?;
-        let speed = self.sim.car(i).forward_speed_mps();
         let (ahead_m, j) = (0..self.racers.len())
             .filter(|&j| j != i && !self.racers[j].crashed)
             .map(|j| {
@@ -428,29 +497,42 @@ impl RaceEnv {
                 let d = (self.track.centreline_s(q.x_m, q.y_m) - s).rem_euclid(lap);
                 (if d > 0.5 * lap { d - lap } else { d }, j)
             })
-            .filter(|(d, _)| *d > 0.0)
+            .filter(|(d, _)| *d > min_ahead_m)
             .min_by(|a, b| a.0.total_cmp(&b.0))?;
         let q = self.sim.car(j).pose2();
-        let pair = Pair {
+        let other_speed_mps = self.sim.car(j).forward_speed_mps();
+        let (_, [dx, dy]) = self.track.centreline_at(self.track.centreline_s(q.x_m, q.y_m));
+        // Offsets grow to the right; a heading left of the track's shrinks them.
+        let drift_mps = -other_speed_mps * (q.yaw_rad - dy.atan2(dx)).sin();
+        let pair = crate::pass_advice::Pair {
             ahead_m,
-            offset_m: self.track.lateral_offset_m(p.x_m, p.y_m),
-            other_offset_m: self.track.lateral_offset_m(q.x_m, q.y_m),
-            speed_mps: speed,
-            other_speed_mps: self.sim.car(j).forward_speed_mps(),
+            offset_m: self.track.offset_right_m(p.x_m, p.y_m),
+            other_offset_m: self.track.offset_right_m(q.x_m, q.y_m),
+            speed_mps: self.sim.car(i).forward_speed_mps(),
+            other_speed_mps,
             half_width_m,
         };
-        let body = Body {
-            length_m: self.body_x_m.1 - self.body_x_m.0,
-            half_width_m: self.body_half_width_m,
-        };
-        let advice = advise(&pair, &body, self.settings.pass_advice_margin_m)?;
+        Some((pair, drift_mps))
+    }
+
+    /// `control` with `advice` applied: steering by pure pursuit of the advised line
+    /// `lookahead_m` down the track, or the throttle capped to follow.
+    fn advised_control(
+        &self,
+        i: usize,
+        advice: crate::pass_advice::Advice,
+        control: Control,
+        limit: f64,
+        lookahead_m: f32,
+    ) -> Control {
+        use crate::pass_advice::Advice;
+        let p = self.sim.car(i).pose2();
         // Only on an advised step: building the limits walks the car's wheels.
         let car = crate::drivers::CarLimits::of(self.sim.vehicle(), 0.0);
-        Some(match advice {
+        match advice {
             Advice::Line(offset_m) => {
-                // Pure pursuit of the point on that line a lookahead down the track.
-                const LOOKAHEAD_M: f32 = 0.6;
-                let ([cx, cy], [dx, dy]) = self.track.centreline_at(s + LOOKAHEAD_M);
+                let s = self.track.centreline_s(p.x_m, p.y_m);
+                let ([cx, cy], [dx, dy]) = self.track.centreline_at(s + lookahead_m);
                 let (tx, ty) = (cx + offset_m * dy, cy - offset_m * dx);
                 let (sn, cs) = p.yaw_rad.sin_cos();
                 let rear = car.rear_axle_x_m as f32;
@@ -463,13 +545,16 @@ impl RaceEnv {
                     ..control
                 }
             }
-            Advice::Follow(v) => Control {
-                throttle: control
-                    .throttle
-                    .min(car.throttle(f64::from(v), Some(f64::from(speed)), 1.0)),
-                ..control
-            },
-        })
+            Advice::Follow(v) => {
+                let speed = self.sim.car(i).forward_speed_mps();
+                Control {
+                    throttle: control
+                        .throttle
+                        .min(car.throttle(f64::from(v), Some(f64::from(speed)), 1.0)),
+                    ..control
+                }
+            }
+        }
     }
 
     fn positions(&self) -> Vec<usize> {
@@ -648,6 +733,7 @@ impl MultiEnv for RaceEnv {
             r.distance_m = r.offset_m;
         }
         self.book = PassBook::new(n);
+        self.trackers.iter_mut().for_each(ScanTracker::reset);
         self.steps = 0;
         self.ready = true;
         Ok(obs)
@@ -678,7 +764,10 @@ impl RaceEnv {
         let limit = self.sim.vehicle().spec.steering.max_rad;
         let mut controls = vec![Control::default(); n];
         let mut corrected = vec![None; n];
-        for i in (0..n).filter(|&i| !self.racers[i].done) {
+        for i in 0..n {
+            if self.racers[i].done {
+                continue;
+            }
             let a = match inputs[i] {
                 CarInput::Action(a) => a,
                 CarInput::Control(c) => {
@@ -698,6 +787,14 @@ impl RaceEnv {
             })?;
             let mut a = a.to_vec();
             space.clamp(&mut a);
+            if self.settings.passer != PasserSource::Off
+                && let Some(proposed) = self.tasks[i].proposed(&a, limit)
+                && let Some(c) = self.passer_control(i, proposed, limit)
+                && let Some(b) = self.tasks[i].action_of(c, limit)
+            {
+                a = b;
+                space.clamp(&mut a);
+            }
             controls[i] = self.tasks[i].control(&a, limit, &self.frames[i]);
             corrected[i] = self.tasks[i].corrected_action();
             if corrected[i].is_none() && self.settings.pass_advice_margin_m > 0.0 {

@@ -635,3 +635,108 @@ fn passing_advice_steers_a_closing_car_away_from_the_one_ahead_and_is_never_appl
         "steer left, away from the car ahead: {a:?} -> {c:?}"
     );
 }
+
+/// A passer takes a car sent along the line of a slower one ahead around it, from the
+/// simulator's places or from its own scan, and holds the line until past: no contact, a pass.
+/// Without it the same actions run into the car ahead.
+#[test]
+fn a_passer_takes_a_car_sent_at_a_slower_one_around_it() {
+    use agvrl_envs::passer::PasserSource;
+    let run = |passer: PasserSource| {
+        let cfg = EnvConfig {
+            track: Some(track("sweepers")),
+            race: Some(RaceSettings {
+                cars: 2,
+                start_behind_share: 1.0,
+                passer,
+                ..RaceSettings::default()
+            }),
+            max_steps: 450,
+            racing: Some(agvrl_envs::task::RacingRulesSetting {
+                end_below_m: Some(0.0),
+                ..Default::default()
+            }),
+            ..EnvConfig::default()
+        };
+        let mut env = make_race("racing-duel", &cfg).unwrap();
+        env.reset(Some(0)).unwrap();
+        loop {
+            // Car 0, 2 m behind, at full throttle after car 1 at half throttle, both along the
+            // centre line.
+            let a = vec![
+                vec![1.0, steer_along(&env, 0, 0.0)],
+                vec![0.5, steer_along(&env, 1, 0.0)],
+            ];
+            if let Some(s) = env.step(&a).unwrap().summary {
+                return s;
+            }
+        }
+    };
+    let plain = run(PasserSource::Off);
+    assert!(plain.contacts[0] >= 1 && plain.at_fault[0] >= 1, "{plain:?}");
+    for source in [PasserSource::Truth, PasserSource::Scan] {
+        let s = run(source);
+        assert_eq!(s.contacts, vec![0, 0], "{source:?}: {s:?}");
+        assert_eq!((s.encounters[0], s.passes[0]), (1, 1), "{source:?}: {s:?}");
+        assert!(!s.crashed[0], "{source:?}: {s:?}");
+    }
+}
+
+/// The passer's tracker finds the car ahead in the scan of the car behind, and times it:
+/// its place along the track within 0.1 m, its offset within 0.1 m, its speed along the
+/// centre line within 0.1 m/s.
+#[test]
+fn a_passers_tracker_follows_the_car_ahead_in_the_scan() {
+    use agvrl_envs::passer::ScanTracker;
+    let mut env = race_behind(Some("sweepers"), 300);
+    env.reset(Some(1)).unwrap();
+    let mut tracker = ScanTracker::default();
+    let mut checked = 0;
+    // Car 1's place along the centre line, and when.
+    let mut places: Vec<(f64, f32)> = Vec::new();
+    for k in 0..300 {
+        // Car 1 0.3 m left of the centre line, car 0 on it, both at half throttle; checked
+        // from 5 s on, at a steady speed.
+        let a = vec![
+            vec![0.5, steer_along(&env, 0, 0.0)],
+            vec![0.5, steer_along(&env, 1, 0.3)],
+        ];
+        env.step(&a).unwrap();
+        let t = env.track();
+        let (p, q) = (env.sim().car(0).pose2(), env.sim().car(1).pose2());
+        let seen = tracker.update(
+            t,
+            p,
+            env.sim().car(0).forward_speed_mps(),
+            env.frame_of(0).scan.as_ref(),
+            env.sim().time_s(),
+            1.0,
+        );
+        places.push((env.sim().time_s(), t.centreline_s(q.x_m, q.y_m)));
+        if k < 150 {
+            continue;
+        }
+        let seen = seen.expect("the car ahead is in the scan");
+        let ahead = t.centreline_s(q.x_m, q.y_m) - t.centreline_s(p.x_m, p.y_m);
+        let offset = t.offset_right_m(q.x_m, q.y_m);
+        // Its speed along the centre line over the last half second.
+        let (t0, s0) = places[places.len() - 16];
+        let (t1, s1) = places[places.len() - 1];
+        let lap = t.lap_length_m();
+        let speed = (s1 - s0).rem_euclid(lap) / (t1 - t0) as f32;
+        assert!(
+            (seen.ahead_m - ahead).abs() < 0.1,
+            "step {k}: {seen:?} against {ahead} m ahead"
+        );
+        assert!(
+            (seen.offset_m - offset).abs() < 0.1,
+            "step {k}: {seen:?} against offset {offset}"
+        );
+        assert!(
+            (seen.speed_mps - speed).abs() < 0.1,
+            "step {k}: {seen:?} against {speed} m/s"
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, 150);
+}

@@ -59,6 +59,11 @@ pub trait Task: Send {
     fn corrected_action(&self) -> Option<Vec<f32>> {
         None
     }
+    /// The control `action` asks for before any safety filter, where the task can say (what a
+    /// race's passer starts from).
+    fn proposed(&self, _action: &[f32], _steering_limit_rad: f64) -> Option<Control> {
+        None
+    }
     /// The action that maps to `control`, where the task can say (advice from outside the
     /// task, e.g. a race's passing advice, is reported as an action).
     fn action_of(&self, _control: Control, _steering_limit_rad: f64) -> Option<Vec<f32>> {
@@ -91,6 +96,9 @@ impl<T: Task + ?Sized> Task for Box<T> {
     }
     fn action_of(&self, control: Control, steering_limit_rad: f64) -> Option<Vec<f32>> {
         (**self).action_of(control, steering_limit_rad)
+    }
+    fn proposed(&self, action: &[f32], steering_limit_rad: f64) -> Option<Control> {
+        (**self).proposed(action, steering_limit_rad)
     }
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         (**self).reset(frame, map)

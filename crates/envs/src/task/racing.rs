@@ -241,6 +241,10 @@ impl Task for Racing {
         Some(self.cfg.common.action_of(control, steering_limit_rad))
     }
 
+    fn proposed(&self, action: &[f32], steering_limit_rad: f64) -> Option<Control> {
+        Some(self.cfg.common.control(action, steering_limit_rad))
+    }
+
     fn reset(&mut self, frame: &SensorFrame, map: Option<&MapInfo>) {
         self.filter.reset();
         self.correction = None;

@@ -1,0 +1,271 @@
+//! The passer: drives the passes of a policy-driven car in a race, in front of the safety
+//! filter. It finds the car ahead, places a line beside it ([`crate::pass_advice`]), allowing
+//! for where that car drifts across the track, steers the car along the line by pure pursuit
+//! and holds it there until the car is past. Elsewhere the policy drives.
+//!
+//! The other car's place comes from the simulator ([`PasserSource::Truth`], a ceiling) or from
+//! the car's own scan against the track ([`PasserSource::Scan`]): what a car that runs pure
+//! pursuit has, its pose on the map, the track's centre line and widths, and its scan.
+
+use crate::api::Track;
+use agvrl_sim::PlanarPose;
+use agvrl_sim::msg::LaserScan;
+use serde::{Deserialize, Serialize};
+
+/// Where a passer learns the other car's place.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PasserSource {
+    /// No passer: the policy drives every step.
+    #[default]
+    Off,
+    /// The car's scan against the track map.
+    Scan,
+    /// The simulator's places of both cars.
+    Truth,
+}
+
+/// The lateral gap a passing line keeps between the two bodies, metres.
+pub const MARGIN_M: f32 = 0.25;
+/// How far behind this car's rear the other car's base must be before the line is let go,
+/// metres.
+pub const HOLD_M: f32 = 0.3;
+/// The longest the other car's drift is carried forward, seconds.
+pub const DRIFT_HORIZON_S: f32 = 1.0;
+/// How far down the track the line is pursued, metres (a shorter lookahead turns hard and
+/// overshoots the line).
+pub const LOOKAHEAD_M: f32 = 1.5;
+/// How far ahead along the track the scan looks for a car, metres.
+pub const SEE_AHEAD_M: f32 = 8.0;
+/// From the face of a car that the scan plane meets at its rear to its base, metres
+/// (XTENTH-CAR's LiDAR stack).
+pub const REAR_TO_BASE_M: f32 = 0.07;
+/// The window the other car's speed and drift are fitted over, seconds.
+pub const FIT_WINDOW_S: f64 = 0.5;
+/// How long a car out of the scan (beside this one) is predicted on, seconds.
+pub const KEEP_S: f64 = 10.0;
+/// Scan points nearer a wall than this are the wall, metres.
+const WALL_BAND_M: f32 = 0.05;
+/// A car's scan points lie no further apart than this, metres.
+const CLUSTER_GAP_M: f32 = 0.25;
+/// Sightings nearer than this show only the car's side: they place it but do not time it,
+/// metres.
+const TIMED_FROM_M: f32 = 0.7;
+
+/// The other car as a passer knows it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Other {
+    /// Its base ahead of this car's along the centre line, metres.
+    pub ahead_m: f32,
+    /// Its offset from the centre line, metres, positive on the right.
+    pub offset_m: f32,
+    /// Its speed along the track, m/s.
+    pub speed_mps: f32,
+    /// How fast its offset grows, m/s.
+    pub drift_mps: f32,
+}
+
+/// The nearest car ahead in `scan`, as (its base ahead of this car's along the centre line,
+/// its offset, the along-track distances and offsets of its points); None when none shows.
+///
+/// Scan points inside the walls and up to [`SEE_AHEAD_M`] ahead, in runs of neighbouring rays,
+/// are a car when a run holds two points or more and does not touch the scan's edge (where the
+/// car may go on out of sight).
+pub fn detect(track: &Track, pose: PlanarPose, scan: &LaserScan) -> Option<(f32, f32)> {
+    let lap = track.lap_length_m();
+    let s0 = track.centreline_s(pose.x_m, pose.y_m);
+    // (ray, along, offset, point)
+    let mut pts: Vec<(usize, f32, f32, [f32; 3])> = Vec::new();
+    for k in 0..scan.ranges.len() {
+        let Some(&w) = scan.points_w.get(k) else { break };
+        if !scan.hit_at(k) {
+            continue;
+        }
+        let s = track.centreline_s(w[0], w[1]);
+        let Some(half) = track.clearance_at_m(s) else { continue };
+        let off = track.offset_right_m(w[0], w[1]);
+        if off.abs() > half - WALL_BAND_M {
+            continue;
+        }
+        let d = wrap(s - s0, lap);
+        if d > 0.0 && d <= SEE_AHEAD_M {
+            pts.push((k, d, off, w));
+        }
+    }
+    let mut best: Option<(f32, f32)> = None;
+    let mut start = 0;
+    while start < pts.len() {
+        let mut end = start + 1;
+        while end < pts.len() {
+            let (a, b) = (pts[end - 1].3, pts[end].3);
+            if pts[end].0 - pts[end - 1].0 > 2 || (a[0] - b[0]).hypot(a[1] - b[1]) > CLUSTER_GAP_M {
+                break;
+            }
+            end += 1;
+        }
+        let run = &pts[start..end];
+        let at_edge = run[0].0 == 0 || run[run.len() - 1].0 + 1 >= scan.ranges.len();
+        if run.len() >= 2 && !at_edge {
+            let nearest = run.iter().map(|q| q.1).fold(f32::MAX, f32::min);
+            let offset = run.iter().map(|q| q.2).sum::<f32>() / run.len() as f32;
+            let base = nearest + REAR_TO_BASE_M;
+            if best.is_none_or(|b| base < b.0) {
+                best = Some((base, offset));
+            }
+        }
+        start = end;
+    }
+    best
+}
+
+/// Follows the car ahead through this car's scans: its place along the track, unwrapped, its
+/// offset, and its speed and drift fitted over the last [`FIT_WINDOW_S`] of sightings. Out of
+/// the scan (beside this car) its place is predicted at that speed.
+#[derive(Clone, Debug, Default)]
+pub struct ScanTracker {
+    /// This car's centre-line place: (as the track gives it, unwrapped).
+    own: Option<(f32, f64)>,
+    /// (unwrapped place, offset, speed, drift, last seen, last updated)
+    other: Option<(f64, f32, f32, f32, f64, f64)>,
+    /// Timed sightings: (time, unwrapped place, offset).
+    sightings: Vec<(f64, f64, f32)>,
+}
+
+impl ScanTracker {
+    /// Forget everything (a new race).
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+
+    /// Take in a scan at `now_s`, this car at `pose` running at `speed_mps`, and say where
+    /// the other car is; None when no car is followed, or it is more than `behind_m` behind.
+    pub fn update(
+        &mut self,
+        track: &Track,
+        pose: PlanarPose,
+        speed_mps: f32,
+        scan: Option<&LaserScan>,
+        now_s: f64,
+        behind_m: f32,
+    ) -> Option<Other> {
+        let lap = track.lap_length_m();
+        let s = track.centreline_s(pose.x_m, pose.y_m);
+        let own = match self.own {
+            Some((prev, at)) => at + f64::from(wrap(s - prev, lap)),
+            None => f64::from(s),
+        };
+        self.own = Some((s, own));
+        match scan.and_then(|scan| detect(track, pose, scan)) {
+            Some((ahead, offset)) => {
+                let at = own + f64::from(ahead);
+                if ahead > TIMED_FROM_M {
+                    self.sightings.push((now_s, at, offset));
+                }
+                self.sightings.retain(|h| now_s - h.0 <= FIT_WINDOW_S);
+                let (speed, drift) = match fit(&self.sightings) {
+                    Some((speed, drift)) => (speed.clamp(0.0, 3.0) as f32, drift.clamp(-1.5, 1.5) as f32),
+                    // Not yet timed: taken at this car's speed, so no pass is planned yet.
+                    None => self.other.map_or((speed_mps, 0.0), |o| (o.2, o.3)),
+                };
+                self.other = Some((at, offset, speed, drift, now_s, now_s));
+            }
+            None => {
+                let (at, offset, speed, drift, seen, last) = self.other?;
+                if now_s - seen > KEEP_S {
+                    self.other = None;
+                    return None;
+                }
+                let at = at + f64::from(speed) * (now_s - last);
+                self.other = Some((at, offset, speed, drift, seen, now_s));
+            }
+        }
+        let (at, offset, speed, drift, _, _) = self.other?;
+        let ahead = (at - own) as f32;
+        if ahead < -behind_m || ahead > SEE_AHEAD_M {
+            self.other = None;
+            return None;
+        }
+        Some(Other {
+            ahead_m: ahead,
+            offset_m: offset,
+            speed_mps: speed,
+            drift_mps: drift,
+        })
+    }
+}
+
+/// The slopes of place and offset against time, over at least 0.15 s of sightings.
+fn fit(h: &[(f64, f64, f32)]) -> Option<(f64, f64)> {
+    let span = h.last()?.0 - h.first()?.0;
+    if span < 0.15 {
+        return None;
+    }
+    let n = h.len() as f64;
+    let mt = h.iter().map(|x| x.0).sum::<f64>() / n;
+    let ms = h.iter().map(|x| x.1).sum::<f64>() / n;
+    let mo = h.iter().map(|x| f64::from(x.2)).sum::<f64>() / n;
+    let var = h.iter().map(|x| (x.0 - mt).powi(2)).sum::<f64>().max(1e-9);
+    let speed = h.iter().map(|x| (x.0 - mt) * (x.1 - ms)).sum::<f64>() / var;
+    let drift = h.iter().map(|x| (x.0 - mt) * (f64::from(x.2) - mo)).sum::<f64>() / var;
+    Some((speed, drift))
+}
+
+/// Where the other car will stand across the track by the time this car is 0.5 m clear of it
+/// (at most [`DRIFT_HORIZON_S`] ahead), when it drifts towards this car's side; where it is
+/// otherwise. Kept inside the walls.
+pub fn drifted_offset(p: &crate::pass_advice::Pair, drift_mps: f32, body: &crate::pass_advice::Body) -> f32 {
+    let closing = (p.speed_mps - p.other_speed_mps).max(0.05);
+    let t = ((p.ahead_m + body.length_m + 0.5) / closing).clamp(0.0, DRIFT_HORIZON_S);
+    let towards = drift_mps * (p.offset_m - p.other_offset_m) > 0.0;
+    if !towards {
+        return p.other_offset_m;
+    }
+    let limit = (p.half_width_m - body.half_width_m).max(0.0);
+    (p.other_offset_m + drift_mps * t).clamp(-limit, limit)
+}
+
+/// An along-track difference on a lap of `lap` metres, wrapped into [-lap/2, lap/2).
+fn wrap(d: f32, lap: f32) -> f32 {
+    let d = d.rem_euclid(lap);
+    if d >= 0.5 * lap { d - lap } else { d }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pass_advice::{Body, Pair};
+
+    const BODY: Body = Body {
+        length_m: 0.6,
+        half_width_m: 0.13,
+    };
+
+    /// 1 m behind, closing at 0.5 m/s: clear of the other car in 4.2 s, so its drift is carried
+    /// the full second, and only when it heads towards this car's side; never into a wall.
+    #[test]
+    fn only_a_drift_towards_the_car_moves_the_other_cars_place() {
+        let p = Pair {
+            ahead_m: 1.0,
+            offset_m: -0.4,
+            other_offset_m: 0.0,
+            speed_mps: 1.8,
+            other_speed_mps: 1.3,
+            half_width_m: 1.0,
+        };
+        assert!((drifted_offset(&p, -0.3, &BODY) + 0.3).abs() < 1e-6);
+        assert_eq!(drifted_offset(&p, 0.3, &BODY), 0.0);
+        assert!((drifted_offset(&p, -1.5, &BODY) + 0.87).abs() < 1e-6);
+        // Nearly clear: 0.1 s to go.
+        let late = Pair { ahead_m: -1.05, ..p };
+        assert!((drifted_offset(&late, -0.3, &BODY) + 0.03).abs() < 1e-5);
+    }
+
+    /// Differences along the lap wrap to the nearer way round.
+    #[test]
+    fn along_track_differences_wrap_to_half_a_lap() {
+        assert_eq!(wrap(1.0, 10.0), 1.0);
+        assert_eq!(wrap(9.0, 10.0), -1.0);
+        assert_eq!(wrap(-9.5, 10.0), 0.5);
+        assert_eq!(wrap(5.0, 10.0), -5.0);
+    }
+}
