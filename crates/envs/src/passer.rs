@@ -78,12 +78,13 @@ pub fn detect(track: &Track, pose: PlanarPose, scan: &LaserScan) -> Option<(f32,
     let mut pts: Vec<(usize, f32, f32, [f32; 3])> = Vec::new();
     for k in 0..scan.ranges.len() {
         let Some(&w) = scan.points_w.get(k) else { break };
-        if !scan.hit_at(k) {
+        // Beyond this range no point lies within SEE_AHEAD_M along the track: tracks are
+        // narrower than 4 m.
+        if !scan.hit_at(k) || scan.ranges[k] > SEE_AHEAD_M + 2.0 {
             continue;
         }
-        let s = track.centreline_s(w[0], w[1]);
+        let (s, off) = track.place_m(w[0], w[1]);
         let Some(half) = track.clearance_at_m(s) else { continue };
-        let off = track.offset_right_m(w[0], w[1]);
         if off.abs() > half - WALL_BAND_M {
             continue;
         }

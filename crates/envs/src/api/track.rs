@@ -191,6 +191,13 @@ impl PathTrack {
         s.rem_euclid(self.lap_length_m())
     }
 
+    /// [`Self::centreline_s`] and [`Self::lateral_offset_m`] of (x, y) from one search.
+    pub fn place(&self, x: f32, y: f32) -> (f32, f32) {
+        let (i, t, d) = self.nearest(x, y);
+        let s = self.cum_s[i] + t * (self.cum_s[i + 1] - self.cum_s[i]);
+        (s.rem_euclid(self.lap_length_m()), d)
+    }
+
     /// The centre-line point at arc length `s` and the racing direction there (unit x, y).
     pub fn centreline_at(&self, s: f32) -> ([f32; 2], [f32; 2]) {
         let n = self.points.len();
@@ -265,6 +272,15 @@ impl Track {
         }
     }
 
+    /// [`Self::centreline_s`] and [`Self::offset_right_m`] of (x, y), a map-file track's from
+    /// one search of its centre line.
+    pub fn place_m(&self, x: f32, y: f32) -> (f32, f32) {
+        match self {
+            Self::Oval(t) => (t.centreline_s(x, y), -t.lateral_offset_m(x, y)),
+            Self::Path(t) => t.place(x, y),
+        }
+    }
+
     /// Distance from the centre-line point at arc length `s` to the nearest wall, metres: the
     /// oval's half lane, `(outer - inner radius) / 2`; a centre line's where the map measured it
     /// (`SimVehicle` does), else None.
@@ -272,6 +288,39 @@ impl Track {
         match self {
             Self::Oval(t) => Some(0.5 * (t.outer_radius_m - t.inner_radius_m)),
             Self::Path(t) => t.clearance_at_m(s),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One search gives what the two separate ones give, on the oval and on a centre line, at
+    /// points inside, on and outside the track.
+    #[test]
+    fn a_place_is_its_arc_length_and_right_hand_offset() {
+        let oval = Track::Oval(OvalTrack {
+            straight_m: 4.0,
+            inner_radius_m: 1.5,
+            outer_radius_m: 3.5,
+        });
+        let path = Track::Path(PathTrack::new(vec![
+            [0.0, 0.0],
+            [6.0, 0.0],
+            [8.0, 3.0],
+            [5.0, 6.0],
+            [-1.0, 4.0],
+        ]));
+        for track in [oval, path] {
+            for i in 0..21 {
+                for j in 0..21 {
+                    let (x, y) = (-4.0 + 0.6 * i as f32, -5.0 + 0.6 * j as f32);
+                    let (s, o) = track.place_m(x, y);
+                    assert!((s - track.centreline_s(x, y)).abs() < 1e-4, "{track:?} ({x}, {y})");
+                    assert!((o - track.offset_right_m(x, y)).abs() < 1e-4, "{track:?} ({x}, {y})");
+                }
+            }
         }
     }
 }
