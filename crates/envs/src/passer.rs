@@ -83,7 +83,7 @@ pub fn detect(track: &Track, pose: PlanarPose, scan: &LaserScan) -> Option<(f32,
         if !scan.hit_at(k) || scan.ranges[k] > SEE_AHEAD_M + 2.0 {
             continue;
         }
-        let (s, off) = track.place_m(w[0], w[1]);
+        let (s, off) = track.place_near_m(w[0], w[1], s0, SEE_AHEAD_M + 4.0);
         let Some(half) = track.clearance_at_m(s) else { continue };
         if off.abs() > half - WALL_BAND_M {
             continue;

@@ -160,9 +160,14 @@ impl PathTrack {
     /// The segment nearest to (x, y): (index, fraction along it, signed distance; positive on
     /// the right of the racing direction).
     fn nearest(&self, x: f32, y: f32) -> (usize, f32, f32) {
+        self.nearest_of(0..self.points.len(), x, y)
+    }
+
+    /// [`Self::nearest`] among the segments `segments` (indices, wrapping past the last).
+    fn nearest_of(&self, segments: impl Iterator<Item = usize>, x: f32, y: f32) -> (usize, f32, f32) {
         let n = self.points.len();
         let mut best = (0, 0.0, f32::INFINITY, 0.0f32);
-        for i in 0..n {
+        for i in segments.map(|i| i % n) {
             let (a, b) = (self.points[i], self.points[(i + 1) % n]);
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
             let len2 = dx * dx + dy * dy;
@@ -193,7 +198,31 @@ impl PathTrack {
 
     /// [`Self::centreline_s`] and [`Self::lateral_offset_m`] of (x, y) from one search.
     pub fn place(&self, x: f32, y: f32) -> (f32, f32) {
-        let (i, t, d) = self.nearest(x, y);
+        self.place_of(self.nearest(x, y))
+    }
+
+    /// [`Self::place`] searching only the centre line within `window_m` of arc length `near_s`:
+    /// the place of a point the car sees from there, in the part of the track it is on.
+    pub fn place_near(&self, x: f32, y: f32, near_s: f32, window_m: f32) -> (f32, f32) {
+        let n = self.points.len();
+        let lap = self.lap_length_m();
+        if 2.0 * window_m >= lap {
+            return self.place(x, y);
+        }
+        let from_s = (near_s - window_m).rem_euclid(lap);
+        let first = self.cum_s[1..].partition_point(|&c| c <= from_s).min(n - 1);
+        // Segments until the window's far end, wrapping past the last.
+        let mut last = first;
+        let mut to_s = self.cum_s[first + 1] - from_s;
+        while to_s < 2.0 * window_m && last - first < n {
+            last += 1;
+            let k = last % n;
+            to_s += self.cum_s[k + 1] - self.cum_s[k];
+        }
+        self.place_of(self.nearest_of(first..=last, x, y))
+    }
+
+    fn place_of(&self, (i, t, d): (usize, f32, f32)) -> (f32, f32) {
         let s = self.cum_s[i] + t * (self.cum_s[i + 1] - self.cum_s[i]);
         (s.rem_euclid(self.lap_length_m()), d)
     }
@@ -281,6 +310,15 @@ impl Track {
         }
     }
 
+    /// [`Self::place_m`] searching a map-file track's centre line only within `window_m` of
+    /// arc length `near_s` ([`PathTrack::place_near`]).
+    pub fn place_near_m(&self, x: f32, y: f32, near_s: f32, window_m: f32) -> (f32, f32) {
+        match self {
+            Self::Oval(_) => self.place_m(x, y),
+            Self::Path(t) => t.place_near(x, y, near_s, window_m),
+        }
+    }
+
     /// Distance from the centre-line point at arc length `s` to the nearest wall, metres: the
     /// oval's half lane, `(outer - inner radius) / 2`; a centre line's where the map measured it
     /// (`SimVehicle` does), else None.
@@ -320,6 +358,34 @@ mod tests {
                     assert!((s - track.centreline_s(x, y)).abs() < 1e-4, "{track:?} ({x}, {y})");
                     assert!((o - track.offset_right_m(x, y)).abs() < 1e-4, "{track:?} ({x}, {y})");
                 }
+            }
+        }
+    }
+
+    /// Searched near a place, a point within the window gets the place a full search gives;
+    /// the window wraps past the centre line's first point.
+    #[test]
+    fn a_place_searched_near_the_car_is_the_same_within_its_window() {
+        let points: Vec<[f32; 2]> = (0..200)
+            .map(|k| {
+                let a = std::f32::consts::TAU * k as f32 / 200.0;
+                [20.0 * a.cos(), 12.0 * a.sin()]
+            })
+            .collect();
+        let track = Track::Path(PathTrack::new(points));
+        let lap = track.lap_length_m();
+        for k in 0..400 {
+            let s = lap * k as f32 / 400.0;
+            for (ahead, off) in [(0.0, 0.0), (3.0, 1.2), (7.5, -1.5), (-2.0, 0.7)] {
+                let ([px, py], [dx, dy]) = track.centreline_at(s + ahead);
+                let (x, y) = (px + off * dy, py - off * dx);
+                let (ws, wo) = track.place_near_m(x, y, s, 12.0);
+                let (fs, fo) = track.place_m(x, y);
+                let ds = (ws - fs).abs();
+                assert!(
+                    ds.min(lap - ds) < 1e-3 && (wo - fo).abs() < 1e-4,
+                    "s {s} +{ahead}: {ws} {wo} / {fs} {fo}"
+                );
             }
         }
     }
