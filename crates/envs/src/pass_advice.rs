@@ -70,18 +70,20 @@ pub fn advise(p: &Pair, body: &Body, margin_m: f32) -> Option<Advice> {
     if p.ahead_m < body.length_m || closing < 0.05 {
         return None;
     }
-    Some(decide(p, body, &Lines::of(p, body, margin_m)))
+    Some(decide(p, body, &Lines::of(p, body, margin_m, None)))
 }
 
 /// The advice a passer applies ([`crate::passer`]): as [`advise`], and on along the passing
 /// line while the bodies overlap and until the other car's base is `hold_m` behind this car's
-/// rear, so the car does not cut back across the other car's front.
-pub fn advise_passing(p: &Pair, body: &Body, margin_m: f32, hold_m: f32) -> Option<Advice> {
+/// rear, so the car does not cut back across the other car's front. From straight behind it
+/// passes on side `right` when given (the side of a pass under way), so a pass does not swap
+/// sides as the other car's place wavers about this car's.
+pub fn advise_passing(p: &Pair, body: &Body, margin_m: f32, hold_m: f32, right: Option<bool>) -> Option<Advice> {
     let reach = body.length_m + HORIZON_S * p.speed_mps.max(0.0);
     if !(p.ahead_m > -(body.length_m + hold_m) && p.ahead_m < reach) {
         return None;
     }
-    let lines = Lines::of(p, body, margin_m);
+    let lines = Lines::of(p, body, margin_m, right);
     if p.ahead_m < body.length_m {
         let limit = lines.limit.max(0.0);
         return Some(Advice::Line(lines.near.clamp(-limit, limit)));
@@ -101,13 +103,13 @@ struct Lines {
 }
 
 impl Lines {
-    fn of(p: &Pair, body: &Body, margin_m: f32) -> Self {
+    fn of(p: &Pair, body: &Body, margin_m: f32, kept: Option<bool>) -> Self {
         // Centre to centre beside the other car.
         let apart = 2.0 * body.half_width_m + margin_m;
         let side = p.offset_m - p.other_offset_m;
-        // The side the car is on; straight behind, the one with more room.
+        // The side the car is on; straight behind, the side kept, else the one with more room.
         let right = if side.abs() < 0.05 {
-            p.other_offset_m < 0.0
+            kept.unwrap_or(p.other_offset_m < 0.0)
         } else {
             side > 0.0
         };
@@ -225,22 +227,46 @@ mod tests {
         let (m, hold) = (0.25, 0.3);
         for ahead in [0.3, 0.0, -0.85] {
             assert_eq!(
-                advise_passing(&pair(ahead, -0.5, 0.0), &BODY, m, hold),
+                advise_passing(&pair(ahead, -0.5, 0.0), &BODY, m, hold, None),
                 Some(Advice::Line(-0.63)),
                 "{ahead} m ahead"
             );
         }
-        assert_eq!(advise_passing(&pair(-0.95, -0.5, 0.0), &BODY, m, hold), None);
+        assert_eq!(advise_passing(&pair(-0.95, -0.5, 0.0), &BODY, m, hold, None), None);
         let narrow = Pair {
             half_width_m: 0.75,
             ..pair(0.2, -0.3, 0.0)
         };
-        let Some(Advice::Line(o)) = advise_passing(&narrow, &BODY, m, hold) else {
+        let Some(Advice::Line(o)) = advise_passing(&narrow, &BODY, m, hold, None) else {
             panic!("a line expected")
         };
         assert!((o + 0.46).abs() < 1e-6, "inside the walls: {o}");
         for p in [pair(1.0, -0.1, 0.2), pair(1.0, 0.3, 0.3), pair(3.0, 0.0, 0.0)] {
-            assert_eq!(advise_passing(&p, &BODY, m, hold), advise(&p, &BODY, m), "{p:?}");
+            assert_eq!(advise_passing(&p, &BODY, m, hold, None), advise(&p, &BODY, m), "{p:?}");
         }
+    }
+
+    /// From straight behind a pass under way keeps its side while the other car's place
+    /// wavers across this car's: with the other car 1 cm to the left of it (which alone sends
+    /// the car right), the kept left side is passed on.
+    #[test]
+    fn a_pass_from_straight_behind_keeps_its_side() {
+        let (m, hold) = (0.25, 0.3);
+        let p = pair(1.0, 0.0, -0.01);
+        let Some(Advice::Line(free)) = advise_passing(&p, &BODY, m, hold, None) else {
+            panic!("a line expected")
+        };
+        assert!(free > 0.0, "{free}");
+        assert_eq!(advise_passing(&p, &BODY, m, hold, Some(true)), Some(Advice::Line(free)));
+        let Some(Advice::Line(kept)) = advise_passing(&p, &BODY, m, hold, Some(false)) else {
+            panic!("a line expected")
+        };
+        assert!((kept - (-0.01 - 0.38 - m)).abs() < 1e-6, "{kept}");
+        // Off to one side, the car passes on the side it is on.
+        let wide = pair(1.0, 0.3, 0.0);
+        assert_eq!(
+            advise_passing(&wide, &BODY, m, hold, Some(false)),
+            advise_passing(&wide, &BODY, m, hold, None)
+        );
     }
 }

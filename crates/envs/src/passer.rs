@@ -7,9 +7,11 @@
 //! the car's own scan against the track ([`PasserSource::Scan`]): what a car that runs pure
 //! pursuit has, its pose on the map, the track's centre line and widths, and its scan.
 
-use crate::api::Track;
+use crate::api::{Control, SensorFrame, Track};
+use crate::drivers::CarLimits;
+use crate::pass_advice::{Advice, Body, Pair};
 use agvrl_sim::PlanarPose;
-use agvrl_sim::msg::LaserScan;
+use agvrl_sim::msg::{LaserScan, Pose3};
 use serde::{Deserialize, Serialize};
 
 /// Where a passer learns the other car's place.
@@ -51,6 +53,226 @@ const CLUSTER_GAP_M: f32 = 0.25;
 /// Sightings nearer than this show only the car's side: they place it but do not time it,
 /// metres.
 const TIMED_FROM_M: f32 = 0.7;
+
+/// The car a passer drives, where it is and how fast it goes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OwnCar {
+    /// Its base on the map.
+    pub pose: PlanarPose,
+    /// Its forward speed, m/s.
+    pub speed_mps: f32,
+}
+
+/// A passer on one car: it follows the car ahead in the car's scans and, while a pass is on,
+/// gives the control that drives it ([`Passer::control`]).
+#[derive(Clone, Debug)]
+pub struct Passer {
+    tracker: ScanTracker,
+    body: Body,
+    limits: CarLimits,
+    /// The side of the pass under way (true: right of the other car).
+    side: Option<bool>,
+}
+
+impl Passer {
+    /// A passer on a car of `body` (both cars') driven within `limits`.
+    pub fn new(body: Body, limits: CarLimits) -> Self {
+        Self {
+            tracker: ScanTracker::default(),
+            body,
+            limits,
+            side: None,
+        }
+    }
+
+    /// A passer on a car of `model`: its body from the model's collision shapes (a car of
+    /// wheels alone: its axles), as the race env measures it.
+    pub fn for_model(model: &agvrl_sim::vehicle::VehicleModel) -> Self {
+        let (rear, front) = body_x_m(model);
+        let half_width_m = model.body_bounds_m().map_or(0.0, |(lo, hi)| 0.5 * (hi[1] - lo[1]));
+        let body = Body {
+            length_m: front - rear,
+            half_width_m,
+        };
+        Self::new(body, CarLimits::of(model, 0.0))
+    }
+
+    /// Forget the car followed and the pass under way (a new race).
+    pub fn reset(&mut self) {
+        self.tracker.reset();
+        self.side = None;
+    }
+
+    /// Both cars' body, as the passer plans with it.
+    pub fn body(&self) -> Body {
+        self.body
+    }
+
+    /// The car's limits, as the passer steers and throttles with them.
+    pub fn limits(&self) -> CarLimits {
+        self.limits
+    }
+
+    /// The control that drives `car`'s pass of the car ahead in `scan` (taken at `now_s`)
+    /// instead of `control`; None while no pass is on and the policy drives.
+    pub fn control(
+        &mut self,
+        track: &Track,
+        car: OwnCar,
+        scan: Option<&LaserScan>,
+        now_s: f64,
+        control: Control,
+        steering_limit_rad: f64,
+    ) -> Option<Control> {
+        let behind_m = self.body.length_m + HOLD_M;
+        let (pose, speed_mps) = (car.pose, car.speed_mps);
+        let Some(seen) = self.tracker.update(track, pose, speed_mps, scan, now_s, behind_m) else {
+            self.side = None;
+            return None;
+        };
+        let s = track.centreline_s(pose.x_m, pose.y_m);
+        let pair = Pair {
+            ahead_m: seen.ahead_m,
+            offset_m: track.offset_right_m(pose.x_m, pose.y_m),
+            other_offset_m: seen.offset_m,
+            speed_mps,
+            other_speed_mps: seen.speed_mps,
+            half_width_m: track.clearance_at_m(s)?,
+        };
+        self.pass(track, car, (pair, seen.drift_mps), control, steering_limit_rad)
+    }
+
+    /// The control that drives `car`'s pass of the other car of `pair`, which drifts across
+    /// the track at `drift_mps`, instead of `control`; None when the policy drives. A pass keeps
+    /// the side it started on while the other car stays straight ahead.
+    pub fn pass(
+        &mut self,
+        track: &Track,
+        car: OwnCar,
+        (mut pair, drift_mps): (Pair, f32),
+        control: Control,
+        steering_limit_rad: f64,
+    ) -> Option<Control> {
+        pair.other_offset_m = drifted_offset(&pair, drift_mps, &self.body);
+        let advice = crate::pass_advice::advise_passing(&pair, &self.body, MARGIN_M, HOLD_M, self.side);
+        self.side = match advice {
+            Some(Advice::Line(o)) => Some(o > pair.other_offset_m),
+            Some(Advice::Follow(_)) => self.side,
+            None => None,
+        };
+        let plan = Plan {
+            track,
+            limits: &self.limits,
+            body: &self.body,
+        };
+        Some(plan.apply(car, advice?, control, steering_limit_rad, LOOKAHEAD_M))
+    }
+
+    /// As [`Passer::control`], from what a drive's frame carries: the pose on the map
+    /// (`frame.gps`), the forward speed (`frame.imu`) and the scan, whose rays are placed on the
+    /// map from the pose and the LiDAR's mount `lidar_b` on the base where the frame does not
+    /// place them (a car's scans). None also when the frame lacks one of these.
+    pub fn control_on_frame(
+        &mut self,
+        track: &Track,
+        frame: &SensorFrame,
+        lidar_b: &Pose3,
+        control: Control,
+        steering_limit_rad: f64,
+    ) -> Option<Control> {
+        let gps = frame.gps.as_ref()?;
+        let speed_mps = frame.imu.as_ref().map(|i| i.lin_vel_b[0]).filter(|v| v.is_finite())? as f32;
+        let pose = PlanarPose {
+            x_m: gps.position_m[0] as f32,
+            y_m: gps.position_m[1] as f32,
+            yaw_rad: gps.rpy_rad[2] as f32,
+        };
+        let scan = frame.scan.as_ref().map(|s| {
+            if s.points_w.len() == s.ranges.len() {
+                std::borrow::Cow::Borrowed(s)
+            } else {
+                let mut placed = s.clone();
+                placed.points_w = scan_points_w(s, pose, lidar_b);
+                std::borrow::Cow::Owned(placed)
+            }
+        });
+        let car = OwnCar { pose, speed_mps };
+        self.control(track, car, scan.as_deref(), frame.stamp_s, control, steering_limit_rad)
+    }
+}
+
+/// Where the car's body ends behind and ahead of its base along x, metres (a car of wheels
+/// alone: its axles).
+pub fn body_x_m(model: &agvrl_sim::vehicle::VehicleModel) -> (f32, f32) {
+    model
+        .body_bounds_m()
+        .map_or((0.0, model.wheelbase_m), |(lo, hi)| (lo[0], hi[0]))
+}
+
+/// Each ray's end point on the map of a car at `pose` whose LiDAR sits at `lidar_b` on its
+/// base, in the plane of the track.
+pub fn scan_points_w(scan: &LaserScan, pose: PlanarPose, lidar_b: &Pose3) -> Vec<[f32; 3]> {
+    let [qx, qy, qz, qw] = lidar_b.orientation_xyzw;
+    let mount_yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
+    let (sn, cs) = pose.yaw_rad.sin_cos();
+    let [mx, my, mz] = lidar_b.position_m;
+    let (ox, oy) = (pose.x_m + mx * cs - my * sn, pose.y_m + mx * sn + my * cs);
+    (0..scan.ranges.len())
+        .map(|k| {
+            let a = pose.yaw_rad + mount_yaw + scan.angle_min + k as f32 * scan.angle_increment;
+            let r = scan.ranges[k];
+            [ox + r * a.cos(), oy + r * a.sin(), mz]
+        })
+        .collect()
+}
+
+/// What a pass is planned on: the track, and both cars' body and this car's limits.
+pub struct Plan<'a> {
+    /// The track.
+    pub track: &'a Track,
+    /// This car's limits (its wheelbase steers the line, its drive the throttle).
+    pub limits: &'a CarLimits,
+    /// Both cars' body.
+    pub body: &'a Body,
+}
+
+impl Plan<'_> {
+    /// `control` with `advice` applied: steering by pure pursuit of the advised line
+    /// `lookahead_m` down the track, or the throttle capped to follow.
+    pub fn apply(
+        &self,
+        car: OwnCar,
+        advice: Advice,
+        control: Control,
+        steering_limit_rad: f64,
+        lookahead_m: f32,
+    ) -> Control {
+        let (p, limit) = (car.pose, steering_limit_rad);
+        match advice {
+            Advice::Line(offset_m) => {
+                let s = self.track.centreline_s(p.x_m, p.y_m);
+                let ([cx, cy], [dx, dy]) = self.track.centreline_at(s + lookahead_m);
+                let (tx, ty) = (cx + offset_m * dy, cy - offset_m * dx);
+                let (sn, cs) = p.yaw_rad.sin_cos();
+                let rear = self.limits.rear_axle_x_m as f32;
+                let (ax, ay) = (p.x_m + rear * cs, p.y_m + rear * sn);
+                let alpha = (ty - ay).atan2(tx - ax) - p.yaw_rad;
+                let d = (tx - ax).hypot(ty - ay).max(1e-3);
+                let curvature = 2.0 * f64::from(alpha.sin()) / f64::from(d);
+                Control {
+                    steering_rad: (self.limits.wheelbase_m * curvature).atan().clamp(-limit, limit),
+                    ..control
+                }
+            }
+            Advice::Follow(v) => Control {
+                throttle: control
+                    .throttle
+                    .min(self.limits.throttle(f64::from(v), Some(f64::from(car.speed_mps)), 1.0)),
+                ..control
+            },
+        }
+    }
+}
 
 /// The other car as a passer knows it.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -8,7 +8,7 @@ use crate::api::{
     BoxSpace, Control, EnvError, EpisodeSummary, Info, MapInfo, MultiEnv, MultiStep, RaceCarInfo, RaceSummary,
     RacingInfo, RewardTerms, SensorFrame, Step, Track, validate_action,
 };
-use crate::passer::{PasserSource, ScanTracker};
+use crate::passer::{Passer, PasserSource};
 use crate::race_figures::{CarAt, PassBook};
 use crate::sim_vehicle::{Randomisation, map_of};
 use crate::task::Task;
@@ -237,10 +237,12 @@ pub struct RaceEnv {
     /// Where the car's body ends behind and ahead of its base along x, metres: the contact
     /// point's place along the car says whose front hit.
     body_x_m: (f32, f32),
-    /// Half the body's width, metres (the passing advice's gap).
-    body_half_width_m: f32,
-    /// Each car's passer's view of the car ahead in its scan.
-    trackers: Vec<ScanTracker>,
+    /// Both cars' body, as the passing advice sees it.
+    body: crate::pass_advice::Body,
+    /// The car's limits, as the passing advice steers and throttles with them.
+    limits: crate::drivers::CarLimits,
+    /// Each car's passer, following the car ahead in its scan.
+    passers: Vec<Passer>,
     steps: u64,
     ready: bool,
 }
@@ -271,11 +273,8 @@ impl RaceEnv {
         let clearance_m = (end_below_m + GRID_MARGIN_M).max(GRID_MIN_CLEARANCE_M);
         let slots = grid(&sim, &track, &settings, clearance_m);
         let model = sim.vehicle();
-        // A vehicle of wheels alone: its axles.
-        let body_x_m = model
-            .body_bounds_m()
-            .map_or((0.0, model.wheelbase_m), |(lo, hi)| (lo[0], hi[0]));
-        let body_half_width_m = model.body_bounds_m().map_or(0.0, |(lo, hi)| 0.5 * (hi[1] - lo[1]));
+        let body_x_m = crate::passer::body_x_m(model);
+        let passer = Passer::for_model(model);
         Ok(Self {
             sim,
             map,
@@ -294,8 +293,9 @@ impl RaceEnv {
             new_layout_each_race: false,
             end_below_m,
             body_x_m,
-            body_half_width_m,
-            trackers: vec![ScanTracker::default(); n],
+            body: passer.body(),
+            limits: passer.limits(),
+            passers: vec![passer; n],
             steps: 0,
             ready: false,
         })
@@ -435,52 +435,53 @@ impl RaceEnv {
     fn pass_advice(&self, i: usize, control: Control, limit: f64) -> Option<Control> {
         let (pair, _) = self.pair_ahead(i, 0.0)?;
         let advice = crate::pass_advice::advise(&pair, &self.body(), self.settings.pass_advice_margin_m)?;
-        Some(self.advised_control(i, advice, control, limit, TRAINING_LOOKAHEAD_M))
+        Some(
+            self.plan()
+                .apply(self.own_car(i), advice, control, limit, TRAINING_LOOKAHEAD_M),
+        )
     }
 
     /// Car `i`'s passer's control instead of `control` (see [`crate::passer`]); None when it
     /// leaves the policy to drive.
     fn passer_control(&mut self, i: usize, control: Control, limit: f64) -> Option<Control> {
-        use crate::passer::{HOLD_M, LOOKAHEAD_M, MARGIN_M, drifted_offset};
-        let body = self.body();
-        let behind_m = body.length_m + HOLD_M;
-        let (mut pair, drift_mps) = match self.settings.passer {
-            PasserSource::Off => return None,
-            PasserSource::Truth => self.pair_ahead(i, -behind_m)?,
-            PasserSource::Scan => {
-                let p = self.sim.car(i).pose2();
-                let speed = self.sim.car(i).forward_speed_mps();
-                let seen = self.trackers[i].update(
-                    &self.track,
-                    p,
-                    speed,
-                    self.frames[i].scan.as_ref(),
-                    self.sim.time_s(),
-                    behind_m,
-                )?;
-                let s = self.track.centreline_s(p.x_m, p.y_m);
-                let pair = crate::pass_advice::Pair {
-                    ahead_m: seen.ahead_m,
-                    offset_m: self.track.offset_right_m(p.x_m, p.y_m),
-                    other_offset_m: seen.offset_m,
-                    speed_mps: speed,
-                    other_speed_mps: seen.speed_mps,
-                    half_width_m: self.track.clearance_at_m(s)?,
+        let car = self.own_car(i);
+        match self.settings.passer {
+            PasserSource::Off => None,
+            PasserSource::Truth => {
+                let behind_m = self.body().length_m + crate::passer::HOLD_M;
+                let Some(seen) = self.pair_ahead(i, -behind_m) else {
+                    self.passers[i].reset();
+                    return None;
                 };
-                (pair, seen.drift_mps)
+                self.passers[i].pass(&self.track, car, seen, control, limit)
             }
-        };
-        pair.other_offset_m = drifted_offset(&pair, drift_mps, &body);
-        let advice = crate::pass_advice::advise_passing(&pair, &body, MARGIN_M, HOLD_M)?;
-        Some(self.advised_control(i, advice, control, limit, LOOKAHEAD_M))
+            PasserSource::Scan => {
+                let (scan, now_s) = (self.frames[i].scan.as_ref(), self.sim.time_s());
+                self.passers[i].control(&self.track, car, scan, now_s, control, limit)
+            }
+        }
+    }
+
+    /// Car `i`'s place and forward speed.
+    fn own_car(&self, i: usize) -> crate::passer::OwnCar {
+        crate::passer::OwnCar {
+            pose: self.sim.car(i).pose2(),
+            speed_mps: self.sim.car(i).forward_speed_mps(),
+        }
+    }
+
+    /// What the passing advice and the passer plan a pass on.
+    fn plan(&self) -> crate::passer::Plan<'_> {
+        crate::passer::Plan {
+            track: &self.track,
+            limits: &self.limits,
+            body: &self.body,
+        }
     }
 
     /// Both cars' bodies, as the passing advice sees them.
     fn body(&self) -> crate::pass_advice::Body {
-        crate::pass_advice::Body {
-            length_m: self.body_x_m.1 - self.body_x_m.0,
-            half_width_m: self.body_half_width_m,
-        }
+        self.body
     }
 
     /// Car `i` and the running car nearest ahead of it along the track (at most `-min_ahead_m`
@@ -513,48 +514,6 @@ impl RaceEnv {
             half_width_m,
         };
         Some((pair, drift_mps))
-    }
-
-    /// `control` with `advice` applied: steering by pure pursuit of the advised line
-    /// `lookahead_m` down the track, or the throttle capped to follow.
-    fn advised_control(
-        &self,
-        i: usize,
-        advice: crate::pass_advice::Advice,
-        control: Control,
-        limit: f64,
-        lookahead_m: f32,
-    ) -> Control {
-        use crate::pass_advice::Advice;
-        let p = self.sim.car(i).pose2();
-        // Only on an advised step: building the limits walks the car's wheels.
-        let car = crate::drivers::CarLimits::of(self.sim.vehicle(), 0.0);
-        match advice {
-            Advice::Line(offset_m) => {
-                let s = self.track.centreline_s(p.x_m, p.y_m);
-                let ([cx, cy], [dx, dy]) = self.track.centreline_at(s + lookahead_m);
-                let (tx, ty) = (cx + offset_m * dy, cy - offset_m * dx);
-                let (sn, cs) = p.yaw_rad.sin_cos();
-                let rear = car.rear_axle_x_m as f32;
-                let (ax, ay) = (p.x_m + rear * cs, p.y_m + rear * sn);
-                let alpha = (ty - ay).atan2(tx - ax) - p.yaw_rad;
-                let d = (tx - ax).hypot(ty - ay).max(1e-3);
-                let curvature = 2.0 * f64::from(alpha.sin()) / f64::from(d);
-                Control {
-                    steering_rad: (car.wheelbase_m * curvature).atan().clamp(-limit, limit),
-                    ..control
-                }
-            }
-            Advice::Follow(v) => {
-                let speed = self.sim.car(i).forward_speed_mps();
-                Control {
-                    throttle: control
-                        .throttle
-                        .min(car.throttle(f64::from(v), Some(f64::from(speed)), 1.0)),
-                    ..control
-                }
-            }
-        }
     }
 
     fn positions(&self) -> Vec<usize> {
@@ -733,7 +692,7 @@ impl MultiEnv for RaceEnv {
             r.distance_m = r.offset_m;
         }
         self.book = PassBook::new(n);
-        self.trackers.iter_mut().for_each(ScanTracker::reset);
+        self.passers.iter_mut().for_each(Passer::reset);
         self.steps = 0;
         self.ready = true;
         Ok(obs)

@@ -740,3 +740,43 @@ fn a_passers_tracker_follows_the_car_ahead_in_the_scan() {
     }
     assert_eq!(checked, 150);
 }
+
+/// A car's scan carries ranges alone; the passer places its rays on the map from the car's
+/// pose and the LiDAR's mount. Those places are where the simulator's rays ended, within
+/// 2 cm, for the car behind with the other car in its scan on the sweepers.
+#[test]
+fn scan_rays_placed_from_the_pose_land_where_the_simulators_rays_ended() {
+    use agvrl_envs::passer::scan_points_w;
+    let mut env = race_behind(Some("sweepers"), 300);
+    env.reset(Some(1)).unwrap();
+    let mount = env.sim().vehicle().lidar_mount();
+    let mut checked = 0;
+    for k in 0..60 {
+        let a = vec![
+            vec![0.6, steer_along(&env, 0, 0.0)],
+            vec![0.5, steer_along(&env, 1, 0.3)],
+        ];
+        env.step(&a).unwrap();
+        if k % 20 != 19 {
+            continue;
+        }
+        let f = env.frame_of(0);
+        let (scan, gps) = (f.scan.as_ref().unwrap(), f.gps.as_ref().unwrap());
+        let pose = agvrl_sim::PlanarPose {
+            x_m: gps.position_m[0] as f32,
+            y_m: gps.position_m[1] as f32,
+            yaw_rad: gps.rpy_rad[2] as f32,
+        };
+        let placed = scan_points_w(scan, pose, &mount);
+        assert_eq!(placed.len(), scan.points_w.len());
+        for (i, (p, q)) in placed.iter().zip(&scan.points_w).enumerate() {
+            if !scan.hit_at(i) || scan.ranges[i] <= scan.range_min {
+                continue;
+            }
+            let d = (p[0] - q[0]).hypot(p[1] - q[1]);
+            assert!(d < 0.02, "step {k}, ray {i}: {p:?} against {q:?} ({d} m)");
+            checked += 1;
+        }
+    }
+    assert!(checked > 100, "{checked} rays checked");
+}
