@@ -111,6 +111,7 @@ impl EpisodeBags {
             racing: None,
             termination: None,
             inference,
+            passed: None,
         });
         o.bag.frame(v.frame, period_s);
         o.stamp_s = v.frame.stamp_s;

@@ -20,4 +20,4 @@ pub mod replay;
 pub mod run_loop;
 pub mod stats;
 
-pub use run_loop::{DeployError, DriveConfig, DriveLoop, Event, Tick};
+pub use run_loop::{DeployError, DriveConfig, DriveLoop, DrivePasser, Event, Tick};

@@ -326,8 +326,11 @@ impl Replayer {
             realtime: false,
             ..DriveConfig::default()
         };
+        // A drive's passer is in its settings; it replays as it drove.
+        let passer = crate::run_loop::DrivePasser::of_env(env, env_cfg)?;
+        let lp = DriveLoop::new(vehicle, task, policy, drive, seed)?.with_passer(passer);
         Ok(Self {
-            lp: DriveLoop::new(vehicle, task, policy, drive, seed)?,
+            lp,
             next: 0,
             diff: ReplayDiff::default(),
         })

@@ -137,6 +137,51 @@ pub struct Tick {
     /// The observation the policy saw and the action it gave (None when the watchdog stopped
     /// the car before inference): what `agvrl-drive --trace` records.
     pub inference: Option<(Vec<f32>, Vec<f32>)>,
+    /// The action the passer gave instead of the policy's, on a tick it drove a pass.
+    pub passed: Option<Vec<f32>>,
+}
+
+/// A passer on the car of a drive ([`agvrl_envs::passer`]): it drives the passes, in front of
+/// the task's safety filter, from the car's pose on the track, its speed and its scan.
+pub struct DrivePasser {
+    /// The passer.
+    pub passer: agvrl_envs::passer::Passer,
+    /// The track the car races on (its centre line and widths).
+    pub track: agvrl_envs::api::Track,
+    /// The LiDAR's mount on the car's base.
+    pub lidar_b: agvrl_sim::msg::Pose3,
+}
+
+impl DrivePasser {
+    /// The passer of a drive of env `env` with `cfg`, when its race settings turn one on
+    /// (`race.passer = "scan"`): on the env's track (a map file's with `track`) as the
+    /// simulator builds it, for the env's car. None when they turn none on.
+    pub fn of_env(env: &str, cfg: &agvrl_envs::EnvConfig) -> Result<Option<Self>, DeployError> {
+        use agvrl_envs::passer::{Passer, PasserSource};
+        match cfg.race.as_ref().map(|r| r.passer).unwrap_or_default() {
+            PasserSource::Off => Ok(None),
+            PasserSource::Truth => Err(DeployError::Config(
+                "race.passer = \"truth\" reads the simulator's places of the other cars, which a car's \
+                 drive does not have: a drive's passer is \"scan\""
+                    .into(),
+            )),
+            PasserSource::Scan => {
+                let car = agvrl_envs::make_vehicle(env, cfg)?;
+                let track = car.map().and_then(|m| m.track.clone()).ok_or_else(|| {
+                    DeployError::Config(format!(
+                        "race.passer = \"scan\" needs the track the car races on, and {env} has none: \
+                         give the map (--track MAP.yaml)"
+                    ))
+                })?;
+                let model = cfg.sim.vehicle_model().map_err(agvrl_envs::EnvError::from)?;
+                Ok(Some(Self {
+                    passer: Passer::for_model(&model),
+                    track,
+                    lidar_b: model.lidar_mount(),
+                }))
+            }
+        }
+    }
 }
 
 /// What picks the actions of a drive.
@@ -159,6 +204,7 @@ pub struct DriveLoop<V, T> {
     start: Instant,
     /// Real time: the wall clock minus this is "now" on the frames' clock.
     wall_offset_s: f64,
+    passer: Option<DrivePasser>,
 }
 
 impl<V: Vehicle, T: Task> DriveLoop<V, T> {
@@ -211,7 +257,32 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             clock_s,
             start: Instant::now(),
             wall_offset_s,
+            passer: None,
         })
+    }
+
+    /// The drive with `passer` (when some) driving the car's passes.
+    pub fn with_passer(mut self, passer: impl Into<Option<DrivePasser>>) -> Self {
+        self.passer = passer.into();
+        self
+    }
+
+    /// Whether a passer drives the car's passes.
+    pub fn passing(&self) -> bool {
+        self.passer.is_some()
+    }
+
+    /// The passer's action instead of `action` on `frame`, when it drives a pass.
+    fn passer_action(&mut self, action: &[f32], frame: &SensorFrame) -> Option<Vec<f32>> {
+        let p = self.passer.as_mut()?;
+        let limit = self.vehicle.steering_limit_rad();
+        let proposed = self.task.proposed(action, limit)?;
+        let c = p
+            .passer
+            .control_on_frame(&p.track, frame, &p.lidar_b, proposed, limit)?;
+        let mut a = self.task.action_of(c, limit)?;
+        a.iter_mut().for_each(|v| *v = v.clamp(-1.0, 1.0));
+        Some(a)
     }
 
     /// The vehicle.
@@ -289,6 +360,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
         let outcome = fresh.then(|| self.task.evaluate(&frame, self.vehicle.map()));
         let eval_time = t_eval.elapsed();
         let mut intervention = Intervention::None;
+        let mut passed = None;
         let (control, event, inference) = match checked {
             Err(ev) => (Control::default(), Some(ev), None),
             Ok(()) => {
@@ -303,7 +375,9 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
                 };
                 match acted {
                     Ok(a) if a.iter().all(|v| v.is_finite()) => {
-                        let c = self.task.control(&a, self.vehicle.steering_limit_rad(), &frame);
+                        passed = self.passer_action(&a, &frame);
+                        let driven = passed.as_deref().unwrap_or(&a);
+                        let c = self.task.control(driven, self.vehicle.steering_limit_rad(), &frame);
                         intervention = self.task.intervention();
                         (c, None, Some((obs, a)))
                     }
@@ -342,6 +416,7 @@ impl<V: Vehicle, T: Task> DriveLoop<V, T> {
             racing: outcome.as_ref().and_then(|o| o.racing.clone()),
             termination: outcome.and_then(|o| o.termination),
             inference,
+            passed,
         })
     }
 }

@@ -581,6 +581,84 @@ fn a_served_race_runs_classical_racers_as_opponents() {
     }
 }
 
+/// A served race on the sweepers: car 0, driven over DDS by pure pursuit at full speed along
+/// the centre line, starts 2 m behind pure pursuit at half speed. With the drive's passer
+/// (`race.passer = "scan"`, from the car's odometry and scan) it passes once without a contact;
+/// without it, the same racer runs into the car ahead.
+#[test]
+fn a_drives_passer_takes_its_car_round_a_slower_one_over_dds() {
+    use agvrl_deploy::DrivePasser;
+    use agvrl_deploy::hardware::Opponent;
+    use agvrl_deploy::run_loop::Brain;
+    use agvrl_envs::drivers::{RacerKind, make_racer};
+    use agvrl_envs::passer::PasserSource;
+    let ticks = 420; // 14 s, within one race of 450 ticks
+    let run = |passer: PasserSource| {
+        let cfg = ros_cfg(InvalidRay::Stop);
+        let sweepers = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tracks/sweepers.yaml");
+        let env_cfg = EnvConfig {
+            track: Some(agvrl_envs::TrackSetting::Path(sweepers)),
+            race: Some(agvrl_envs::RaceSettings {
+                cars: 2,
+                start_behind_share: 1.0,
+                passer,
+                ..Default::default()
+            }),
+            max_steps: 450,
+            racing: Some(agvrl_envs::task::RacingRulesSetting {
+                end_below_m: Some(0.0),
+                ..Default::default()
+            }),
+            ..EnvConfig::default()
+        };
+        let slow = make_racer(RacerKind::PurePursuit, &env_cfg, 0.5, None).unwrap();
+        let mut robot =
+            SimRobot::race(&env_cfg, cfg.clone(), 0, Faults::default(), vec![Opponent::Racer(slow)]).unwrap();
+        let h = robot.handle();
+        let th = std::thread::spawn(move || robot.run(Pace::Lockstep, 0).unwrap());
+        let car0 = Ros2Config {
+            topics: cfg.topics.namespaced("car0"),
+            ..cfg.clone()
+        };
+        let v = Ros2Vehicle::new(car0, true, None).unwrap();
+        let task = make_task("racing-oval", &env_cfg, cfg.drive.steering_limit_rad).unwrap();
+        // A car has no map: its pure pursuit follows the track's centre line as a CSV.
+        let track = env_cfg.track.as_ref().unwrap().load().unwrap();
+        let csv: String = track
+            .centreline
+            .iter()
+            .map(|p| format!("{}, {}\n", p[0], p[1]))
+            .collect();
+        let fast = make_racer(RacerKind::PurePursuit, &env_cfg, 1.0, Some(&csv)).unwrap();
+        let brain = Brain::Racer(fast, env_cfg.action_mapping);
+        let drive_passer = DrivePasser::of_env("racing-oval", &env_cfg).unwrap();
+        assert_eq!(drive_passer.is_some(), passer == PasserSource::Scan);
+        let mut lp = DriveLoop::with_brain(v, task, brain, DriveConfig::default(), 0)
+            .unwrap()
+            .with_passer(drive_passer);
+        let mut passing = 0;
+        for k in 0..ticks {
+            let t = lp.tick().unwrap();
+            assert!(t.event.is_none(), "tick {k}: {:?}", t.event);
+            passing += u32::from(t.passed.is_some());
+        }
+        drop(lp);
+        let t0 = std::time::Instant::now();
+        while h.stats().commands < ticks && t0.elapsed().as_secs() < 10 {
+            std::thread::yield_now();
+        }
+        h.stop();
+        th.join().unwrap();
+        (h.stats(), passing)
+    };
+    let (plain, passing) = run(PasserSource::Off);
+    assert_eq!(passing, 0);
+    assert!(plain.car_contacts >= 1 && plain.at_fault >= 1, "{plain:?}");
+    let (s, passing) = run(PasserSource::Scan);
+    assert_eq!((s.car_contacts, s.passes, s.terminations), (0, 1, 0), "{s:?}");
+    assert!(passing > 10, "the passer drove {passing} ticks");
+}
+
 #[test]
 fn a_bad_car_toml_is_one_clear_line() {
     let e = Ros2Config::from_toml("[scan]\nn_ray = 3\n").unwrap_err();

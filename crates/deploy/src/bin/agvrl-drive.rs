@@ -9,7 +9,7 @@ use agvrl_deploy::hardware::config::DriveMapping;
 use agvrl_deploy::hardware::frames::Subscribed;
 use agvrl_deploy::record::{self, BagCar, DriveBag, Recorded};
 use agvrl_deploy::stats::{cpu_time_s, quantile, rss_mb};
-use agvrl_deploy::{DriveConfig, DriveLoop};
+use agvrl_deploy::{DriveConfig, DriveLoop, DrivePasser};
 use agvrl_envs::api::Vehicle;
 use agvrl_envs::task::{Intervention, Task};
 use agvrl_envs::{EnvConfig, make_task, make_vehicle};
@@ -104,8 +104,8 @@ struct Args {
     /// opponent policy plus the served car).
     #[arg(long, requires = "serve_sim")]
     cars: Option<usize>,
-    /// --vehicle ros2: the car's topics under this namespace (`car0`: `/car0/scan`,
-    /// `/car0/drive`), as a served race names its cars.
+    /// --vehicle ros2 (and --replay of its bag): the car's topics under this namespace (`car0`:
+    /// `/car0/scan`, `/car0/drive`), as a served race names its cars.
     #[arg(long, value_name = "NS", conflicts_with = "serve_sim")]
     namespace: Option<String>,
     /// --serve-sim --realtime: faults on the wire, comma-separated KEY=VALUE (loss, delay_ms,
@@ -268,16 +268,19 @@ fn run() -> Result<()> {
     };
     match a.vehicle {
         VehicleKind::Sim => {
+            let passer = DrivePasser::of_env(&env, &env_cfg)?;
             let mut vehicle = make_vehicle(&env, &env_cfg)?;
             let task = make_task(&env, &env_cfg, vehicle.steering_limit_rad())?;
             let Some(dir) = &a.record else {
-                return drive_loop(&a, DriveLoop::new(vehicle, task, policy, drive, a.seed)?, None);
+                let lp = DriveLoop::new(vehicle, task, policy, drive, a.seed)?.with_passer(passer);
+                return drive_loop(&a, lp, None);
             };
             // The sensors the bag holds: those of the first frame (the loop resets again, to
             // the same state).
             let bag = Arc::new(sim_bag(dir, Some(&src.policy), &env, &env_cfg, &mut vehicle, a.seed)?);
             let v = Recorded::new(vehicle, bag.clone(), true);
-            drive_loop(&a, DriveLoop::new(v, task, policy, drive, a.seed)?, Some(bag))
+            let lp = DriveLoop::new(v, task, policy, drive, a.seed)?.with_passer(passer);
+            drive_loop(&a, lp, Some(bag))
         }
         VehicleKind::Ros2 => drive_ros2(&a, &src, &env, &env_cfg, policy, drive),
     }
@@ -313,14 +316,17 @@ fn drive_racer(a: &Args, kind: &str, env: &str, env_cfg: &EnvConfig) -> Result<(
     };
     match a.vehicle {
         VehicleKind::Sim => {
+            let passer = DrivePasser::of_env(env, env_cfg)?;
             let mut vehicle = make_vehicle(env, env_cfg)?;
             let task = make_task(env, env_cfg, vehicle.steering_limit_rad())?;
             let Some(dir) = &a.record else {
-                return drive_loop(a, DriveLoop::with_brain(vehicle, task, brain, drive, a.seed)?, None);
+                let lp = DriveLoop::with_brain(vehicle, task, brain, drive, a.seed)?.with_passer(passer);
+                return drive_loop(a, lp, None);
             };
             let bag = Arc::new(sim_bag(dir, None, env, env_cfg, &mut vehicle, a.seed)?);
             let v = Recorded::new(vehicle, bag.clone(), true);
-            drive_loop(a, DriveLoop::with_brain(v, task, brain, drive, a.seed)?, Some(bag))
+            let lp = DriveLoop::with_brain(v, task, brain, drive, a.seed)?.with_passer(passer);
+            drive_loop(a, lp, Some(bag))
         }
         VehicleKind::Ros2 => racer_ros2(a, env, env_cfg, brain, drive),
     }
@@ -382,6 +388,7 @@ fn ros2_car(
     brain: agvrl_deploy::run_loop::Brain,
     drive: DriveConfig,
 ) -> Result<()> {
+    let passer = DrivePasser::of_env(env, env_cfg)?;
     let bag = match &a.record {
         Some(dir) => {
             let car = BagCar {
@@ -399,9 +406,13 @@ fn ros2_car(
         Some(bag) => {
             vehicle.record_into(bag.clone());
             let v = Recorded::new(vehicle, bag.clone(), false);
-            drive_loop(a, DriveLoop::with_brain(v, task, brain, drive, a.seed)?, Some(bag))
+            let lp = DriveLoop::with_brain(v, task, brain, drive, a.seed)?.with_passer(passer);
+            drive_loop(a, lp, Some(bag))
         }
-        None => drive_loop(a, DriveLoop::with_brain(vehicle, task, brain, drive, a.seed)?, None),
+        None => {
+            let lp = DriveLoop::with_brain(vehicle, task, brain, drive, a.seed)?.with_passer(passer);
+            drive_loop(a, lp, None)
+        }
     }
 }
 
@@ -452,11 +463,18 @@ fn drive_ros2(_: &Args, _: &PolicySettings, _: &str, _: &EnvConfig, _: Policy, _
 
 /// `--replay DIR [--fast] [--check]`.
 fn replay(a: &Args, dir: &Path, env: &str, env_cfg: &EnvConfig, policy: Policy) -> Result<()> {
-    let cfg = a
-        .config
-        .as_deref()
-        .map(agvrl_deploy::hardware::Ros2Config::load)
-        .transpose()?;
+    use agvrl_deploy::hardware::Ros2Config;
+    let mut cfg = a.config.as_deref().map(Ros2Config::load).transpose()?;
+    // A drive of a served race's car: its topics under its namespace, as it drove.
+    if let Some(ns) = &a.namespace {
+        let mut c = cfg.unwrap_or_else(|| {
+            let mut c = Ros2Config::default();
+            c.scan = c.scan.with_rays_of(&env_cfg.sim.lidar);
+            c
+        });
+        c.topics = c.topics.namespaced(ns);
+        cfg = Some(c);
+    }
     let mut r = agvrl_deploy::replay::Replayer::open(dir, cfg, env, env_cfg, policy, a.rate_hz, a.seed)?;
     if let Some(d) = &r.vehicle().damage {
         eprintln!("warning: {d}; replaying the intact part");
@@ -584,8 +602,10 @@ fn dump(dir: &Path) -> Result<()> {
 }
 
 fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Option<Arc<DriveBag>>) -> Result<()> {
+    let passing = lp.passing();
     let (cpu0, t0) = (cpu_time_s(), Instant::now());
     let (mut k, mut events, mut terminations, mut filtered) = (0u64, 0u64, 0u64, 0u64);
+    let mut passed = 0u64;
     // Constant memory however long the car drives.
     let mut infer_us = agvrl_deploy::stats::Latencies::default();
     let (mut late, mut tick_us, period_s) = (0u64, agvrl_deploy::stats::Latencies::default(), 1.0 / a.rate_hz);
@@ -607,6 +627,7 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Optio
         events += u64::from(t.event.is_some());
         terminations += u64::from(t.termination.is_some());
         filtered += u64::from(t.intervention != Intervention::None);
+        passed += u64::from(t.passed.is_some());
         infer_us.add(t.infer_us);
         if t.racing.is_some() {
             racing = t.racing.clone();
@@ -625,8 +646,9 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Optio
                 .as_ref()
                 .map(|r| format!(" laps={}", r.laps))
                 .unwrap_or_default();
+            let pass = if t.passed.is_some() { " passer=1" } else { "" };
             out!(
-                "tick={} stamp_s={:.3} throttle={:.3} steering_rad={:.3} infer_us={:.1}{laps}{filter}{ev}{term}",
+                "tick={} stamp_s={:.3} throttle={:.3} steering_rad={:.3} infer_us={:.1}{laps}{pass}{filter}{ev}{term}",
                 t.index,
                 t.stamp_s,
                 t.control.throttle,
@@ -660,8 +682,13 @@ fn drive_loop<V: Vehicle, T: Task>(a: &Args, mut lp: DriveLoop<V, T>, bag: Optio
             r.best_lap_s.map_or("na".into(), |b| format!("{b:.2}"))
         )
     });
+    let passer = if passing {
+        format!(" passer_ticks={passed}")
+    } else {
+        String::new()
+    };
     out!(
-        "summary ticks={k} events={events} terminations={terminations} filter_interventions={filtered}{laps} infer_us_p50={:.1} infer_us_p99={:.1} late_ticks={late} tick_us_p99={:.1} tick_us_max={:.1} wall_s={wall_s:.2} cpu_pct={cpu} rss_mb={rss}{}{bagged}",
+        "summary ticks={k} events={events} terminations={terminations} filter_interventions={filtered}{passer}{laps} infer_us_p50={:.1} infer_us_p99={:.1} late_ticks={late} tick_us_p99={:.1} tick_us_max={:.1} wall_s={wall_s:.2} cpu_pct={cpu} rss_mb={rss}{}{bagged}",
         infer_us.quantile(0.5),
         infer_us.quantile(0.99),
         tick_us.quantile(0.99),
