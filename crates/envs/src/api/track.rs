@@ -91,7 +91,13 @@ pub struct PathTrack {
     cum_s: Vec<f32>,
     /// Distance from each point to the nearest wall, metres, when known.
     clearance_m: Option<Vec<f32>>,
+    /// A circle (centre x, y, radius) holding each run of [`CHUNK`] segments, so a search
+    /// skips the runs that cannot hold the nearest point.
+    chunks: Vec<[f32; 3]>,
 }
+
+/// Segments per bounding circle of [`PathTrack`]'s search.
+const CHUNK: usize = 8;
 
 impl PathTrack {
     /// The closed polyline through `points` (at least 3, not repeating the first at the end).
@@ -105,10 +111,25 @@ impl PathTrack {
             s += ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
             cum_s.push(s);
         }
+        let chunks = (0..n.div_ceil(CHUNK))
+            .map(|c| {
+                // The run's segments' end points: its own and the next run's first.
+                let ends = || (c * CHUNK..=((c + 1) * CHUNK).min(n)).map(|i| points[i % n]);
+                let (lo, hi) = ends().fold(([f32::MAX; 2], [f32::MIN; 2]), |(lo, hi), p| {
+                    ([lo[0].min(p[0]), lo[1].min(p[1])], [hi[0].max(p[0]), hi[1].max(p[1])])
+                });
+                let (cx, cy) = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]));
+                let r = ends()
+                    .map(|p| ((p[0] - cx).powi(2) + (p[1] - cy).powi(2)).sqrt())
+                    .fold(0.0, f32::max);
+                [cx, cy, r]
+            })
+            .collect();
         Self {
             points,
             cum_s,
             clearance_m: None,
+            chunks,
         }
     }
 
@@ -160,32 +181,76 @@ impl PathTrack {
     /// The segment nearest to (x, y): (index, fraction along it, signed distance; positive on
     /// the right of the racing direction).
     fn nearest(&self, x: f32, y: f32) -> (usize, f32, f32) {
-        self.nearest_of(0..self.points.len(), x, y)
+        self.nearest_in(0, self.points.len() - 1, x, y)
     }
 
-    /// [`Self::nearest`] among the segments `segments` (indices, wrapping past the last).
-    fn nearest_of(&self, segments: impl Iterator<Item = usize>, x: f32, y: f32) -> (usize, f32, f32) {
+    /// [`Self::nearest`] among segments `first..=last` (indices, wrapping past the last): the
+    /// first in that order at the least distance, as visiting every segment finds it. Runs of
+    /// segments whose bounding circle lies farther than a nearest segment's distance are
+    /// skipped: that distance bounds the least one, so they cannot hold it.
+    fn nearest_in(&self, first: usize, last: usize, x: f32, y: f32) -> (usize, f32, f32) {
         let n = self.points.len();
+        // The pieces of runs in range: (first segment, unwrapped; one past the last).
+        let pieces = || {
+            let mut j = first;
+            std::iter::from_fn(move || {
+                (j <= last).then(|| {
+                    let i = j % n;
+                    let end = (j + ((i / CHUNK + 1) * CHUNK).min(n) - i).min(last + 1);
+                    let piece = (j, end);
+                    j = end;
+                    piece
+                })
+            })
+        };
+        // The least distance to the segments of the run holding segment j: at least this.
+        let below = |j: usize| {
+            let [cx, cy, r] = self.chunks[(j % n) / CHUNK];
+            ((x - cx) * (x - cx) + (y - cy) * (y - cy)).sqrt() - r
+        };
+        // A bound on the least distance: the nearest segment of the piece whose circle is
+        // nearest. A piece farther than that cannot hold the nearest segment.
+        let (j, end) = pieces()
+            .min_by(|a, b| below(a.0).total_cmp(&below(b.0)))
+            .expect("a segment in range");
+        let i0 = j % n;
+        let bound = (i0..i0 + end - j)
+            .map(|i| self.to_segment(i, x, y).1)
+            .fold(f32::INFINITY, f32::min);
+        // Beyond rounding.
+        let reach = bound.sqrt() + 1e-3;
         let mut best = (0, 0.0, f32::INFINITY, 0.0f32);
-        for i in segments.map(|i| i % n) {
-            let (a, b) = (self.points[i], self.points[(i + 1) % n]);
-            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-            let len2 = dx * dx + dy * dy;
-            let t = if len2 > 0.0 {
-                (((x - a[0]) * dx + (y - a[1]) * dy) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let (px, py) = (a[0] + t * dx - x, a[1] + t * dy - y);
-            let d2 = px * px + py * py;
-            if d2 < best.2 {
-                // Cross product of the direction and the offset: negative on the left.
-                let side = dx * (y - a[1]) - dy * (x - a[0]);
-                best = (i, t, d2, side);
+        for (j, end) in pieces() {
+            if below(j) > reach {
+                continue;
+            }
+            let i0 = j % n;
+            for i in i0..i0 + end - j {
+                let (t, d2, side) = self.to_segment(i, x, y);
+                if d2 < best.2 {
+                    best = (i, t, d2, side);
+                }
             }
         }
         let d = best.2.sqrt();
         (best.0, best.1, if best.3 > 0.0 { -d } else { d })
+    }
+
+    /// From (x, y) to segment `i`: where along it the nearest point lies (0 to 1), the distance
+    /// squared, and a side (the cross product of the direction and the offset: negative on the
+    /// left).
+    fn to_segment(&self, i: usize, x: f32, y: f32) -> (f32, f32, f32) {
+        let n = self.points.len();
+        let (a, b) = (self.points[i], self.points[(i + 1) % n]);
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len2 = dx * dx + dy * dy;
+        let t = if len2 > 0.0 {
+            (((x - a[0]) * dx + (y - a[1]) * dy) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let (px, py) = (a[0] + t * dx - x, a[1] + t * dy - y);
+        (t, px * px + py * py, dx * (y - a[1]) - dy * (x - a[0]))
     }
 
     /// Arc length (metres, in [0, lap)) of the centre-line point nearest to (x, y), from the
@@ -211,15 +276,11 @@ impl PathTrack {
         }
         let from_s = (near_s - window_m).rem_euclid(lap);
         let first = self.cum_s[1..].partition_point(|&c| c <= from_s).min(n - 1);
-        // Segments until the window's far end, wrapping past the last.
-        let mut last = first;
-        let mut to_s = self.cum_s[first + 1] - from_s;
-        while to_s < 2.0 * window_m && last - first < n {
-            last += 1;
-            let k = last % n;
-            to_s += self.cum_s[k + 1] - self.cum_s[k];
-        }
-        self.place_of(self.nearest_of(first..=last, x, y))
+        // The segment holding the window's far end, wrapping past the last.
+        let to_s = from_s + 2.0 * window_m;
+        let (lap_from, to_s) = if to_s < lap { (0, to_s) } else { (n, to_s - lap) };
+        let last = (lap_from + self.cum_s[1..].partition_point(|&c| c < to_s).min(n - 1)).max(first);
+        self.place_of(self.nearest_in(first, last, x, y))
     }
 
     fn place_of(&self, (i, t, d): (usize, f32, f32)) -> (f32, f32) {
@@ -386,6 +447,51 @@ mod tests {
                     ds.min(lap - ds) < 1e-3 && (wo - fo).abs() < 1e-4,
                     "s {s} +{ahead}: {ws} {wo} / {fs} {fo}"
                 );
+            }
+        }
+    }
+
+    /// The search that skips runs of segments gives what visiting every segment gives, bit for
+    /// bit, on wobbly closed lines of 3 to 300 points (a run and a part run, many runs), at
+    /// points on, near and far from the line, over the whole line and over windows of it that
+    /// wrap past its first point.
+    #[test]
+    fn skipping_far_runs_of_segments_finds_the_nearest_segment_of_all() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        for n in [3, 15, 16, 17, 40, 300] {
+            let points: Vec<[f32; 2]> = (0..n)
+                .map(|k| {
+                    let a = std::f32::consts::TAU * k as f32 / n as f32;
+                    let r = 10.0 + rng.random_range(-2.0..2.0f32);
+                    [r * a.cos(), 0.6 * r * a.sin()]
+                })
+                .collect();
+            let track = PathTrack::new(points.clone());
+            for k in 0..4000 {
+                let (x, y) = (rng.random_range(-16.0..16.0f32), rng.random_range(-12.0..12.0f32));
+                // The whole line, then windows of 1 to n + 1 segments from anywhere.
+                let (first, len) = if k % 2 == 0 {
+                    (0, n)
+                } else {
+                    (rng.random_range(0..n), rng.random_range(1..=n + 1))
+                };
+                // Every segment, in order: the first strictly nearest.
+                let mut best = (0, 0.0f32, f32::INFINITY, 0.0f32);
+                for i in (first..first + len).map(|j| j % n) {
+                    let (a, b) = (points[i], points[(i + 1) % n]);
+                    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                    let t = (((x - a[0]) * dx + (y - a[1]) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
+                    let (px, py) = (a[0] + t * dx - x, a[1] + t * dy - y);
+                    let d2 = px * px + py * py;
+                    if d2 < best.2 {
+                        best = (i, t, d2, dx * (y - a[1]) - dy * (x - a[0]));
+                    }
+                }
+                let d = best.2.sqrt();
+                let want = (best.0, best.1, if best.3 > 0.0 { -d } else { d });
+                let got = track.nearest_in(first, first + len - 1, x, y);
+                assert_eq!(got, want, "{n} points, segments {first} + {len}, ({x}, {y})");
             }
         }
     }
