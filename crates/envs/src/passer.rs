@@ -181,7 +181,7 @@ impl Passer {
         steering_limit_rad: f64,
     ) -> Option<Control> {
         let gps = frame.gps.as_ref()?;
-        let speed_mps = frame.imu.as_ref().map(|i| i.lin_vel_b[0]).filter(|v| v.is_finite())? as f32;
+        let speed_mps = crate::drivers::measured_speed_mps(frame)? as f32;
         let pose = PlanarPose {
             x_m: gps.position_m[0] as f32,
             y_m: gps.position_m[1] as f32,

@@ -434,7 +434,7 @@ impl RaceEnv {
     /// running car nearest ahead of it along the track; None when it asks nothing.
     fn pass_advice(&self, i: usize, control: Control, limit: f64) -> Option<Control> {
         let (pair, _) = self.pair_ahead(i, 0.0)?;
-        let advice = crate::pass_advice::advise(&pair, &self.body(), self.settings.pass_advice_margin_m)?;
+        let advice = crate::pass_advice::advise(&pair, &self.body, self.settings.pass_advice_margin_m)?;
         Some(
             self.plan()
                 .apply(self.own_car(i), advice, control, limit, TRAINING_LOOKAHEAD_M),
@@ -448,7 +448,7 @@ impl RaceEnv {
         match self.settings.passer {
             PasserSource::Off => None,
             PasserSource::Truth => {
-                let behind_m = self.body().length_m + crate::passer::HOLD_M;
+                let behind_m = self.body.length_m + crate::passer::HOLD_M;
                 let Some(seen) = self.pair_ahead(i, -behind_m) else {
                     self.passers[i].reset();
                     return None;
@@ -477,11 +477,6 @@ impl RaceEnv {
             limits: &self.limits,
             body: &self.body,
         }
-    }
-
-    /// Both cars' bodies, as the passing advice sees them.
-    fn body(&self) -> crate::pass_advice::Body {
-        self.body
     }
 
     /// Car `i` and the running car nearest ahead of it along the track (at most `-min_ahead_m`

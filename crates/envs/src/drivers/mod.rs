@@ -122,7 +122,7 @@ pub fn make_racer(
 }
 
 /// Forward speed from the IMU's body-frame velocity, m/s, when the frame carries one.
-fn measured_speed_mps(frame: &SensorFrame) -> Option<f64> {
+pub(crate) fn measured_speed_mps(frame: &SensorFrame) -> Option<f64> {
     frame.imu.as_ref().map(|imu| imu.lin_vel_b[0]).filter(|v| v.is_finite())
 }
 
