@@ -212,8 +212,7 @@ pub fn body_x_m(model: &agvrl_sim::vehicle::VehicleModel) -> (f32, f32) {
 /// Each ray's end point on the map of a car at `pose` whose LiDAR sits at `lidar_b` on its
 /// base, in the plane of the track.
 pub fn scan_points_w(scan: &LaserScan, pose: PlanarPose, lidar_b: &Pose3) -> Vec<[f32; 3]> {
-    let [qx, qy, qz, qw] = lidar_b.orientation_xyzw;
-    let mount_yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
+    let mount_yaw = lidar_b.yaw_rad();
     let (sn, cs) = pose.yaw_rad.sin_cos();
     let [mx, my, mz] = lidar_b.position_m;
     let (ox, oy) = (pose.x_m + mx * cs - my * sn, pose.y_m + mx * sn + my * cs);
